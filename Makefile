@@ -1,0 +1,37 @@
+# Two commands set everything up: `make demo` and `make test`.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-stamp
+# JAX on CPU: keep XLA from oversubscribing a 2-core machine when pytest runs workers.
+export PYTHONUNBUFFERED := 1
+
+.PHONY: all venv test lint demo bench experiments clean
+
+all: test
+
+$(STAMP): pyproject.toml requirements.lock
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -c requirements.lock -e ".[dev]"
+	@touch $(STAMP)
+
+venv: $(STAMP)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check fourierjax tests experiments
+
+test: lint
+	$(PY) -m pytest
+
+demo: $(STAMP)
+	$(VENV)/bin/fourierjax demo --out out/demo
+
+bench: $(STAMP)
+	$(PY) -m experiments.benchmarks --out out/bench
+
+experiments: $(STAMP)
+	$(PY) -m experiments --out out/experiments
+
+clean:
+	rm -rf $(VENV) out .pytest_cache .ruff_cache .hypothesis

@@ -1,0 +1,54 @@
+"""The `fourierjax` command line: one module per subcommand, registered in COMMANDS."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# Subcommand name -> module under fourierjax.cli. Each module defines
+#   add_arguments(parser: argparse.ArgumentParser) -> None
+#   run(args: argparse.Namespace) -> int
+#   HELP: str  (one line for `fourierjax --help`)
+COMMANDS: dict[str, str] = {
+    "info": "info",
+    "positions": "positions",
+}
+
+
+def _build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fourierjax",
+        description="Fourier gait models and expressive stance for human motion (JAX).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, module_name in COMMANDS.items():
+        module = importlib.import_module(f"fourierjax.cli.{module_name}")
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `fourierjax` script. Returns the process exit code."""
+    from fourierjax.errors import FourierJaxError
+
+    parser = _build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except FourierJaxError as err:
+        print(f"fourierjax: error: {err}", file=sys.stderr)
+        return 2
+    except FileNotFoundError as err:
+        print(f"fourierjax: error: {err.filename or err}: no such file", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fourierjax: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
