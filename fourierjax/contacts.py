@@ -1,0 +1,412 @@
+"""Foot contacts from foot-point trajectories: detection, step events, step period, soft weights."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+import numpy as np
+
+from fourierjax.errors import UserError
+
+# The CMU skeleton's foot joints, ankle first (the heel strike is seen there), toes last.
+CMU_FEET: tuple[tuple[str, ...], tuple[str, ...]] = (
+    ("LeftFoot", "LeftToeBase"),
+    ("RightFoot", "RightToeBase"),
+)
+
+
+class FootPoints(NamedTuple):
+    """Which points of a skeleton make up each foot.
+
+    Indices point into the concatenation of joint positions and End-Site positions
+    (`[J + E, 3]`: joint `j` is index `j`, End Site `e` is index `J + e`), as built by
+    `gather_foot_positions`.
+
+    - `left`, `right`: point indices of each foot, ankle first, toe tip last.
+    - `names`: the matching names (End Sites are named `"<parent>/End Site"`).
+    """
+
+    left: tuple[int, ...]
+    right: tuple[int, ...]
+    names: tuple[tuple[str, ...], tuple[str, ...]]
+
+
+def foot_points(topology, feet=CMU_FEET, *, end_sites: bool = True) -> FootPoints:
+    """Find the foot points of a skeleton by joint name.
+
+    **Arguments:**
+
+    - `topology`: a `fourierjax.skeleton.Topology` (uses `names` and `end_site_parents`).
+    - `feet`: `(left_names, right_names)`, the joints of each foot, ankle first. Defaults to
+      the CMU naming (`LeftFoot, LeftToeBase` / `RightFoot, RightToeBase`).
+    - `end_sites`: also take the End Site(s) hanging from the last joint of each foot (the
+      toe tip, the lowest point of a flat foot).
+
+    **Returns:** a `FootPoints`. Both feet must have the same number of points.
+
+    Raises `UserError` naming the missing joints and the skeleton's joints when the skeleton
+    does not use the names asked for (pass `feet=` for other skeletons).
+    """
+    names = tuple(topology.names)
+    num_joints = len(names)
+    es_parents = tuple(getattr(topology, "end_site_parents", ()))
+    out_idx, out_names = [], []
+    for side in feet:
+        missing = [n for n in side if n not in names]
+        if missing:
+            raise UserError(
+                f"foot_points: the skeleton has no joint(s) {missing}; its joints are "
+                f"{list(names)}. Pass feet=((left joints...), (right joints...)) for a skeleton "
+                "that does not use the CMU names"
+            )
+        idx = [names.index(n) for n in side]
+        nm = list(side)
+        if end_sites:
+            for e, p in enumerate(es_parents):
+                if p == idx[-1]:
+                    idx.append(num_joints + e)
+                    nm.append(f"{side[-1]}/End Site")
+        out_idx.append(tuple(idx))
+        out_names.append(tuple(nm))
+    if len(out_idx) != 2:
+        raise UserError(f"foot_points: `feet` must name two feet (left, right), got {len(feet)}")
+    if len(out_idx[0]) != len(out_idx[1]):
+        raise UserError(
+            f"foot_points: the feet have different point counts: {out_names[0]} vs {out_names[1]}"
+        )
+    return FootPoints(out_idx[0], out_idx[1], (out_names[0], out_names[1]))
+
+
+def gather_foot_positions(joint_positions, end_site_positions, points: FootPoints):
+    """Stack the foot points of FK output into `[..., 2, P, 3]` (left, right).
+
+    **Arguments:**
+
+    - `joint_positions`: `[..., J, 3]` joint positions (any leading batch/time axes).
+    - `end_site_positions`: `[..., E, 3]` End-Site positions.
+    - `points`: from `foot_points`.
+
+    **Returns:** `[..., 2, P, 3]`. Pure jnp (numpy inputs give a JAX array).
+    """
+    allp = jnp.concatenate([jnp.asarray(joint_positions), jnp.asarray(end_site_positions)], -2)
+    idx = jnp.asarray([points.left, points.right])
+    return allp[..., idx, :]
+
+
+def point_speeds(positions, frame_time_s, *, up_axis: int | None = None):
+    """Speed of points over time by central differences (one-sided at the ends).
+
+    **Arguments:**
+
+    - `positions`: `[T, ..., 3]` (T ≥ 2).
+    - `frame_time_s`: seconds per frame.
+    - `up_axis`: if given, that component is ignored (horizontal speed).
+
+    **Returns:** `[T, ...]` in file units per second. Pure jnp, differentiable.
+    """
+    p = jnp.asarray(positions)
+    if up_axis is not None:
+        keep = [k for k in range(3) if k != up_axis]
+        p = p[..., keep]
+    v = jnp.gradient(p, axis=0) / frame_time_s
+    # sqrt(0) has an infinite derivative: shim the exact-zero case (a planted foot).
+    sq = jnp.sum(v * v, axis=-1)
+    safe = jnp.where(sq > 0, sq, 1.0)
+    return jnp.where(sq > 0, jnp.sqrt(safe), 0.0)
+
+
+def soft_contact_weights(height, speed, height_threshold, speed_threshold, softness=0.25):
+    """Differentiable contact weights in [0, 1]: low AND slow, with sigmoid edges.
+
+    `w = σ((h_th − h) / (softness·h_th)) · σ((v_th − v) / (softness·v_th))`: 1/4 at both
+    thresholds, → 1 well below both, → 0 above either.
+
+    **Arguments:**
+
+    - `height`: `[...]` height above the floor (file units).
+    - `speed`: `[...]` point speed (file units / s), e.g. from `point_speeds`.
+    - `height_threshold`, `speed_threshold`: positive scalars.
+    - `softness`: edge width as a fraction of each threshold.
+
+    **Returns:** `[...]` weights. Pure jnp.
+    """
+    import jax
+
+    wh = jax.nn.sigmoid((height_threshold - height) / (softness * height_threshold))
+    wv = jax.nn.sigmoid((speed_threshold - speed) / (softness * speed_threshold))
+    return wh * wv
+
+
+class GroundEstimate(NamedTuple):
+    """The floor under each foot point: `floor = intercepts + slope · (horizontal position)`.
+
+    - `intercepts`: `[F, P]` height of each point's floor at the horizontal origin (it includes
+      the point's clearance when planted: an ankle sits above its floor by ~1 CMU unit).
+    - `slope`: `[2]` rise per unit along the two horizontal axes (in axis order, up removed).
+    - `height_threshold`, `speed_threshold`: the thresholds used (file units, units/s).
+    """
+
+    intercepts: np.ndarray
+    slope: np.ndarray
+    height_threshold: float
+    speed_threshold: float
+
+
+def _as_points(foot_positions) -> np.ndarray:
+    p = np.asarray(foot_positions, dtype=float)
+    if p.ndim == 3:
+        p = p[:, :, None, :]
+    if p.ndim != 4 or p.shape[-1] != 3:
+        raise UserError(
+            f"foot_positions: expected shape [T, F, 3] or [T, F, P, 3], got {p.shape}"
+        )
+    if p.shape[0] < 3:
+        raise UserError(f"foot_positions: need at least 3 frames, got {p.shape[0]}")
+    if not np.all(np.isfinite(p)):
+        raise UserError("foot_positions: contains NaN or inf")
+    return p
+
+
+def _scale(p: np.ndarray, up_axis: int) -> float:
+    """A length for the default thresholds: the foot length (ankle → toe tip), if known."""
+    if p.shape[2] >= 2:
+        length = float(np.median(np.linalg.norm(p[:, :, 0] - p[:, :, -1], axis=-1)))
+        if length > 0:
+            return length
+    # One point per foot: half the typical vertical excursion of the feet stands in.
+    h = p[..., up_axis]
+    rng = np.percentile(h, 95, axis=0) - np.percentile(h, 5, axis=0)
+    return max(0.5 * float(np.median(rng)), 1e-6)
+
+
+def _fit_floor(h, hz, slow, threshold, iters=3):
+    """Least squares floor with one shared slope and one intercept per point.
+
+    The slope is fitted only along horizontal directions the feet actually cover (spread of
+    the planted points > 10 thresholds); CMU capture floors tilt by ~1 unit over a walk.
+    """
+    T, F, P = h.shape
+    cand = slow & (h <= np.percentile(h, 30, axis=0))
+    intercepts = np.percentile(h, 2, axis=0)
+    slope = np.zeros(2)
+    for _ in range(iters):
+        if cand.sum() < F * P + 2:
+            break
+        pts = hz[cand]
+        centre = pts.mean(0)
+        cov = np.cov((pts - centre).T) if len(pts) > 2 else np.zeros((2, 2))
+        evals, evecs = np.linalg.eigh(cov)
+        dirs = [evecs[:, k] for k in range(2) if 4 * np.sqrt(max(evals[k], 0)) > 10 * threshold]
+        A = np.zeros((T, F, P, F * P + len(dirs)))
+        A[..., : F * P] = np.eye(F * P).reshape(F, P, F * P)[None]
+        for k, d in enumerate(dirs):
+            A[..., F * P + k] = (hz - centre) @ d
+        used = np.zeros((F, P), bool)
+        used[np.nonzero(cand)[1:]] = True
+        if not used.all():
+            break
+        sol = np.linalg.lstsq(A[cand], h[cand], rcond=None)[0]
+        slope = sum((sol[F * P + k] * d for k, d in enumerate(dirs)), np.zeros(2))
+        intercepts = sol[: F * P].reshape(F, P) - centre @ slope
+        resid = h - intercepts - hz @ slope
+        cand = slow & (resid < threshold)
+    return intercepts, slope
+
+
+def _runs(mask: np.ndarray):
+    """(start, stop) of each run of True in a 1-D bool array."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
+
+
+def _cleanup(c: np.ndarray, min_len: int, max_gap: int) -> np.ndarray:
+    c = c.copy()
+    # Close short gaps inside contacts (marker jitter), never at the clip's ends.
+    starts, stops = _runs(~c)
+    for a, b in zip(starts, stops):
+        if a > 0 and b < len(c) and b - a <= max_gap:
+            c[a:b] = True
+    starts, stops = _runs(c)
+    for a, b in zip(starts, stops):
+        if b - a < min_len:
+            c[a:b] = False
+    return c
+
+
+def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
+    out = np.zeros_like(enter)
+    on = False
+    for t in range(len(enter)):
+        on = bool(enter[t]) or (on and bool(stay[t]))
+        out[t] = on
+    return out
+
+
+def estimate_ground(
+    foot_positions,
+    frame_time_s: float,
+    *,
+    up_axis: int = 1,
+    ground_height: float | None = None,
+    height_threshold: float | None = None,
+    speed_threshold: float | None = None,
+) -> GroundEstimate:
+    """Estimate the floor under each foot point and the contact thresholds.
+
+    See `foot_contacts` for the arguments and the defaults. With `ground_height` given the
+    floor is level at that height and each point's clearance is its 2nd-percentile height
+    above it (0 if the point goes lower).
+    """
+    p = _as_points(foot_positions)
+    if frame_time_s <= 0:
+        raise UserError(f"frame_time_s: must be positive, got {frame_time_s}")
+    if up_axis not in (0, 1, 2):
+        raise UserError(f"up_axis: must be 0, 1 or 2, got {up_axis}")
+    scale = _scale(p, up_axis)
+    th = 0.25 * scale if height_threshold is None else float(height_threshold)
+    tv = 6.0 * scale if speed_threshold is None else float(speed_threshold)
+    if th <= 0 or tv <= 0:
+        raise UserError(f"contact thresholds must be positive, got height {th}, speed {tv}")
+    h = p[..., up_axis]
+    hz = np.delete(p, up_axis, axis=-1)
+    if ground_height is not None:
+        intercepts = np.maximum(np.percentile(h, 2, axis=0), float(ground_height))
+        return GroundEstimate(intercepts, np.zeros(2), th, tv)
+    speed = np.asarray(point_speeds(p, frame_time_s))
+    intercepts, slope = _fit_floor(h, hz, speed < tv, th)
+    return GroundEstimate(intercepts, slope, th, tv)
+
+
+def foot_contacts(
+    foot_positions,
+    frame_time_s: float,
+    *,
+    up_axis: int = 1,
+    ground_height: float | None = None,
+    height_threshold: float | None = None,
+    speed_threshold: float | None = None,
+    min_contact_s: float = 0.04,
+    max_gap_s: float = 0.025,
+) -> np.ndarray:
+    """Detect foot contacts: a point is in contact when it is low AND slow (NumPy, edge code).
+
+    A point is *low* when its height above its floor is below `height_threshold`, *slow* when
+    its 3-D speed is below `speed_threshold`. The floor of each point is fitted (a plane with
+    one slope shared by all points, so tilted capture floors work, and one intercept per point,
+    so the ankle's clearance above the ground is learned). A foot given by several points
+    (`[T, F, P, 3]`) is in contact when any of its points is: the heel lands first, the toes
+    leave last. Hysteresis (a contact holds until 1.5× either threshold), then gaps of at most
+    `max_gap_s` are closed and contacts shorter than `min_contact_s` are dropped.
+
+    Defaults are relative to the clip's scale, the foot length ℓ (median ankle → toe-tip
+    distance, or half the median vertical excursion with one point per foot):
+    `height_threshold = 0.25 ℓ` (CMU: ~0.8 units ≈ 4.5 cm) and `speed_threshold = 6 ℓ/s`
+    (CMU: ~19 units/s ≈ 1.1 m/s).
+
+    **Arguments:**
+
+    - `foot_positions`: `[T, F, 3]` one point per foot, or `[T, F, P, 3]` (e.g. from
+      `gather_foot_positions`), file units.
+    - `frame_time_s`: seconds per frame.
+    - `up_axis`: index of the vertical axis (1: Y up).
+    - `ground_height`: a level floor height; `None` fits the floor (see above).
+    - `height_threshold`, `speed_threshold`: override the relative defaults.
+    - `min_contact_s`, `max_gap_s`: cleanup durations.
+
+    **Returns:** `bool [T, F]`.
+    """
+    p = _as_points(foot_positions)
+    g = estimate_ground(
+        p,
+        frame_time_s,
+        up_axis=up_axis,
+        ground_height=ground_height,
+        height_threshold=height_threshold,
+        speed_threshold=speed_threshold,
+    )
+    h = p[..., up_axis]
+    hz = np.delete(p, up_axis, axis=-1)
+    above = h - g.intercepts - hz @ g.slope
+    speed = np.asarray(point_speeds(p, frame_time_s))
+    enter = (above < g.height_threshold) & (speed < g.speed_threshold)
+    stay = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)
+    T, F, P = h.shape
+    min_len = max(1, int(round(min_contact_s / frame_time_s)))
+    max_gap = int(round(max_gap_s / frame_time_s))
+    out = np.zeros((T, F), bool)
+    for f in range(F):
+        pts = [_hysteresis(enter[:, f, k], stay[:, f, k]) for k in range(P)]
+        out[:, f] = _cleanup(np.any(pts, axis=0), min_len, max_gap)
+    return out
+
+
+def step_events(contacts) -> tuple[np.ndarray, ...]:
+    """Heel strikes: the frames where each foot's contact begins.
+
+    A contact already on at frame 0 is not a strike (its onset was not seen).
+
+    **Arguments:** `contacts`: `bool [T, F]`.
+
+    **Returns:** a tuple of F integer arrays of frame indices, ascending.
+    """
+    c = np.asarray(contacts, bool)
+    if c.ndim != 2:
+        raise UserError(f"contacts: expected shape [T, F], got {c.shape}")
+    return tuple(np.nonzero(c[1:, f] & ~c[:-1, f])[0] + 1 for f in range(c.shape[1]))
+
+
+def step_intervals(contacts) -> np.ndarray:
+    """Frames between consecutive heel strikes of different feet (one per step)."""
+    ev = step_events(contacts)
+    frames = np.concatenate(ev) if ev else np.zeros(0, int)
+    feet = np.concatenate([np.full(len(e), f) for f, e in enumerate(ev)]) if ev else frames
+    order = np.argsort(frames, kind="stable")
+    frames, feet = frames[order], feet[order]
+    alt = feet[1:] != feet[:-1]
+    return np.diff(frames)[alt]
+
+
+def mean_step_period_s(contacts, frame_time_s: float) -> float:
+    """Mean step duration, heel strike to the other foot's heel strike (Tilmanne §2.2).
+
+    The gait cycle is two steps: `omega = 2π / (2 · mean_step_period_s)`. When each foot has
+    at least two strikes the cycle is measured foot by foot (robust to left/right asymmetry)
+    and halved; otherwise the alternating strike intervals are averaged.
+
+    **Arguments:** `contacts`: `bool [T, F]`; `frame_time_s`: seconds per frame.
+
+    **Returns:** seconds. Raises `UserError` when the clip holds fewer than two heel strikes.
+    """
+    ev = step_events(contacts)
+    cycles = [np.diff(e) for e in ev if len(e) >= 2]
+    if len(ev) >= 2 and len(cycles) == len(ev):
+        return float(np.mean(np.concatenate(cycles))) * frame_time_s / 2.0
+    steps = step_intervals(contacts)
+    if len(steps) == 0:
+        raise UserError(
+            "mean_step_period_s: fewer than two alternating heel strikes in the clip; cannot "
+            "measure a step"
+        )
+    return float(np.mean(steps)) * frame_time_s
+
+
+def flight_fraction(contacts) -> float:
+    """Fraction of frames with no foot in contact (`contacts`: `bool [T, F]`)."""
+    c = np.asarray(contacts, bool)
+    return float(np.mean(~c.any(axis=1)))
+
+
+def double_support_fraction(contacts) -> float:
+    """Fraction of frames with every foot in contact (`contacts`: `bool [T, F]`)."""
+    c = np.asarray(contacts, bool)
+    return float(np.mean(c.all(axis=1)))
+
+
+def contact_timeline(contacts, labels=("L", "R")) -> str:
+    """One text line per foot, `#` in contact, `.` in the air (for logs and the CLI)."""
+    c = np.asarray(contacts, bool)
+    return "\n".join(
+        f"{labels[f] if f < len(labels) else f} " + "".join("#" if x else "." for x in c[:, f])
+        for f in range(c.shape[1])
+    )

@@ -1,0 +1,284 @@
+"""Tests of fourierjax.contacts on real CMU clips and on synthetic feet with known contacts."""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import contacts as C
+from fourierjax.errors import UserError
+
+SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap" / "cmu_mb"
+
+
+# -- an independent numpy BVH reader and FK (oracle; also used until fourierjax.data lands) --
+def _read_bvh(path):
+    toks = Path(path).read_text().split()
+    names, parents, offsets, chans, es_par, es_off = [], [], [], [], [], []
+    stack, i, cur = [], 0, None
+    while toks[i] != "MOTION":
+        t = toks[i]
+        if t in ("ROOT", "JOINT"):
+            names.append(toks[i + 1])
+            parents.append(stack[-1] if stack else -1)
+            cur, i = len(names) - 1, i + 2
+        elif t == "End":
+            es_par.append(stack[-1])
+            cur, i = "end", i + 2
+        elif t == "{":
+            stack.append(cur)
+            i += 1
+        elif t == "}":
+            stack.pop()
+            i += 1
+        elif t == "OFFSET":
+            (es_off if cur == "end" else offsets).append([float(x) for x in toks[i + 1 : i + 4]])
+            i += 4
+        elif t == "CHANNELS":
+            n = int(toks[i + 1])
+            chans.append(tuple(toks[i + 2 : i + 2 + n]))
+            i += 2 + n
+        else:
+            i += 1
+    nf, ft = int(toks[i + 2]), float(toks[i + 5])
+    frames = np.array(toks[i + 6 :], float).reshape(nf, -1)
+    return dict(names=names, parents=parents, offsets=np.array(offsets), channels=chans,
+                es_par=es_par, es_off=np.array(es_off), frames=frames, frame_time=ft)
+
+
+def _rot(axis, a):
+    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
+    m = {"X": [[o, z, z], [z, c, -s], [z, s, c]], "Y": [[c, z, s], [z, o, z], [-s, z, c]],
+         "Z": [[c, -s, z], [s, c, z], [z, z, o]]}[axis]
+    return np.moveaxis(np.array(m), (0, 1), (-2, -1))
+
+
+def _fk(b, frames):
+    T, J = frames.shape[0], len(b["names"])
+    pos, R, k = np.zeros((T, J, 3)), np.zeros((T, J, 3, 3)), 0
+    for j in range(J):
+        off = np.broadcast_to(b["offsets"][j], (T, 3)).copy()
+        Rl = np.broadcast_to(np.eye(3), (T, 3, 3))
+        for c in b["channels"][j]:
+            v = frames[:, k]
+            k += 1
+            if c.endswith("position"):
+                off[:, "XYZ".index(c[0])] = v
+            else:
+                Rl = Rl @ _rot(c[0], np.deg2rad(v))
+        p = b["parents"][j]
+        if p < 0:
+            R[:, j], pos[:, j] = Rl, off
+        else:
+            R[:, j] = R[:, p] @ Rl
+            pos[:, j] = pos[:, p] + np.einsum("tij,tj->ti", R[:, p], off)
+    es = np.stack(
+        [pos[:, p] + np.einsum("tij,j->ti", R[:, p], o) for p, o in zip(b["es_par"], b["es_off"])],
+        1,
+    )
+    return pos, es
+
+
+class _Topo:
+    def __init__(self, names, es_par):
+        self.names, self.end_site_parents = tuple(names), tuple(es_par)
+
+
+@functools.cache
+def clip_feet(name: str):
+    """Foot points [T, 2, 3, 3] of a bundled clip (T-pose frame dropped) and its frame time."""
+    b = _read_bvh(SHARED / f"{name}.bvh")
+    start = 2 if name == "07_12" else 1
+    pos, es = _fk(b, b["frames"][start:])
+    pts = C.foot_points(_Topo(b["names"], b["es_par"]))
+    return np.asarray(C.gather_foot_positions(pos, es, pts)), b["frame_time"]
+
+
+WALKS = ["07_01", "02_01", "07_04", "07_12"]
+RUNS = ["09_01", "02_03", "09_02"]
+
+
+# -- foot_points -----------------------------------------------------------------------------
+def test_foot_points_cmu():
+    b = _read_bvh(SHARED / "07_01.bvh")
+    topo = _Topo(b["names"], b["es_par"])
+    fp = C.foot_points(topo)
+    n = b["names"]
+    J = len(n)
+    assert fp.left[:2] == (n.index("LeftFoot"), n.index("LeftToeBase"))
+    assert fp.right[:2] == (n.index("RightFoot"), n.index("RightToeBase"))
+    # The toe End Site, found through its parent.
+    assert b["es_par"][fp.left[2] - J] == n.index("LeftToeBase")
+    assert b["es_par"][fp.right[2] - J] == n.index("RightToeBase")
+    assert fp.names[0] == ("LeftFoot", "LeftToeBase", "LeftToeBase/End Site")
+    assert len(C.foot_points(topo, end_sites=False).left) == 2
+
+
+def test_foot_points_unknown_skeleton():
+    topo = _Topo(("pelvis", "l_ankle", "r_ankle"), ())
+    with pytest.raises(UserError, match="LeftFoot.*pelvis"):
+        C.foot_points(topo)
+    fp = C.foot_points(topo, feet=(("l_ankle",), ("r_ankle",)))
+    assert fp.left == (1,) and fp.right == (2,)
+
+
+# -- real clips -------------------------------------------------------------------------------
+def _alternates(contacts):
+    ev = C.step_events(contacts)
+    strikes = sorted([(int(f), side) for side, e in enumerate(ev) for f in e])
+    sides = [s for _, s in strikes]
+    return len(sides) >= 2 and all(a != b for a, b in zip(sides, sides[1:]))
+
+
+@pytest.mark.parametrize("name", WALKS)
+def test_walks_alternate_with_double_support(name):
+    feet, ft = clip_feet(name)
+    c = C.foot_contacts(feet, ft)
+    assert _alternates(c), C.contact_timeline(c)
+    assert C.double_support_fraction(c) > 0.08, C.contact_timeline(c)
+    # A walk never leaves the ground (07_12's glitch frame is dropped above).
+    assert C.flight_fraction(c) == 0.0, C.contact_timeline(c)
+    # Each foot is on the ground for more than half of the clip (stance ~60% of a cycle).
+    assert np.all(c.mean(0) > 0.45)
+    period = C.mean_step_period_s(c, ft)
+    assert 0.4 < period < 0.8, period
+
+
+@pytest.mark.parametrize("name", RUNS)
+def test_runs_have_flight_phases(name):
+    feet, ft = clip_feet(name)
+    c = C.foot_contacts(feet, ft)
+    assert _alternates(c), C.contact_timeline(c)
+    assert C.double_support_fraction(c) == 0.0, C.contact_timeline(c)
+    assert C.flight_fraction(c) > 0.2, C.contact_timeline(c)
+    # Flight phases: runs of frames with no foot down between the two feet's stances.
+    airborne = ~c.any(1)
+    starts = np.nonzero(airborne[1:] & ~airborne[:-1])[0]
+    assert len(starts) >= 2
+    period = C.mean_step_period_s(c, ft)
+    assert 0.3 < period < 0.45, period
+
+
+def test_run_steps_are_shorter_than_walk_steps_same_subject():
+    walk, ft = clip_feet("02_01")
+    run, _ = clip_feet("02_03")
+    p_walk = C.mean_step_period_s(C.foot_contacts(walk, ft), ft)
+    p_run = C.mean_step_period_s(C.foot_contacts(run, ft), ft)
+    assert p_run < 0.85 * p_walk
+
+
+def test_tilted_capture_floor_is_fitted():
+    # CMU floors rise ~1 unit along a walk; the fitted slope follows the walking direction (+Z).
+    feet, ft = clip_feet("07_01")
+    g = C.estimate_ground(feet, ft)
+    assert 0.005 < g.slope[1] < 0.03
+    # The toe tip's floor is near the world ground, the ankle's clearance ~1 unit above it.
+    assert np.all(np.abs(g.intercepts[:, 2] - g.intercepts[:, 2].mean()) < 0.5)
+    assert np.all(g.intercepts[:, 0] - g.intercepts[:, 2] > 0.5)
+
+
+# -- synthetic feet with known contacts ----------------------------------------------------
+def _synthetic_walk(T=480, ft=1 / 120, cycle=120, stance=72, tilt=0.02, flight=False):
+    """Two feet (ankle, toe) on a floor y = tilt * z; known contact masks."""
+    t = np.arange(T)
+    feet = np.zeros((T, 2, 2, 3))
+    truth = np.zeros((T, 2), bool)
+    stride = 30.0
+    for f, shift in enumerate((0, cycle // 2)):
+        ph = (t + shift) % cycle
+        k = (t + shift) // cycle
+        down = ph < stance
+        s = np.clip((ph - stance) / (cycle - stance), 0, 1)
+        z = stride * (k + np.where(down, 0.0, 0.5 - 0.5 * np.cos(np.pi * s)))
+        lift = np.where(down, 0.0, 3.0 * np.sin(np.pi * s))
+        x = 3.0 if f == 0 else -3.0
+        for p, (dz, dy) in enumerate(((0.0, 1.0), (3.0, 0.0))):
+            feet[:, f, p] = np.stack([np.full(T, x), tilt * (z + dz) + dy + lift, z + dz], -1)
+        truth[:, f] = down
+    return feet, ft, truth
+
+
+def test_synthetic_contacts_match_truth_on_tilted_floor():
+    feet, ft, truth = _synthetic_walk()
+    c = C.foot_contacts(feet, ft)
+    # Equal except within a couple of frames of each touch-down / lift-off.
+    diff = c != truth
+    edges = np.zeros_like(truth)
+    for f in range(2):
+        on = np.nonzero(np.diff(truth[:, f].astype(int)))[0]
+        for e in on:
+            edges[max(e - 3, 0) : e + 4, f] = True
+    assert not np.any(diff & ~edges)
+    assert C.mean_step_period_s(c, ft) == pytest.approx(0.5, abs=1 / 120)
+
+
+def test_ground_height_given_is_level():
+    feet, ft, truth = _synthetic_walk(tilt=0.0)
+    c = C.foot_contacts(feet, ft, ground_height=0.0)
+    assert (c == truth).mean() > 0.95
+    g = C.estimate_ground(feet, ft, ground_height=0.0)
+    np.testing.assert_allclose(g.slope, 0.0)
+    np.testing.assert_allclose(g.intercepts[:, 1], 0.0, atol=1e-9)
+
+
+def test_one_point_per_foot_and_explicit_thresholds():
+    feet, ft, truth = _synthetic_walk(tilt=0.0)
+    toes = feet[:, :, 1]
+    c = C.foot_contacts(toes, ft, height_threshold=0.5, speed_threshold=10.0)
+    assert (c == truth).mean() > 0.95
+
+
+def test_bad_input_raises():
+    with pytest.raises(UserError, match="foot_positions"):
+        C.foot_contacts(np.zeros((10, 2)), 0.01)
+    with pytest.raises(UserError, match="frame_time_s"):
+        C.foot_contacts(np.zeros((10, 2, 3)), 0.0)
+    with pytest.raises(UserError, match="NaN"):
+        C.foot_contacts(np.full((10, 2, 3), np.nan), 0.01)
+    with pytest.raises(UserError, match="contacts"):
+        C.step_events(np.zeros(5, bool))
+    with pytest.raises(UserError, match="fewer than two"):
+        C.mean_step_period_s(np.zeros((10, 2), bool), 0.01)
+
+
+def test_step_events_and_fractions_by_hand():
+    c = np.array([[1, 0], [1, 0], [0, 0], [0, 1], [0, 1], [1, 1], [1, 0]], bool)
+    ev = C.step_events(c)
+    assert ev[0].tolist() == [5] and ev[1].tolist() == [3]
+    assert C.step_intervals(c).tolist() == [2]
+    assert C.mean_step_period_s(c, 0.5) == 1.0
+    assert C.flight_fraction(c) == pytest.approx(1 / 7)
+    assert C.double_support_fraction(c) == pytest.approx(1 / 7)
+    assert C.contact_timeline(c).splitlines()[0] == "L ##...##"
+
+
+def test_cleanup_closes_gaps_and_drops_blips():
+    c = np.array([1, 1, 1, 1, 0, 1, 1, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 0], bool)
+    out = C._cleanup(c, min_len=3, max_gap=1)
+    assert out.tolist() == [True] * 8 + [False] * 10
+
+
+# -- differentiable parts ----------------------------------------------------------------------
+def test_soft_weights_and_speed_gradients_are_finite():
+    p = jnp.zeros((5, 2, 3))  # a planted, motionless foot: speed exactly 0
+    g = jax.grad(lambda q: C.point_speeds(q, 0.01).sum())(p)
+    assert jnp.all(jnp.isfinite(g))
+    w = C.soft_contact_weights(jnp.array([0.0, 1.0, 10.0]), jnp.array([0.0, 2.0, 0.0]), 1.0, 2.0)
+    np.testing.assert_allclose(w[1], 0.25, rtol=1e-6)
+    assert w[0] > 0.95 and w[2] < 1e-6
+    dw = jax.grad(lambda h: C.soft_contact_weights(h, 0.0, 1.0, 2.0))(0.5)
+    assert jnp.isfinite(dw) and dw < 0
+
+
+def test_point_speeds_match_numpy_gradient():
+    rng = np.random.default_rng(0)
+    p = rng.normal(size=(20, 2, 3))
+    ref = np.linalg.norm(np.gradient(p, 0.1, axis=0), axis=-1)
+    np.testing.assert_allclose(C.point_speeds(p, 0.1), ref, rtol=1e-5)
+    ref_h = np.linalg.norm(np.gradient(p[..., [0, 2]], 0.1, axis=0), axis=-1)
+    np.testing.assert_allclose(C.point_speeds(p, 0.1, up_axis=1), ref_h, rtol=1e-5)
