@@ -1,0 +1,746 @@
+"""Fourier gait models (Unuma 1995 eq. 1; Tilmanne & Dutoit eq. 1-6): model, synthesis, fits, ω.
+
+Contract (for `fourierjax.style` and other users)
+------------------------------------------------
+``FourierModel(offset[C], amplitude[C, N], phase[C, N], omega[], representation, channel_names)``
+is an all-leaves equinox Module (``representation`` and ``channel_names`` are static). Per channel
+``c`` it is Unuma's rescaled Fourier functional model (eq. 1, sine convention)::
+
+    x_c(theta) = offset[c] + sum_n amplitude[c, n-1] * sin(n * theta + phase[c, n-1])
+    theta = omega * t_s                        (phase of the gait cycle, radians)
+
+with ``amplitude >= 0``, ``phase`` in ``(-pi, pi]`` and ``omega`` the fundamental in rad/s (one
+gait cycle = two steps). Stack models with ``jax.tree.map(lambda *x: jnp.stack(x), *models)``
+(same static fields) and vmap: ``jax.vmap(synthesize, in_axes=(0, None))(models, t_s)``.
+
+* ``synthesize(model, t_s[T]) -> [T, C]``, ``synthesize_phase(model, phase[T]) -> [T, C]``.
+* ``model.sin_cos() -> (a[C, N], b[C, N])`` with ``x = offset + sum a sin(n th) + b cos(n th)``
+  (the linear coordinates: PCA and averaging belong here); ``FourierModel.from_sin_cos(...)``.
+* ``model.to_cosine() -> (offset, amplitude, phase_cos)``: Tilmanne eq. 1,
+  ``x = p0 + sum p_n cos(n th + phase_cos_n)``, ``phase_cos = wrap(phase - pi/2)``.
+* ``model.style_vector(convention="sine") -> [C * (2N + 1) + 1]``: per channel
+  ``(A0, A1, phi1, ..., AN, phiN)`` then ``omega`` (Tilmanne: 54 x 5 + 1 = 271).
+  ``FourierModel.from_style_vector(v, num_channels, num_harmonics, ...)`` inverts it.
+* ``shift_phase(model, delta) -> model`` with ``x'(theta) = x(theta + delta)``
+  (``phase_n += n * delta``); fitted models are aligned so that theta = 0 is the canonical gait
+  event (left heel strike; see ``align_to_events`` / ``channel_event_phase``).
+
+Channels (built by ``fourierjax.motion.features_from_motion``) are joint rotations in radians,
+either the file's Euler angles (``"LeftUpLeg.Xrotation"``, unwrapped over time and repaired at
+gimbal flips) or the continuous exponential map (``"LeftUpLeg.expmap0..2"``), plus three root
+channels: ``"root.vx"``, ``"root.vz"`` (horizontal root velocity in file units per second,
+expressed in the heading frame: +z forward, +x left of the walker's heading) and ``"root.y"``
+(root height, file units). The root's own rotation channels hold its orientation relative to the
+heading frame and are treated like any joint. Root position is never a channel: it is integrated
+from the velocity channels when a motion is written back. The heading frame is fixed per fitted
+stretch (the circular mean of the root's facing direction), so a synthesized motion walks
+straight along +Z.
+
+Fitting (``fit``): for a fixed ω the coefficients are a closed-form linear least-squares solve
+(one small (2N+1)x(2N+1) Gram matrix shared by all channels, solved with a hand-rolled Cholesky
+in plain jnp: batched LAPACK calls hang on 2-core CPUs). ω itself is found by variable projection
+(the residual with the coefficients solved exactly inside): a grid then a golden-section search
+around the spectral (or step-based) estimate, then Newton steps on the projected residual. Clips of
+different lengths are batched by padding at the end and a frame mask.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+REPRESENTATIONS = ("euler", "expmap")
+ROOT_CHANNELS = ("root.vx", "root.vz", "root.y")
+
+__all__ = [
+    "REPRESENTATIONS",
+    "ROOT_CHANNELS",
+    "FourierModel",
+    "FitResult",
+    "wrap_angle",
+    "synthesize",
+    "synthesize_phase",
+    "harmonic_basis",
+    "fit_linear",
+    "projected_residual",
+    "fit",
+    "fit_batch",
+    "spectral_omega",
+    "shift_phase",
+    "align_to_events",
+    "channel_event_phase",
+    "rms_error",
+    "variance_explained",
+    "energy_per_harmonic",
+    "amplitude_spectrum",
+    "angle_channel_mask",
+    "stack_models",
+]
+
+
+def wrap_angle(x: Array) -> Array:
+    """Wrap angles (radians) to ``(-pi, pi]``."""
+    y = jnp.remainder(x + jnp.pi, 2 * jnp.pi) - jnp.pi  # [-pi, pi)
+    return jnp.where(y <= -jnp.pi, y + 2 * jnp.pi, y)
+
+
+def _safe_norm_atan2(a: Array, b: Array) -> tuple[Array, Array]:
+    """(sqrt(a^2 + b^2), atan2(b, a)) with finite gradients at a = b = 0."""
+    r2 = a * a + b * b
+    small = r2 < 1e-30
+    # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.
+    r2_safe = jnp.where(small, 1.0, r2)
+    a_safe = jnp.where(small, 1.0, a)
+    b_safe = jnp.where(small, 0.0, b)
+    amplitude = jnp.where(small, 0.0, jnp.sqrt(r2_safe))
+    phase = jnp.where(small, 0.0, jnp.arctan2(b_safe, a_safe))
+    phase = jnp.where(phase <= -jnp.pi, phase + 2 * jnp.pi, phase)
+    return amplitude, phase
+
+
+class FourierModel(eqx.Module):
+    """Per-channel Fourier series with one fundamental (Unuma 1995 eq. 1, sine convention).
+
+    Fields: ``offset [C]`` (A0), ``amplitude [C, N]`` (A_n >= 0), ``phase [C, N]`` (phi_n in
+    (-pi, pi]), ``omega []`` (rad/s); static ``representation`` ("euler" | "expmap") and
+    ``channel_names`` (tuple of str, empty or length C).
+    """
+
+    offset: Float[Array, " C"]
+    amplitude: Float[Array, "C N"]
+    phase: Float[Array, "C N"]
+    omega: Float[Array, ""]
+    representation: str = eqx.field(static=True, default="euler")
+    channel_names: tuple[str, ...] = eqx.field(static=True, default=())
+
+    def __check_init__(self):
+        off, amp, ph, om = (jnp.shape(x) for x in (self.offset, self.amplitude, self.phase,
+                                                     self.omega))
+        if len(amp) < 2 or amp != ph:
+            raise ValueError(
+                f"FourierModel: amplitude {amp} and phase {ph} must both be [..., C, N]"
+            )
+        if off != amp[:-1]:
+            raise ValueError(f"FourierModel: offset {off} must be [..., C] with C = {amp[-2]}")
+        if om != off[:-1]:
+            raise ValueError(f"FourierModel: omega {om} must be a scalar (per model)")
+        if self.representation not in REPRESENTATIONS:
+            raise ValueError(
+                f"FourierModel: representation {self.representation!r} not in {REPRESENTATIONS}"
+            )
+        if not isinstance(self.channel_names, tuple):
+            raise TypeError("FourierModel: channel_names must be a tuple of str")
+        if self.channel_names and len(self.channel_names) != amp[-2]:
+            raise ValueError(
+                f"FourierModel: {len(self.channel_names)} channel_names for {amp[-2]} channels"
+            )
+
+    @property
+    def num_channels(self) -> int:
+        return self.amplitude.shape[-2]
+
+    @property
+    def num_harmonics(self) -> int:
+        return self.amplitude.shape[-1]
+
+    @property
+    def fundamental_hz(self) -> Array:
+        return self.omega / (2 * jnp.pi)
+
+    def sin_cos(self) -> tuple[Array, Array]:
+        """Linear coordinates ``(a, b)`` [C, N]: ``x = A0 + sum a_n sin(n th) + b_n cos(n th)``."""
+        return self.amplitude * jnp.cos(self.phase), self.amplitude * jnp.sin(self.phase)
+
+    @classmethod
+    def from_sin_cos(cls, offset, a, b, omega, representation="euler", channel_names=()):
+        """Inverse of :meth:`sin_cos` (amplitudes made >= 0, phases in (-pi, pi])."""
+        amplitude, phase = _safe_norm_atan2(jnp.asarray(a), jnp.asarray(b))
+        return cls(jnp.asarray(offset), amplitude, phase, jnp.asarray(omega),
+                   representation, tuple(channel_names))
+
+    def to_cosine(self) -> tuple[Array, Array, Array]:
+        """Tilmanne & Dutoit eq. 1 convention: ``x = p0 + sum p_n cos(n w t + phase_cos_n)``.
+
+        Returns ``(offset [C], amplitude [C, N], phase_cos [C, N])``, ``phase_cos = phase - pi/2``
+        wrapped to (-pi, pi].
+        """
+        return self.offset, self.amplitude, wrap_angle(self.phase - jnp.pi / 2)
+
+    @classmethod
+    def from_cosine(cls, offset, amplitude, phase_cos, omega, representation="euler",
+                    channel_names=()):
+        """Inverse of :meth:`to_cosine`."""
+        return cls(jnp.asarray(offset), jnp.asarray(amplitude),
+                   wrap_angle(jnp.asarray(phase_cos) + jnp.pi / 2), jnp.asarray(omega),
+                   representation, tuple(channel_names))
+
+    def style_vector(self, convention: str = "sine") -> Float[Array, " S"]:
+        """Flat view ``[C * (2N + 1) + 1]``: per channel (A0, A1, phi1, ..., AN, phiN), then omega.
+
+        ``convention="cosine"`` gives Tilmanne's phases (eq. 1; 54 x 5 + 1 = 271 numbers).
+        """
+        if convention not in ("sine", "cosine"):
+            raise ValueError(f"style_vector: convention {convention!r} not 'sine' or 'cosine'")
+        amp = self.amplitude
+        ph = wrap_angle(self.phase - jnp.pi / 2) if convention == "cosine" else self.phase
+        pairs = jnp.stack([amp, ph], axis=-1).reshape(*amp.shape[:-1], -1)  # [C, 2N]
+        per_channel = jnp.concatenate([self.offset[..., None], pairs], axis=-1)
+        flat = per_channel.reshape(*per_channel.shape[:-2], -1)
+        return jnp.concatenate([flat, self.omega[..., None]], axis=-1)
+
+    @classmethod
+    def from_style_vector(cls, vector, num_channels: int, num_harmonics: int,
+                          representation="euler", channel_names=(), convention: str = "sine"):
+        """Inverse of :meth:`style_vector` for one model (amplitudes/phases are canonicalised)."""
+        vector = jnp.asarray(vector)
+        expected = num_channels * (2 * num_harmonics + 1) + 1
+        if vector.shape != (expected,):
+            raise ValueError(
+                f"from_style_vector: vector shape {vector.shape}, expected ({expected},) for "
+                f"{num_channels} channels x {num_harmonics} harmonics"
+            )
+        per_channel = vector[:-1].reshape(num_channels, 2 * num_harmonics + 1)
+        offset = per_channel[:, 0]
+        amp = per_channel[:, 1::2]
+        ph = per_channel[:, 2::2]
+        if convention == "cosine":
+            ph = ph + jnp.pi / 2
+        elif convention != "sine":
+            raise ValueError(f"from_style_vector: convention {convention!r} not 'sine' or 'cosine'")
+        # Negative amplitudes (e.g. after PCA) are legal points: flip sign into the phase.
+        a, b = amp * jnp.cos(ph), amp * jnp.sin(ph)
+        return cls.from_sin_cos(offset, a, b, vector[-1], representation, channel_names)
+
+
+def stack_models(models) -> FourierModel:
+    """Stack models with identical static fields along a new leading axis (for vmap)."""
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *models)
+
+
+# ----------------------------------------------------------------------------------- synthesis
+
+
+def harmonic_basis(theta: Float[Array, " T"], num_harmonics: int) -> Float[Array, "T P"]:
+    """Design matrix ``[1, sin(n th) (n=1..N), cos(n th) (n=1..N)]``, P = 2N + 1."""
+    n = jnp.arange(1, num_harmonics + 1, dtype=theta.dtype)
+    nt = theta[:, None] * n[None, :]
+    return jnp.concatenate([jnp.ones_like(theta)[:, None], jnp.sin(nt), jnp.cos(nt)], axis=1)
+
+
+def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Array, "T C"]:
+    """Evaluate the model at cycle phases ``phase`` (radians), Unuma 1995 eq. 1.
+
+    Arguments:
+        model: one FourierModel (vmap for several).
+        phase: ``[T]`` cycle phase theta in radians (any values; 2 pi = one gait cycle).
+    Returns:
+        ``[T, C]`` channel values (radians for angle channels).
+    """
+    phase = jnp.asarray(phase, dtype=model.amplitude.dtype)
+    a, b = model.sin_cos()
+    n = jnp.arange(1, model.num_harmonics + 1, dtype=phase.dtype)
+    nt = phase[:, None] * n[None, :]  # T x N trig calls, not T x C x N
+    return model.offset[None, :] + jnp.sin(nt) @ a.T + jnp.cos(nt) @ b.T
+
+
+def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T C"]:
+    """Evaluate the model at times ``t_s`` (seconds): ``synthesize_phase(model, omega * t_s)``.
+
+    Arguments:
+        model: one FourierModel (vmap for several).
+        t_s: ``[T]`` times in seconds (any length and frame rate).
+    Returns:
+        ``[T, C]`` channel values.
+    """
+    t_s = jnp.asarray(t_s, dtype=model.amplitude.dtype)
+    return synthesize_phase(model, model.omega * t_s)
+
+
+# ------------------------------------------------------------------------------- linear solves
+
+
+def _cholesky(G: Float[Array, "P P"]) -> Float[Array, "P P"]:
+    """Lower Cholesky factor in plain jnp (a fori_loop over columns; no LAPACK call)."""
+    P = G.shape[-1]
+    idx = jnp.arange(P)
+
+    def body(j, L):
+        row = L[j]  # only entries k < j are filled yet
+        d2 = G[j, j] - row @ row
+        d = jnp.sqrt(jnp.maximum(d2, jnp.finfo(G.dtype).tiny))
+        col = (G[:, j] - L @ row) / d
+        new = jnp.where(idx > j, col, 0.0) + jnp.where(idx == j, d, 0.0)
+        return L.at[:, j].set(new)
+
+    return jax.lax.fori_loop(0, P, body, jnp.zeros_like(G))
+
+
+def _cho_solve(L: Float[Array, "P P"], rhs: Float[Array, "P K"]) -> Float[Array, "P K"]:
+    """Solve ``L L^T x = rhs`` by forward and back substitution (plain jnp)."""
+    P = L.shape[-1]
+
+    def fwd(j, y):
+        return y.at[j].set((rhs[j] - L[j] @ y) / L[j, j])
+
+    y = jax.lax.fori_loop(0, P, fwd, jnp.zeros_like(rhs))
+
+    def bwd(i, x):
+        j = P - 1 - i
+        return x.at[j].set((y[j] - L[:, j] @ x) / L[j, j])
+
+    return jax.lax.fori_loop(0, P, bwd, jnp.zeros_like(rhs))
+
+
+def _masked_mean(x: Float[Array, "T C"], w: Float[Array, " T"]) -> Float[Array, " C"]:
+    return (w @ x) / jnp.maximum(jnp.sum(w), 1.0)
+
+
+def _solve_coefficients(features, w, theta, num_harmonics):
+    """Least-squares coefficients [P, C] of centred data for the basis at phases theta."""
+    B = harmonic_basis(theta, num_harmonics)
+    Bw = B * w[:, None]
+    G = Bw.T @ B
+    # Relative jitter: keeps the factorisation defined when a column vanishes (omega -> 0).
+    scale = jnp.trace(G) / G.shape[0]
+    G = G + (10 * jnp.finfo(G.dtype).eps * scale + jnp.finfo(G.dtype).tiny) * jnp.eye(
+        G.shape[0], dtype=G.dtype)
+    coef = _cho_solve(_cholesky(G), Bw.T @ features)
+    return B, coef
+
+
+def _model_arrays_from_coef(mean, coef, num_harmonics):
+    N = num_harmonics
+    a = coef[1 : N + 1].T  # [C, N] sine coefficients
+    b = coef[N + 1 :].T  # [C, N] cosine coefficients
+    amplitude, phase = _safe_norm_atan2(a, b)
+    return mean + coef[0], amplitude, phase
+
+
+def projected_residual(
+    omega: Float[Array, ""],
+    features: Float[Array, "T C"],
+    t_s: Float[Array, " T"],
+    num_harmonics: int,
+    mask: Float[Array, " T"] | None = None,
+    channel_weights: Float[Array, " C"] | None = None,
+) -> Float[Array, ""]:
+    """Variable-projection objective: weighted SSE of the best N-harmonic fit at ``omega``.
+
+    ``sum_t mask_t sum_c w_c (x_tc - xhat_tc(omega))^2`` with the linear coefficients solved
+    exactly for this omega (the objective whose minimiser is the nonlinear least-squares omega).
+    """
+    T, C = features.shape
+    w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
+    cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
+    x = features - _masked_mean(features, w)[None, :]
+    B, coef = _solve_coefficients(x, w, omega * t_s, num_harmonics)
+    r = x - B @ coef
+    return jnp.sum(w[:, None] * cw[None, :] * r * r)
+
+
+def fit_linear(
+    features: Float[Array, "T C"],
+    t_s: Float[Array, " T"],
+    omega: Float[Array, ""],
+    num_harmonics: int,
+    mask: Bool[Array, " T"] | None = None,
+    representation: str = "euler",
+    channel_names: tuple[str, ...] = (),
+) -> FourierModel:
+    """Closed-form least-squares Fourier coefficients for a fixed fundamental.
+
+    Minimises ``sum_t mask_t |x_t - model(omega t_t)|^2`` per channel; the frames need not span
+    a whole number of cycles (a plain projection, Tilmanne eq. 3-4, would need that).
+
+    Arguments:
+        features: ``[T, C]`` samples; t_s: ``[T]`` sample times (s); omega: rad/s;
+        num_harmonics: N (static); mask: ``[T]`` frames to use (default all).
+    Returns:
+        FourierModel with the given omega.
+    """
+    features = jnp.asarray(features)
+    T = features.shape[0]
+    w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
+    mean = _masked_mean(features, w)
+    omega = jnp.asarray(omega, features.dtype)
+    _, coef = _solve_coefficients(features - mean[None, :], w, omega * jnp.asarray(t_s),
+                                  num_harmonics)
+    offset, amplitude, phase = _model_arrays_from_coef(mean, coef, num_harmonics)
+    return FourierModel(offset, amplitude, phase, omega, representation, tuple(channel_names))
+
+
+# -------------------------------------------------------------------------- fundamental frequency
+
+
+def spectral_omega(
+    features: Float[Array, "T C"],
+    frame_time_s: Float[Array, ""],
+    mask: Bool[Array, " T"] | None = None,
+    channel_weights: Float[Array, " C"] | None = None,
+    f_min_hz: float = 0.4,
+    f_max_hz: float = 3.0,
+    pad_factor: int = 8,
+) -> tuple[Float[Array, ""], Float[Array, " K"], Float[Array, " K"]]:
+    """Fundamental from the power spectrum summed over channels, refined below one bin.
+
+    Each channel is centred, Hann-windowed over its valid frames (the mask must be a prefix:
+    clips padded at the end), zero-padded ``pad_factor``x and transformed; the weighted power
+    spectra are summed (Tilmanne Fig. 1) and the highest peak in ``[f_min_hz, f_max_hz]`` is
+    refined by a parabola through the log power of its three bins.
+
+    Returns:
+        ``(omega [rad/s], freqs_hz [K], power [K])``.
+    """
+    T, C = features.shape
+    w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
+    cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
+    n_valid = jnp.sum(w)
+    k = jnp.arange(T, dtype=features.dtype)
+    hann = 0.5 - 0.5 * jnp.cos(2 * jnp.pi * k / jnp.maximum(n_valid - 1, 1.0))
+    win = hann * w
+    x = (features - _masked_mean(features, w)[None, :]) * win[:, None]
+    nfft = int(2 ** math.ceil(math.log2(max(T, 2) * pad_factor)))
+    spec = jnp.fft.rfft(x, n=nfft, axis=0)
+    power = (jnp.abs(spec) ** 2) @ cw
+    freqs = jnp.fft.rfftfreq(nfft, d=1.0) / frame_time_s
+    band = (freqs >= f_min_hz) & (freqs <= f_max_hz)
+    i = jnp.argmax(jnp.where(band, power, -jnp.inf))
+    i = jnp.clip(i, 1, power.shape[0] - 2)
+    lp = jnp.log(jnp.maximum(power[jnp.stack([i - 1, i, i + 1])], 1e-30))
+    denom = lp[0] - 2 * lp[1] + lp[2]
+    delta = jnp.where(denom < 0, 0.5 * (lp[0] - lp[2]) / jnp.where(denom < 0, denom, -1.0), 0.0)
+    f_peak = (i + jnp.clip(delta, -0.5, 0.5)) * (freqs[1] - freqs[0])
+    return 2 * jnp.pi * f_peak, freqs, power
+
+
+def _odd_energy_fraction(features, w, t_s, omega, num_harmonics, cw):
+    """Fraction of the (weighted) harmonic energy in odd harmonics of omega."""
+    x = features - _masked_mean(features, w)[None, :]
+    _, coef = _solve_coefficients(x, w, omega * t_s, num_harmonics)
+    N = num_harmonics
+    e = (coef[1 : N + 1] ** 2 + coef[N + 1 :] ** 2) @ cw  # [N]
+    odd = (jnp.arange(1, N + 1) % 2) == 1
+    return jnp.sum(jnp.where(odd, e, 0.0)) / jnp.maximum(jnp.sum(e), 1e-30)
+
+
+class FitResult(eqx.Module):
+    """Outcome of :func:`fit` for one clip (all leaves; a batched fit has a leading axis).
+
+    ``model`` is the fitted model (omega = ``omega_fit``), before phase alignment; the ω
+    estimates are rad/s: ``omega_spectral`` (a), ``omega_steps`` (b; NaN if no step events were
+    given), ``omega_guess`` (the candidate after the subharmonic guard), ``omega_fit`` (c;
+    variable projection). Metrics cover the masked frames: ``rms`` per channel (channel units),
+    ``rms_deg`` (angle channels), ``variance_explained_angles``; ``num_frames`` used.
+    """
+
+    model: FourierModel
+    omega_spectral: Float[Array, ""]
+    omega_steps: Float[Array, ""]
+    omega_guess: Float[Array, ""]
+    omega_fit: Float[Array, ""]
+    rms: Float[Array, " C"]
+    rms_deg: Float[Array, ""]
+    variance_explained_angles: Float[Array, ""]
+    num_frames: Int[Array, ""]
+
+
+def _golden_section(f, lo, hi, iterations):
+    invphi = (math.sqrt(5) - 1) / 2
+
+    def body(_, state):
+        a, b, c, d, fc, fd = state
+        left = fc < fd  # minimum in [a, d]
+        a2 = jnp.where(left, a, c)
+        b2 = jnp.where(left, d, b)
+        c_new = b2 - invphi * (b2 - a2)
+        d_new = a2 + invphi * (b2 - a2)
+        # Reuse one interior point; evaluate the other.
+        c2 = jnp.where(left, c_new, d)
+        d2 = jnp.where(left, c, d_new)
+        x_eval = jnp.where(left, c2, d2)
+        f_eval = f(x_eval)
+        fc2 = jnp.where(left, f_eval, fd)
+        fd2 = jnp.where(left, fc, f_eval)
+        return a2, b2, c2, d2, fc2, fd2
+
+    c = hi - invphi * (hi - lo)
+    d = lo + invphi * (hi - lo)
+    a, b, c, d, fc, fd = jax.lax.fori_loop(0, iterations, body, (lo, hi, c, d, f(c), f(d)))
+    return jnp.where(fc < fd, c, d)
+
+
+def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_harmonics,
+                f_min_hz, f_max_hz, search_halfwidth, grid_points, golden_iterations,
+                newton_steps, odd_threshold):
+    """Numeric core of :func:`fit` for one clip (plain arrays in and out)."""
+    dtype = features.dtype
+    T, C = features.shape
+    w = jnp.asarray(mask, dtype)
+    t_s = jnp.arange(T, dtype=dtype) * frame_time_s
+    n_valid = jnp.sum(w)
+    duration = n_valid * frame_time_s
+    cw = channel_weights
+
+    omega_spec, _, _ = spectral_omega(features, frame_time_s, w, cw, f_min_hz, f_max_hz)
+
+    # Subharmonic / harmonic guard. A gait cycle is two steps; the N-harmonic model at w/2
+    # contains the one at w, so residuals alone prefer subharmonics. With step events the
+    # candidate (w/2, w, 2w) closest to 1 / (2 mean step) wins; without them, w/2 wins only if
+    # its odd harmonics carry real energy (and the clip holds >= 2 of its cycles), 2w wins if
+    # the odd harmonics of w are empty.
+    cands = jnp.stack([omega_spec / 2, omega_spec, omega_spec * 2])
+    have_steps = jnp.isfinite(omega_steps)
+    steps_safe = jnp.where(have_steps, omega_steps, 1.0)
+    by_steps = cands[jnp.argmin(jnp.abs(jnp.log(cands / steps_safe)))]
+    nh = max(num_harmonics, 2)
+    odd_half = _odd_energy_fraction(features, w, t_s, omega_spec / 2, nh, cw)
+    odd_full = _odd_energy_fraction(features, w, t_s, omega_spec, nh, cw)
+    half_ok = duration * omega_spec / 2 / (2 * jnp.pi) >= 2.0
+    by_energy = jnp.where(
+        half_ok & (odd_half > odd_threshold),
+        omega_spec / 2,
+        jnp.where(odd_full < odd_threshold / 4, omega_spec * 2, omega_spec),
+    )
+    omega_guess = jnp.where(have_steps, by_steps, by_energy)
+
+    def objective(om):
+        return projected_residual(om, features, t_s, num_harmonics, w, cw)
+
+    # Grid over [guess / (1 + h), guess * (1 + h)] (log spaced), then golden section in the
+    # best cell, then safeguarded Newton steps on the projected residual.
+    ratios = jnp.exp(jnp.linspace(-jnp.log1p(search_halfwidth), jnp.log1p(search_halfwidth),
+                                  grid_points, dtype=dtype))
+    grid = omega_guess * ratios
+    values = jax.vmap(objective)(grid)
+    j = jnp.argmin(values)
+    lo = grid[jnp.maximum(j - 1, 0)]
+    hi = grid[jnp.minimum(j + 1, grid_points - 1)]
+    om = _golden_section(objective, lo, hi, golden_iterations)
+    g_fn = jax.grad(objective)
+    h_fn = jax.grad(g_fn)
+
+    def newton(_, om):
+        g, h = g_fn(om), h_fn(om)
+        step = jnp.where(h > 0, -g / jnp.where(h > 0, h, 1.0), 0.0)
+        cand = jnp.clip(om + step, lo, hi)
+        return jnp.where(objective(cand) <= objective(om), cand, om)
+
+    om = jax.lax.fori_loop(0, newton_steps, newton, om)
+
+    mean = _masked_mean(features, w)
+    B, coef = _solve_coefficients(features - mean[None, :], w, om * t_s, num_harmonics)
+    offset, amplitude, phase = _model_arrays_from_coef(mean, coef, num_harmonics)
+    resid = (features - mean[None, :]) - B @ coef
+    ms = (w @ (resid * resid)) / jnp.maximum(n_valid, 1.0)
+    centred = features - mean[None, :]
+    sst = w @ (centred * centred)
+    angle = cw > 0
+    rms_deg = jnp.degrees(jnp.sqrt(jnp.sum(jnp.where(angle, ms, 0.0))
+                                   / jnp.maximum(jnp.sum(angle), 1)))
+    ve = 1.0 - jnp.sum(jnp.where(angle, ms * n_valid, 0.0)) / jnp.maximum(
+        jnp.sum(jnp.where(angle, sst, 0.0)), 1e-30)
+    return dict(offset=offset, amplitude=amplitude, phase=phase, omega=om,
+                omega_spectral=omega_spec, omega_steps=omega_steps, omega_guess=omega_guess,
+                rms=jnp.sqrt(ms), rms_deg=rms_deg, variance_explained_angles=ve,
+                num_frames=n_valid.astype(jnp.int32))
+
+
+_FIT_STATIC = ("num_harmonics", "f_min_hz", "f_max_hz", "search_halfwidth", "grid_points",
+               "golden_iterations", "newton_steps", "odd_threshold")
+
+
+def _fit_batched_impl(features, mask, frame_time_s, omega_steps, channel_weights, **static):
+    fn = lambda f, m, dt, os: _fit_arrays(f, m, dt, os, channel_weights, **static)  # noqa: E731
+    return jax.vmap(fn)(features, mask, frame_time_s, omega_steps)
+
+
+_fit_batched = jax.jit(_fit_batched_impl, static_argnames=_FIT_STATIC)
+
+
+def _default_channel_weights(channel_names, num_channels, dtype):
+    if not channel_names:
+        return jnp.ones((num_channels,), dtype)
+    return jnp.asarray(angle_channel_mask(channel_names), dtype)
+
+
+def angle_channel_mask(channel_names: tuple[str, ...]) -> tuple[bool, ...]:
+    """True for rotation channels, False for the root translation channels ``root.*``."""
+    return tuple(not name.startswith("root.") for name in channel_names)
+
+
+def fit_batch(
+    features: Float[Array, "B T C"],
+    frame_time_s: Float[Array, " B"],
+    num_harmonics: int,
+    *,
+    mask: Bool[Array, "B T"] | None = None,
+    omega_steps: Float[Array, " B"] | None = None,
+    channel_weights: Float[Array, " C"] | None = None,
+    representation: str = "euler",
+    channel_names: tuple[str, ...] = (),
+    f_min_hz: float = 0.4,
+    f_max_hz: float = 3.0,
+    search_halfwidth: float = 0.25,
+    grid_points: int = 33,
+    golden_iterations: int = 30,
+    newton_steps: int = 3,
+    odd_threshold: float = 0.2,
+) -> FitResult:
+    """Fit many clips in one jit/vmap call: ω three ways and the coefficients.
+
+    Clips of different lengths are padded at the end to a common ``T`` and flagged by ``mask``.
+    Per clip: (a) spectral ω (:func:`spectral_omega`), (b) ω from step events if given
+    (``omega_steps`` rad/s, NaN where unknown; Tilmanne §2.2: cycle = two steps), the
+    subharmonic guard, then (c) the nonlinear least-squares ω by variable projection (grid,
+    golden section, Newton on :func:`projected_residual`) and the closed-form coefficients.
+    ``channel_weights`` weigh channels in the ω search (default: 1 for rotations, 0 for ``root.*``).
+
+    Returns:
+        FitResult with a leading batch axis on every leaf.
+    """
+    features = jnp.asarray(features)
+    if features.ndim != 3:
+        raise ValueError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
+    Bn, T, C = features.shape
+    if channel_names and len(channel_names) != C:
+        raise ValueError(f"fit_batch: {len(channel_names)} channel_names for {C} channels")
+    if num_harmonics < 1:
+        raise ValueError(f"fit_batch: num_harmonics must be >= 1, got {num_harmonics}")
+    dtype = features.dtype
+    mask = jnp.ones((Bn, T), dtype) if mask is None else jnp.asarray(mask, dtype)
+    if mask.shape != (Bn, T):
+        raise ValueError(f"fit_batch: mask shape {mask.shape}, expected {(Bn, T)}")
+    frame_time_s = jnp.broadcast_to(jnp.asarray(frame_time_s, dtype), (Bn,))
+    omega_steps = (jnp.full((Bn,), jnp.nan, dtype) if omega_steps is None
+                   else jnp.broadcast_to(jnp.asarray(omega_steps, dtype), (Bn,)))
+    cw = (_default_channel_weights(channel_names, C, dtype) if channel_weights is None
+          else jnp.asarray(channel_weights, dtype))
+    out = _fit_batched(features, mask, frame_time_s, omega_steps, cw,
+                       num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
+                       search_halfwidth=search_halfwidth, grid_points=grid_points,
+                       golden_iterations=golden_iterations, newton_steps=newton_steps,
+                       odd_threshold=odd_threshold)
+    model = FourierModel(out["offset"], out["amplitude"], out["phase"], out["omega"],
+                         representation, tuple(channel_names))
+    return FitResult(model, out["omega_spectral"], out["omega_steps"], out["omega_guess"],
+                     out["omega"], out["rms"], out["rms_deg"],
+                     out["variance_explained_angles"], out["num_frames"])
+
+
+def fit(
+    features: Float[Array, "T C"],
+    frame_time_s: float,
+    num_harmonics: int,
+    *,
+    mask: Bool[Array, " T"] | None = None,
+    omega_steps: float | None = None,
+    **kwargs,
+) -> FitResult:
+    """Fit one clip (``fit_batch`` with a batch of one; same arguments without the batch axis).
+
+    Arguments:
+        features: ``[T, C]`` channel samples (frame 0 at t = 0); frame_time_s: seconds;
+        num_harmonics: N; mask: ``[T]`` frames to use; omega_steps: ω from step events (rad/s).
+    Returns:
+        FitResult (no batch axis).
+    """
+    features = jnp.asarray(features)
+    if features.ndim != 2:
+        raise ValueError(f"fit: features must be [T, C], got shape {features.shape}")
+    m = None if mask is None else jnp.asarray(mask)[None]
+    os_ = None if omega_steps is None else jnp.asarray([omega_steps])
+    res = fit_batch(features[None], jnp.asarray([frame_time_s]), num_harmonics, mask=m,
+                    omega_steps=os_, **kwargs)
+    return jax.tree.map(lambda x: x[0], res)
+
+
+# ---------------------------------------------------------------------------- phase alignment
+
+
+def shift_phase(model: FourierModel, delta: Float[Array, ""]) -> FourierModel:
+    """Model advanced by ``delta`` radians of cycle: ``x'(theta) = x(theta + delta)``.
+
+    ``phase_n -> wrap(phase_n + n * delta)``; amplitudes, offset and omega are unchanged.
+    """
+    n = jnp.arange(1, model.num_harmonics + 1, dtype=model.phase.dtype)
+    new_phase = wrap_angle(model.phase + n * jnp.asarray(delta, model.phase.dtype)[..., None, None])
+    return eqx.tree_at(lambda m: m.phase, model, new_phase)
+
+
+def align_to_events(
+    model: FourierModel, event_times_s: Float[Array, " K"], valid: Bool[Array, " K"] | None = None
+) -> tuple[FourierModel, Float[Array, ""]]:
+    """Shift the phase so that theta = 0 falls on a gait event (e.g. left heel strikes).
+
+    The event phase is the circular mean of ``omega * t_k`` over the events (times in the
+    clip's fitting frame, t = 0 at its first frame). Returns ``(aligned_model, delta)``; a clip
+    time t has aligned phase ``omega * t - delta``.
+    """
+    theta = model.omega * jnp.asarray(event_times_s, model.phase.dtype)
+    v = jnp.ones_like(theta) if valid is None else jnp.asarray(valid, theta.dtype)
+    s, c = jnp.sum(v * jnp.sin(theta)), jnp.sum(v * jnp.cos(theta))
+    _, delta = _safe_norm_atan2(c, s)
+    return shift_phase(model, delta), delta
+
+
+def channel_event_phase(model: FourierModel, channel: int) -> Float[Array, ""]:
+    """Phase (radians) where the fundamental of ``channel`` peaks: ``pi/2 - phase[channel, 0]``.
+
+    The documented fallback event when no foot contacts are available: with the channel the
+    left hip flexion, ``shift_phase(model, channel_event_phase(model, c))`` puts the peak of
+    the left hip's fundamental at theta = 0.
+    """
+    return wrap_angle(jnp.pi / 2 - model.phase[channel, 0])
+
+
+# --------------------------------------------------------------------------------- metrics
+
+
+def rms_error(
+    model: FourierModel, features: Float[Array, "T C"], t_s: Float[Array, " T"],
+    mask: Bool[Array, " T"] | None = None,
+) -> Float[Array, " C"]:
+    """Per-channel RMS of ``features - synthesize(model, t_s)`` over the masked frames."""
+    r = jnp.asarray(features) - synthesize(model, t_s)
+    w = jnp.ones(r.shape[:1], r.dtype) if mask is None else jnp.asarray(mask, r.dtype)
+    return jnp.sqrt((w @ (r * r)) / jnp.maximum(jnp.sum(w), 1.0))
+
+
+def variance_explained(
+    target: Float[Array, "T D"], approx: Float[Array, "T D"],
+    mask: Bool[Array, " T"] | None = None,
+) -> Float[Array, ""]:
+    """``1 - sum |target - approx|^2 / sum |target - mean(target)|^2`` over masked frames."""
+    target, approx = jnp.asarray(target), jnp.asarray(approx)
+    target = target.reshape(target.shape[0], -1)
+    approx = approx.reshape(approx.shape[0], -1)
+    w = jnp.ones(target.shape[:1], target.dtype) if mask is None else jnp.asarray(mask,
+                                                                                 target.dtype)
+    mean = _masked_mean(target, w)
+    sse = jnp.sum(w @ ((target - approx) ** 2))
+    sst = jnp.sum(w @ ((target - mean[None, :]) ** 2))
+    return 1.0 - sse / jnp.maximum(sst, 1e-30)
+
+
+def energy_per_harmonic(model: FourierModel) -> Float[Array, "C N"]:
+    """Mean power of each harmonic per channel, ``A_n^2 / 2`` (channel units squared)."""
+    return 0.5 * model.amplitude**2
+
+
+def amplitude_spectrum(
+    features: Float[Array, "T C"], frame_time_s: float
+) -> tuple[Float[Array, " K"], Float[Array, "K C"]]:
+    """Single-sided DFT amplitude spectrum per channel (Tilmanne Fig. 1).
+
+    Returns ``(freqs_hz [K], amplitude [K, C])`` with ``amplitude = 2 |c_k|`` (``|c_0|`` at 0 Hz)
+    so that a sinusoid of amplitude A on a bin shows A.
+    """
+    x = jnp.asarray(features)
+    T = x.shape[0]
+    c = jnp.fft.rfft(x, axis=0) / T
+    amp = jnp.abs(c).at[1:].multiply(2.0)
+    return jnp.fft.rfftfreq(T, d=frame_time_s), amp
