@@ -1,0 +1,422 @@
+"""Tests of the style algebra: interpolation, transitions, characteristics, noise, style space."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.flatten_util import ravel_pytree
+
+from fourierjax import style
+from fourierjax.fourier import FourierModel, synthesize_phase
+
+
+def _names(c):
+    return tuple(f"j{i}.Xrotation" for i in range(c))
+
+
+def random_model(seed, c=4, n=3, omega=None, representation="euler", names=None):
+    rng = np.random.default_rng(seed)
+    return FourierModel(
+        jnp.asarray(rng.normal(size=c)),
+        jnp.asarray(rng.uniform(0.05, 1.0, size=(c, n))),
+        jnp.asarray(rng.uniform(-np.pi, np.pi, size=(c, n))),
+        jnp.asarray(rng.uniform(4.0, 10.0) if omega is None else omega),
+        representation,
+        _names(c) if names is None else names,
+    )
+
+
+def numpy_eval(offset, amplitude, phase, theta):
+    """Independent reference for Unuma eq. 1 at phases theta [T] -> [T, C]."""
+    n = np.arange(1, np.shape(amplitude)[1] + 1)
+    arg = n[None, None, :] * np.asarray(theta)[:, None, None] + np.asarray(phase)[None]
+    return np.asarray(offset)[None] + np.sum(np.asarray(amplitude)[None] * np.sin(arg), axis=-1)
+
+
+def assert_models_close(m1, m2, atol=1e-10):
+    """Same signal and same ω (phase compared on the circle; zero amplitudes ignore phase)."""
+    np.testing.assert_allclose(m1.offset, m2.offset, atol=atol)
+    np.testing.assert_allclose(m1.amplitude, m2.amplitude, atol=atol)
+    dphi = np.asarray(style.wrap_angle(m1.phase - m2.phase))
+    np.testing.assert_allclose(np.where(np.asarray(m1.amplitude) > atol, dphi, 0.0), 0.0, atol=atol)
+    np.testing.assert_allclose(m1.omega, m2.omega, rtol=1e-12)
+
+
+THETA = np.linspace(0.0, 2 * np.pi, 97)
+
+
+# ------------------------------------------------------------------------------ helpers
+
+
+def test_wrap_angle_range_and_gradient(x64):
+    x = jnp.linspace(-20.0, 20.0, 4001)
+    y = style.wrap_angle(x)
+    assert float(y.min()) > -np.pi and float(y.max()) <= np.pi
+    np.testing.assert_allclose(np.sin(y), np.sin(x), atol=1e-12)
+    np.testing.assert_allclose(np.cos(y), np.cos(x), atol=1e-12)
+    assert float(style.wrap_angle(jnp.pi)) == pytest.approx(np.pi)
+    assert float(style.wrap_angle(-jnp.pi)) == pytest.approx(np.pi)
+    g = jax.vmap(jax.grad(style.wrap_angle))(x)
+    np.testing.assert_array_equal(g, 1.0)
+
+
+def test_polar_from_phasor_is_nan_free_at_zero(x64):
+    amp, ph = style._polar_from_phasor(jnp.zeros((2,)))
+    assert float(amp) == 0.0 and float(ph) == 0.0
+    g = jax.grad(lambda c: style._polar_from_phasor(c)[0] + style._polar_from_phasor(c)[1])(jnp.zeros((2,)))
+    assert np.all(np.isfinite(g))
+
+
+# ---------------------------------------------------------------------- interpolation
+
+
+@pytest.mark.parametrize("method", ["polar", "phasor"])
+def test_interpolation_endpoints_reproduce_models(x64, method):
+    a, b = random_model(0), random_model(1)
+    assert_models_close(style.interpolate(a, b, 0.0, method=method), a)
+    assert_models_close(style.interpolate(a, b, 1.0, method=method), b)
+
+
+def test_phase_interpolation_takes_the_shorter_arc(x64):
+    a = FourierModel(jnp.zeros(1), jnp.ones((1, 1)), jnp.full((1, 1), 3.0), jnp.asarray(6.0), "euler", ("x",))
+    b = eqx.tree_at(lambda m: m.phase, a, jnp.full((1, 1), -3.0))
+    # The arc from 3.0 to -3.0 through pi is 2pi - 6 = 0.283 rad long; the long way is 6 rad.
+    for s in np.linspace(0.0, 1.0, 11):
+        ph = float(style.interpolate(a, b, s).phase[0, 0])
+        expected = 3.0 + s * (2 * np.pi - 6.0)
+        assert abs(float(style.wrap_angle(ph - expected))) < 1e-12, (s, ph)
+        assert abs(ph) > 2.9  # never passes through 0
+    mid = float(style.interpolate(a, b, 0.5).phase[0, 0])
+    assert mid == pytest.approx(np.pi)
+    # and the other direction
+    back = float(style.interpolate(b, a, 0.25).phase[0, 0])
+    assert float(style.wrap_angle(back - (-3.0 - 0.25 * (2 * np.pi - 6.0)))) == pytest.approx(0)
+
+
+def test_polar_interpolation_is_unuma_eq3(x64):
+    # Against eq. 3 written out in numpy (phases pre-unwrapped so the plain formula is the
+    # shorter arc), inside and outside [0, 1].
+    a, b = random_model(2), random_model(3)
+    pa, pb = np.asarray(a.phase), np.asarray(b.phase)
+    pb_near = pa + np.angle(np.exp(1j * (pb - pa)))
+    for s in (-0.7, 0.3, 1.0, 1.8):
+        m = style.interpolate(a, b, s)
+        ref = numpy_eval(
+            (1 - s) * np.asarray(a.offset) + s * np.asarray(b.offset),
+            (1 - s) * np.asarray(a.amplitude) + s * np.asarray(b.amplitude),
+            (1 - s) * pa + s * pb_near,
+            THETA,
+        )
+        np.testing.assert_allclose(synthesize_phase(m, THETA), ref, atol=1e-10)
+        assert np.all(np.asarray(m.amplitude) >= 0)
+        phase = np.asarray(m.phase)
+        assert np.all((phase > -np.pi) & (phase <= np.pi))
+        expected_omega = float(a.omega) ** (1 - s) * float(b.omega) ** s
+        assert float(m.omega) == pytest.approx(expected_omega, rel=1e-12)
+
+
+def test_extrapolation_canonicalises_negative_amplitudes(x64):
+    a = FourierModel(jnp.zeros(1), jnp.asarray([[1.0]]), jnp.asarray([[0.5]]), jnp.asarray(6.0), "euler", ("x",))
+    b = eqx.tree_at(lambda m: m.amplitude, a, jnp.asarray([[0.2]]))
+    m = style.interpolate(a, b, 2.0)  # amplitude 1 + 2 (0.2 - 1) = -0.6
+    assert float(m.amplitude[0, 0]) == pytest.approx(0.6)
+    assert float(m.phase[0, 0]) == pytest.approx(0.5 - np.pi)
+    np.testing.assert_allclose(synthesize_phase(m, THETA)[:, 0], -0.6 * np.sin(THETA + 0.5), atol=1e-12)
+
+
+def test_linear_omega_option(x64):
+    a, b = random_model(4, omega=5.0), random_model(5, omega=9.0)
+    assert float(style.interpolate(a, b, 0.25, omega="linear").omega) == pytest.approx(6.0)
+    assert float(style.interpolate(a, b, 0.5).omega) == pytest.approx(np.sqrt(45.0))
+    # geometric stays positive where linear would not
+    assert float(style.interpolate(a, b, -2.0).omega) > 0
+
+
+def test_phasor_interpolation_is_the_time_domain_blend(x64):
+    a, b = random_model(6), random_model(7, n=2)  # different harmonic counts are padded
+    for s in (-0.5, 0.3, 1.4):
+        m = style.interpolate(a, b, s, method="phasor")
+        blend = jax.vmap(lambda th: style.blend_time_domain(a, b, s, th))(jnp.asarray(THETA))
+        ref = (1 - s) * synthesize_phase(a, THETA) + s * synthesize_phase(b, THETA)
+        np.testing.assert_allclose(blend, ref, atol=1e-12)
+        np.testing.assert_allclose(synthesize_phase(m, THETA), ref, atol=1e-10)
+
+
+def test_interpolation_vmaps_over_s_and_does_not_retrace(x64):
+    a, b = random_model(8), random_model(9)
+    ss = jnp.linspace(-1.0, 2.0, 7)
+    batched = jax.vmap(lambda s: style.interpolate(a, b, s))(ss)
+    for i, s in enumerate(ss):
+        one = style.interpolate(a, b, float(s))
+        np.testing.assert_allclose(batched.amplitude[i], one.amplitude, atol=1e-12)
+        np.testing.assert_allclose(batched.phase[i], one.phase, atol=1e-12)
+    jitted = jax.jit(lambda s: style.interpolate(a, b, s).offset)
+    np.testing.assert_allclose(jitted(0.4), style.interpolate(a, b, 0.4).offset, atol=1e-12)
+
+    counted = eqx.debug.assert_max_traces(style._interpolate.__wrapped__, max_traces=1)
+    f = eqx.filter_jit(counted)
+    for s in (0.1, 0.2, 0.7):
+        f(a, b, jnp.asarray(s), "polar", "geometric")
+
+
+# ------------------------------------------------------------------------- incompatibility
+
+
+def test_incompatible_models_name_the_argument():
+    a = random_model(0, c=4)
+    with pytest.raises(ValueError, match="^b: channels"):
+        style.interpolate(a, random_model(1, c=5), 0.5)
+    with pytest.raises(ValueError, match="^b: channels .*channel 2"):
+        names = ("j0.Xrotation", "j1.Xrotation", "zz", "j3.Xrotation")
+        style.characteristic(a, random_model(1, c=4, names=names))
+    with pytest.raises(ValueError, match="^b: representation 'expmap'"):
+        style.transition(a, random_model(1, representation="expmap"), jnp.zeros(3), 0.0, 1.0)
+    char = style.characteristic(random_model(2, c=5), random_model(3, c=5))
+    with pytest.raises(ValueError, match="^characteristics: channels"):
+        style.superpose(a, char, 1.0)
+    with pytest.raises(ValueError, match="^target: channels"):
+        style.fit_style_weights(random_model(2, c=5), char, a)
+    with pytest.raises(ValueError, match="weights"):
+        style.superpose(a, [style.characteristic(a, random_model(1))] * 2, [1.0])
+    with pytest.raises(ValueError, match="method"):
+        style.interpolate(a, a, 0.5, method="cubic")
+    with pytest.raises(ValueError, match="duration_s"):
+        style.transition(a, a, jnp.zeros(3), 0.0, 0.0)
+
+
+# ------------------------------------------------------------------------------ transitions
+
+
+def _reference_phase(t, wa, wb, start, dur):
+    """Independent reference: cumulative trapezoid of ω(s(τ)) on a very fine grid."""
+    grid = np.linspace(0.0, t, 200001)
+    u = np.clip((grid - start) / dur, 0, 1)
+    s = u * u * (3 - 2 * u)
+    w = wa ** (1 - s) * wb**s
+    return float(np.sum((w[1:] + w[:-1]) * np.diff(grid)) / 2)
+
+
+def test_transition_phase_is_the_integral_of_omega(x64):
+    wa, wb, start, dur = 5.0, 9.0, 1.0, 1.5
+    t = jnp.asarray([0.0, 0.5, 1.0, 1.3, 1.75, 2.2, 2.5, 4.0])
+    s, theta = style.transition_schedule(wa, wb, t, start, dur)
+    for ti, th in zip(np.asarray(t), np.asarray(theta)):
+        assert th == pytest.approx(_reference_phase(ti, wa, wb, start, dur), abs=1e-8)
+    np.testing.assert_allclose(s, [0, 0, 0, 0.104, 0.5, 0.896, 1, 1], atol=1e-12)
+    # dθ/dt = ω(s(t)) everywhere, including across the window edges
+    tt = jnp.linspace(0.0, 4.0, 2001)
+    dtheta = jax.vmap(jax.grad(lambda x: style.transition_schedule(wa, wb, x[None], start, dur)[1][0]))(tt)
+    s_tt, _ = style.transition_schedule(wa, wb, tt, start, dur)
+    np.testing.assert_allclose(dtheta, wa ** (1 - s_tt) * wb**s_tt, rtol=1e-10)
+
+
+def test_transition_plays_a_then_b(x64):
+    a, b = random_model(10, omega=5.0), random_model(11, omega=8.0)
+    t = jnp.linspace(0.0, 5.0, 501)
+    values, s, theta = style.transition(a, b, t, 1.0, 2.0, return_schedule=True)
+    before = np.asarray(t) < 1.0
+    after = np.asarray(t) > 3.0
+    np.testing.assert_allclose(values[before], synthesize_phase(a, 5.0 * t[before]), atol=1e-10)
+    np.testing.assert_allclose(values[after], synthesize_phase(b, theta[after]), atol=1e-10)
+    np.testing.assert_allclose(np.diff(theta[after]), 8.0 * 0.01, rtol=1e-10)
+    # every frame is Ξ(s, θ) of eq. 3
+    i = 250
+    m = style.interpolate(a, b, float(s[i]))
+    np.testing.assert_allclose(values[i], synthesize_phase(m, theta[i : i + 1])[0], atol=1e-10)
+
+
+# ------------------------------------------------------------- characteristics, superposition
+
+
+def test_characteristic_is_unuma_eq7_and_psi_is_eq8(x64):
+    a, b = random_model(12), random_model(13)
+    char = style.characteristic(a, b)
+    np.testing.assert_allclose(char.amplitude, a.amplitude - b.amplitude, atol=1e-14)
+    np.testing.assert_allclose(np.exp(1j * char.phase), np.exp(1j * (a.phase - b.phase)), atol=1e-12)
+    assert np.all(np.abs(np.asarray(char.phase)) <= np.pi)
+    assert float(char.log_omega) == pytest.approx(np.log(float(a.omega) / float(b.omega)))
+    psi = jax.vmap(lambda th: style.characteristic_function(char, th))(jnp.asarray(THETA))
+    ref = numpy_eval(char.offset, a.amplitude - b.amplitude, a.phase - b.phase, THETA)
+    np.testing.assert_allclose(psi, ref, atol=1e-12)
+
+
+@pytest.mark.parametrize("method", ["polar", "phasor"])
+def test_superposition_identities(x64, method):
+    a, b, base = random_model(14), random_model(15), random_model(16)
+    char = style.characteristic(a, b)
+    assert_models_close(style.superpose(b, char, 1.0, method=method), a)
+    assert_models_close(style.superpose(base, [char], [0.0], method=method), base)
+    # base + 1 (A - base) == A
+    assert_models_close(style.superpose(base, style.characteristic(a, base), 1.0, method=method), a)
+
+
+def test_polar_superposition_equals_interpolation(x64):
+    a, b = random_model(17), random_model(18)
+    for s in (-0.4, 0.35, 1.6):
+        assert_models_close(style.superpose(a, style.characteristic(b, a), s), style.interpolate(a, b, s))
+
+
+def test_phasor_superposition_adds_signals(x64):
+    # The documented identity: Θ_base + Σ w_k (Θ_A,k − Θ_B,k) at a common phase.
+    base = random_model(19)
+    pairs = [(random_model(20 + i), random_model(30 + i, n=2)) for i in range(3)]
+    chars = [style.characteristic(x, y) for x, y in pairs]
+    w = np.array([1.37, -0.5, 0.25])
+    m = style.superpose(base, chars, w, method="phasor")
+    ref = synthesize_phase(base, THETA) + sum(
+        wk * (synthesize_phase(x, THETA) - synthesize_phase(y, THETA)) for wk, (x, y) in zip(w, pairs)
+    )
+    np.testing.assert_allclose(synthesize_phase(m, THETA), ref, atol=1e-10)
+    omega = float(base.omega) * np.prod([(float(x.omega) / float(y.omega)) ** wk for wk, (x, y) in zip(w, pairs)])
+    assert float(m.omega) == pytest.approx(omega, rel=1e-12)
+    # stacked batch == sequence
+    m2 = style.superpose(base, style.stack(chars), jnp.asarray(w), method="phasor")
+    assert_models_close(m, m2)
+    # include_omega=False keeps the base's ω
+    assert float(style.superpose(base, chars, w, include_omega=False).omega) == float(base.omega)
+
+
+# --------------------------------------------------------------------------------------- noise
+
+
+def test_add_noise_adds_random_higher_harmonics(x64):
+    m = random_model(40, c=3, n=3)
+    key = jax.random.key(0)
+    noisy = style.add_noise(m, key, 0.02, harmonics=4)
+    assert noisy.amplitude.shape == (3, 7)
+    np.testing.assert_allclose(noisy.amplitude[:, :3], m.amplitude)
+    np.testing.assert_allclose(noisy.phase[:, :3], m.phase)
+    np.testing.assert_allclose(noisy.amplitude[:, 3:], 0.02)
+    again = style.add_noise(m, key, 0.02, harmonics=4)
+    np.testing.assert_array_equal(noisy.phase, again.phase)
+    other = style.add_noise(m, jax.random.key(1), 0.02, harmonics=4)
+    assert not np.allclose(other.phase[:, 3:], noisy.phase[:, 3:])
+    # explicit harmonics, per-channel amplitude (channel 0 kept still)
+    sparse = style.add_noise(m, key, jnp.asarray([0.0, 0.1, 0.2]), harmonics=(9, 11))
+    assert sparse.amplitude.shape == (3, 11)
+    np.testing.assert_allclose(sparse.amplitude[:, 8], [0.0, 0.1, 0.2])
+    np.testing.assert_allclose(sparse.amplitude[:, 3:8], 0.0)
+    # the noise is band-limited to the requested harmonics
+    diff = synthesize_phase(sparse, THETA) - synthesize_phase(m, THETA)
+    spectrum = np.abs(np.fft.rfft(diff[:-1], axis=0))
+    assert np.all(spectrum[:9] < 1e-10) and spectrum[9, 2] > 1.0
+    with pytest.raises(ValueError, match="above the model's N=3"):
+        style.add_noise(m, key, 0.1, harmonics=(2, 5))
+
+
+# ----------------------------------------------------------------------------- style space
+
+
+def test_style_vector_layout_roundtrip_and_parseval(x64):
+    a = random_model(50, c=54, n=2, omega=6.0)
+    b = random_model(51, c=54, n=2, omega=6.0)
+    va, vb = style.style_vector(a), style.style_vector(b)
+    assert va.shape == (271,)  # Tilmanne: 54 channels x 5 + omega
+    assert_models_close(style.model_from_style_vector(va, like=a), a)
+    # Parseval: the Euclidean distance is the RMS signal difference over a cycle
+    theta = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    diff = np.asarray(synthesize_phase(a, theta) - synthesize_phase(b, theta))
+    msd = np.mean(np.sum(diff**2, axis=1))
+    assert float(jnp.sum((va - vb)[:-1] ** 2)) == pytest.approx(msd, rel=1e-10)
+    # linear combinations in style space are linear combinations of signals
+    mix = style.model_from_style_vector(0.3 * va + 0.7 * vb, like=a)
+    np.testing.assert_allclose(
+        synthesize_phase(mix, theta),
+        0.3 * synthesize_phase(a, theta) + 0.7 * synthesize_phase(b, theta),
+        atol=1e-10,
+    )
+
+
+def test_style_pca_against_numpy(x64):
+    models = [random_model(60 + i, c=6, n=2) for i in range(7)]
+    mat = style.style_matrix(models)
+    assert mat.shape == (7, 6 * 5 + 1)
+    np.testing.assert_allclose(mat[3], style.style_vector(models[3]), atol=1e-14)
+    pca = style.style_pca(mat)
+    x = np.asarray(mat) - np.asarray(mat).mean(0)
+    evals, evecs = np.linalg.eigh(x.T @ x / 6)
+    evals, evecs = evals[::-1][:6], evecs[:, ::-1][:, :6]
+    np.testing.assert_allclose(pca.explained_variance, evals, rtol=1e-9)
+    np.testing.assert_allclose(np.abs(np.sum(np.asarray(pca.components) * evecs.T, 1)), 1, atol=1e-9)
+    assert float(jnp.sum(pca.explained_variance_ratio)) == pytest.approx(1.0)
+    coords = style.pca_project(pca, mat)
+    np.testing.assert_allclose(style.pca_reconstruct(pca, coords), mat, atol=1e-10)
+    two = style.style_pca(mat, num_components=2)
+    assert two.components.shape == (2, 31)
+
+
+def test_fit_style_weights_recovers_known_weights(x64):
+    base = random_model(70, c=8)
+    chars = [style.characteristic(random_model(71 + i, c=8), random_model(81 + i, c=8)) for i in range(3)]
+    w_true = jnp.asarray([0.7, -1.2, 1.37])
+    target = style.superpose(base, chars, w_true, method="phasor")
+    np.testing.assert_allclose(style.fit_style_weights(base, chars, target), w_true, atol=1e-9)
+    batched = jax.vmap(
+        lambda w: style.fit_style_weights(base, chars, style.superpose(base, chars, w, method="phasor"))
+    )(jnp.stack([w_true, -w_true]))
+    np.testing.assert_allclose(batched, jnp.stack([w_true, -w_true]), atol=1e-9)
+    # least squares: the residual is orthogonal to every characteristic direction
+    target2 = random_model(90, c=8)
+    w = style.fit_style_weights(base, chars, target2)
+    fit = style.superpose(base, chars, w, method="phasor")
+    r = style.style_vector(target2) - style.style_vector(fit)
+    for ch in chars:
+        d = style.style_vector(style.superpose(base, ch, 1.0, method="phasor")) - style.style_vector(base)
+        assert abs(float(jnp.dot(r, d))) < 1e-9
+
+
+# ---------------------------------------------------------------------------- gradients
+
+
+def _fd_check(f, x, eps=1e-6, rtol=1e-6, atol=1e-8):
+    x = np.asarray(x, dtype=np.float64)
+    f = jax.jit(f)
+    g = np.asarray(jax.jit(jax.grad(f))(jnp.asarray(x)))
+    assert np.all(np.isfinite(g))
+    fd = np.zeros_like(x)
+    for i in range(x.size):
+        e = np.zeros_like(x)
+        e.flat[i] = eps
+        fd.flat[i] = (float(f(jnp.asarray(x + e))) - float(f(jnp.asarray(x - e)))) / (2 * eps)
+    np.testing.assert_allclose(g, fd, rtol=rtol, atol=atol)
+
+
+def test_gradients_wrt_style_weights_match_finite_differences(x64):
+    base = random_model(100, c=5)
+    chars = [style.characteristic(random_model(101 + i, c=5), random_model(111 + i, c=5)) for i in range(3)]
+    t = jnp.linspace(0.0, 2.0, 50)
+    target = jnp.asarray(np.random.default_rng(0).normal(size=(50, 5)))
+
+    for method in ("polar", "phasor"):
+
+        def loss(w, method=method):
+            m = style.superpose(base, chars, w, method=method)
+            return jnp.mean((synthesize_phase(m, m.omega * t) - target) ** 2)
+
+        _fd_check(loss, [0.3, -0.8, 1.37])
+
+    def loss_fit(w):  # through fit_style_weights itself (target built from weights)
+        tgt = style.superpose(base, chars, w, method="phasor")
+        return jnp.sum(style.fit_style_weights(base, chars, tgt, ridge=0.1) ** 2)
+
+    _fd_check(loss_fit, [0.3, -0.8, 1.37])
+
+
+def test_gradients_wrt_model_parameters_match_finite_differences(x64):
+    a, b = random_model(120, c=3, n=2), random_model(121, c=3, n=2)
+    flat_a, unravel = ravel_pytree(a)
+    t = jnp.linspace(0.0, 3.0, 40)
+
+    def loss(p):
+        m = unravel(p)
+        x = style.transition(m, b, t, 0.8, 1.2)
+        y = synthesize_phase(style.interpolate(m, b, -0.3), t * 6.0)
+        char = style.characteristic(m, b)
+        z = synthesize_phase(style.superpose(b, char, 0.6), t * 6.0)
+        noisy = style.add_noise(m, jax.random.key(3), 0.05, harmonics=2)
+        return jnp.sum(jnp.sin(x)) + jnp.sum(y**2) + jnp.sum(jnp.cos(z)) + jnp.sum(style.style_vector(noisy) ** 2)
+
+    _fd_check(loss, flat_a, rtol=1e-5, atol=1e-7)
+    # transition timing parameters too
+    _fd_check(lambda p: jnp.sum(jnp.sin(style.transition(a, b, t, p[0], p[1]))), [0.8, 1.2], rtol=1e-5, atol=1e-7)
