@@ -1,0 +1,673 @@
+"""Fast NumPy reader and writer for BVH motion files, with errors that name the file and line."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import re
+from collections.abc import Iterator
+from itertools import chain
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from fourierjax.errors import FourierJaxError
+from fourierjax.skeleton import CHANNEL_NAMES, Topology
+
+if TYPE_CHECKING:  # pragma: no cover
+    from fourierjax.skeleton import Skeleton
+
+__all__ = ["BVHError", "Motion", "format_bvh", "parse_bvh", "read_bvh", "write_bvh"]
+
+
+class BVHError(FourierJaxError, ValueError):
+    """A BVH file that cannot be read: names the file, the 1-based line (or None) and the problem.
+
+    `str(err)` is `"path:line: message"`, or `"path: message"` when no line applies (a missing
+    or unreadable file). Attributes: `path` (str), `line` (int | None), `message` (str).
+    """
+
+    def __init__(self, path: str, line: int | None, message: str):
+        super().__init__(path, line, message)  # args kept so that the error pickles
+        self.path = str(path)
+        self.line = line
+        self.message = message
+
+    def __str__(self) -> str:
+        if self.line is None:
+            return f"{self.path}: {self.message}"
+        return f"{self.path}:{self.line}: {self.message}"
+
+
+# -- Motion ------------------------------------------------------------------------------
+
+
+def _frozen_array(x, name: str, ndim: int) -> np.ndarray:
+    try:
+        a = np.array(x, dtype=np.float64)  # always a private copy
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"Motion: `{name}` is not a numeric array ({err})") from None
+    if a.ndim != ndim:
+        raise ValueError(f"Motion: `{name}` must have {ndim} dimensions, got shape {a.shape}")
+    a.setflags(write=False)
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False, repr=False)
+class Motion:
+    """A BVH clip held in NumPy: the skeleton layout plus one row of channel values per frame.
+
+    Values are stored exactly as the file has them: positions in file units (CMU: 1 unit ~
+    0.0564 m), rotations in **degrees**, channels in file order (`topology.channels`). Position
+    channels give a joint's local translation and *replace* the matching OFFSET components;
+    that semantic is applied by `fourierjax.kinematics`, not here. Arrays are read-only copies,
+    so a `Motion` can be shared and cached safely; use `with_channels` or slicing for new ones.
+
+    **Arguments:**
+
+    - `topology`: `fourierjax.skeleton.Topology` (names, parents, channel names, End Sites).
+    - `offsets`: `[J, 3]` float64, each joint's OFFSET from its parent (file units).
+    - `end_site_offsets`: `[E, 3]` float64, each End Site's OFFSET from its parent joint.
+    - `channels`: `[F, C]` float64, `C = topology.num_channels`.
+    - `frame_time_s`: seconds per frame (> 0).
+    - `source`: where the clip came from (a path) or None.
+    """
+
+    topology: Topology
+    offsets: np.ndarray
+    end_site_offsets: np.ndarray
+    channels: np.ndarray
+    frame_time_s: float
+    source: str | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.topology, Topology):
+            raise TypeError(f"Motion: `topology` must be a Topology, got {type(self.topology)}")
+        topo = self.topology
+        offsets = _frozen_array(self.offsets, "offsets", 2)
+        ends = _frozen_array(
+            np.reshape(self.end_site_offsets, (-1, 3))
+            if np.size(self.end_site_offsets) == 0
+            else self.end_site_offsets,
+            "end_site_offsets",
+            2,
+        )
+        channels = _frozen_array(self.channels, "channels", 2)
+        if offsets.shape != (topo.num_joints, 3):
+            raise ValueError(
+                f"Motion: `offsets` has shape {offsets.shape}, expected ({topo.num_joints}, 3)"
+            )
+        if ends.shape != (topo.num_end_sites, 3):
+            raise ValueError(
+                f"Motion: `end_site_offsets` has shape {ends.shape}, "
+                f"expected ({topo.num_end_sites}, 3)"
+            )
+        if channels.shape[1] != topo.num_channels:
+            raise ValueError(
+                f"Motion: `channels` has shape {channels.shape}, expected (frames, "
+                f"{topo.num_channels}) for this topology"
+            )
+        try:
+            frame_time_s = float(self.frame_time_s)
+        except (TypeError, ValueError):
+            raise ValueError(f"Motion: `frame_time_s` must be a number, got {self.frame_time_s!r}")
+        if not (math.isfinite(frame_time_s) and frame_time_s > 0):
+            raise ValueError(f"Motion: `frame_time_s` must be finite and > 0, got {frame_time_s}")
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "end_site_offsets", ends)
+        object.__setattr__(self, "channels", channels)
+        object.__setattr__(self, "frame_time_s", frame_time_s)
+        object.__setattr__(self, "source", None if self.source is None else str(self.source))
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.channels.shape[0])
+
+    @property
+    def num_joints(self) -> int:
+        return self.topology.num_joints
+
+    @property
+    def num_channels(self) -> int:
+        return self.topology.num_channels
+
+    @property
+    def duration_s(self) -> float:
+        """`num_frames * frame_time_s` (the BVH convention: each frame lasts one frame time)."""
+        return self.num_frames * self.frame_time_s
+
+    @property
+    def fps(self) -> float:
+        """Frames per second, `1 / frame_time_s` (CMU's `.0083333` gives 120.0005)."""
+        return 1.0 / self.frame_time_s
+
+    def skeleton(self) -> Skeleton:
+        """The `fourierjax.skeleton.Skeleton` of this clip.
+
+        Offsets become JAX arrays of the default float dtype (float32, or float64 under x64).
+        """
+        from fourierjax.skeleton import Skeleton
+
+        return Skeleton(self.topology, self.offsets, self.end_site_offsets)
+
+    def __getitem__(self, index: slice) -> Motion:
+        """`motion[a:b:step]`: the same skeleton with the frames sliced.
+
+        A step multiplies the frame time by `abs(step)` (so `motion[::2]` keeps real time).
+        Only slices are accepted, so that the result is always a `Motion`.
+        """
+        if not isinstance(index, slice):
+            raise TypeError(
+                f"Motion indexing takes a slice of frames (e.g. motion[1:]); got "
+                f"{type(index).__name__}. Use motion.channels[i] for one frame's values."
+            )
+        step = 1 if index.step is None else int(index.step)
+        return dataclasses.replace(
+            self, channels=self.channels[index], frame_time_s=self.frame_time_s * abs(step)
+        )
+
+    def with_channels(self, channels) -> Motion:
+        """The same skeleton, frame time and source with new frames `channels` `[F', C]`."""
+        return dataclasses.replace(self, channels=channels)
+
+    def __len__(self) -> int:
+        return self.num_frames
+
+    def __repr__(self) -> str:
+        return (
+            f"Motion({self.num_joints} joints, {self.topology.num_end_sites} end sites, "
+            f"{self.num_channels} channels, {self.num_frames} frames at "
+            f"{self.fps:.6g} fps, source={self.source!r})"
+        )
+
+
+# -- reading -----------------------------------------------------------------------------
+
+_CHANNEL_BY_LOWER = {c.lower(): c for c in CHANNEL_NAMES}
+_FRAMES_RE = re.compile(r"\s*frames\s*:\s*(\S*)\s*", re.IGNORECASE | re.ASCII)
+_FRAME_TIME_RE = re.compile(r"\s*frame\s*time\s*:\s*(\S*)\s*", re.IGNORECASE | re.ASCII)
+_INT_RE = re.compile(r"\+?[0-9]{1,9}", re.ASCII)  # counts; int() of 4300+ digits raises
+
+
+def read_bvh(path: str | os.PathLike) -> Motion:
+    """Read a BVH file.
+
+    **Arguments:**
+
+    - `path`: the file. UTF-8 (a BOM is allowed); LF, CRLF or CR line endings.
+
+    **Returns:** a `Motion` (channel values as in the file: degrees and file units).
+
+    **Raises:** `BVHError` for anything wrong, naming the file and the 1-based line: a missing
+    or unreadable file (line None), bytes that are not UTF-8, a malformed hierarchy, unknown
+    channel names, a frame count that does not match the rows, rows with the wrong number of
+    values, non-numeric, NaN or infinite values, zero frames, a non-positive frame time.
+    """
+    name = os.fspath(path)
+    try:
+        with open(name, "rb") as f:
+            raw = f.read()
+    except FileNotFoundError:
+        raise BVHError(name, None, "no such file") from None
+    except IsADirectoryError:
+        raise BVHError(name, None, "is a directory, not a BVH file") from None
+    except OSError as err:
+        raise BVHError(name, None, f"cannot read file: {err.strerror or err}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        line = raw.count(b"\n", 0, err.start) + 1
+        raise BVHError(
+            name, line, f"not UTF-8 text (byte 0x{raw[err.start]:02x} cannot be decoded)"
+        ) from None
+    return parse_bvh(text, source=name)
+
+
+def _lines(text: str, pos: int, lineno: int) -> Iterator[tuple[int, int, str]]:
+    """Yields (line number, offset of the next line, line) from `pos`, one line at a time."""
+    n = len(text)
+    while pos < n:
+        end = text.find("\n", pos)
+        if end < 0:
+            end = n
+        yield lineno, end + 1, text[pos:end]
+        pos = end + 1
+        lineno += 1
+
+
+class _Joint:
+    __slots__ = ("name", "parent", "line", "offset", "channels")
+
+    def __init__(self, name, parent, line):
+        self.name, self.parent, self.line = name, parent, line
+        self.offset: list[float] | None = None
+        self.channels: tuple[str, ...] | None = None
+
+
+def _show(s: str, limit: int = 40) -> str:
+    """`repr(s)`, shortened: error messages stay one readable line whatever the input."""
+    return repr(s if len(s) <= limit else s[:limit] + "...")
+
+
+def _number(tok: str, what: str, err) -> float:
+    try:
+        v = float(tok)
+    except ValueError:
+        raise err(f"{what}: {_show(tok)} is not a number") from None
+    if not math.isfinite(v):
+        raise err(f"{what}: {_show(tok)} is not a finite number")
+    return v
+
+
+def parse_bvh(text: str, source: str = "<string>") -> Motion:
+    """Parse the text of a BVH file (see `read_bvh`); `source` names it in errors.
+
+    The hierarchy (a few hundred lines) is parsed in Python; the MOTION block is parsed in
+    bulk by NumPy (one conversion call for all values) after a C-level split into rows; a bad
+    row is reported with its line number.
+
+    **Arguments:**
+
+    - `text`: the whole file as a string.
+    - `source`: the name used in errors and stored in `Motion.source` (None if left default).
+
+    **Returns:** a `Motion`.
+    """
+    if not isinstance(text, str):
+        raise TypeError(f"parse_bvh expects str, got {type(text).__name__}; use read_bvh(path)")
+    src = str(source)
+
+    def error(line, message):
+        return BVHError(src, line, message)
+
+    if text.startswith("\ufeff"):
+        text = text[1:]
+    if "\r" in text:  # CRLF (and old Mac CR) line endings; line numbers stay those of editors
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+
+    lines = _lines(text, 0, 1)
+    # -- HIERARCHY keyword
+    last_line = 0
+    for lineno, _, line in lines:
+        last_line = lineno
+        toks = line.split()
+        if not toks:
+            continue
+        if toks[0].upper() != "HIERARCHY":
+            raise error(lineno, f"expected HIERARCHY, found {_show(toks[0])}")
+        if len(toks) > 1:
+            raise error(lineno, f"unexpected {_show(toks[1])} after HIERARCHY")
+        break
+    else:
+        raise error(None, "missing HIERARCHY: the file is empty")
+
+    # -- hierarchy: a small state machine over tokens, with an explicit stack (no recursion)
+    joints: list[_Joint] = []
+    end_parents: list[int] = []
+    end_offsets: list[list[float] | None] = []
+    seen: dict[str, int] = {}
+    stack: list[tuple[str, int]] = []  # ("joint", index) or ("end", index)
+    pending: tuple[str, int] | None = None  # a node whose "{" has not been read yet
+    motion_line = None
+    data_pos = len(text)
+    for lineno, next_pos, line in lines:
+        last_line = lineno
+        toks = line.split()
+        if not toks:
+            continue
+        if toks[0].upper() == "MOTION":
+            if pending is not None:
+                raise error(lineno, "expected '{' before MOTION")
+            if stack:
+                kind, k = stack[-1]
+                what = f"joint {joints[k].name!r}" if kind == "joint" else "End Site"
+                opened = joints[k].line if kind == "joint" else None
+                where = f" (opened at line {opened})" if opened else ""
+                raise error(lineno, f"unbalanced braces: {what}{where} is not closed by '}}'")
+            if not joints:
+                raise error(lineno, "the hierarchy has no ROOT joint")
+            if len(toks) > 1:
+                raise error(lineno, f"unexpected {_show(toks[1])} after MOTION")
+            motion_line = lineno
+            data_pos = next_pos
+            break
+
+        def err(message, _lineno=lineno):
+            return error(_lineno, message)
+
+        k = 0
+        while k < len(toks):
+            tok = toks[k]
+            if pending is not None:
+                if tok != "{":
+                    raise err(f"expected '{{', found {_show(tok)}")
+                stack.append(pending)
+                pending = None
+                k += 1
+                continue
+            up = tok.upper()
+            if up in ("ROOT", "JOINT"):
+                if (up == "ROOT") != (not stack):
+                    raise err(
+                        "ROOT must be at the top level" if up == "ROOT"
+                        else "JOINT outside of a ROOT: expected ROOT or MOTION"
+                    )
+                if stack and stack[-1][0] == "end":
+                    raise err("an End Site cannot have child joints")
+                rest = toks[k + 1 :]
+                brace = bool(rest) and rest[-1] == "{"
+                if brace:
+                    rest = rest[:-1]
+                name = " ".join(rest)
+                if not name:
+                    raise err(f"{tok} without a name")
+                if "{" in name or "}" in name:
+                    raise err(f"invalid joint name {_show(name)}")
+                if name in seen:
+                    raise err(f"duplicate joint name {_show(name)} (first at line {seen[name]})")
+                seen[name] = lineno
+                parent = stack[-1][1] if stack else -1
+                joints.append(_Joint(name, parent, lineno))
+                node = ("joint", len(joints) - 1)
+                if brace:
+                    stack.append(node)
+                else:
+                    pending = node
+                break  # the name used the rest of the line
+            if up == "END":
+                if not stack or stack[-1][0] != "joint":
+                    raise err("End Site outside of a joint")
+                if k + 1 >= len(toks) or toks[k + 1].upper() != "SITE":
+                    raise err("expected 'End Site'")
+                end_parents.append(stack[-1][1])
+                end_offsets.append(None)
+                pending = ("end", len(end_parents) - 1)
+                k += 2
+                continue
+            if not stack:
+                raise err(f"expected ROOT or MOTION, found {_show(tok)}")
+            kind, idx = stack[-1]
+            if up == "OFFSET":
+                vals = toks[k + 1 : k + 4]
+                if len(vals) != 3:
+                    raise err(f"OFFSET needs 3 numbers, found {len(vals)}")
+                offset = [_number(v, "OFFSET", err) for v in vals]
+                if kind == "joint":
+                    if joints[idx].offset is not None:
+                        raise err(f"joint {joints[idx].name!r} has a second OFFSET")
+                    joints[idx].offset = offset
+                else:
+                    if end_offsets[idx] is not None:
+                        raise err("End Site has a second OFFSET")
+                    end_offsets[idx] = offset
+                k += 4
+                continue
+            if up == "CHANNELS":
+                if kind != "joint":
+                    raise err("an End Site cannot have CHANNELS")
+                joint = joints[idx]
+                if joint.channels is not None:
+                    raise err(f"joint {joint.name!r} has a second CHANNELS line")
+                if k + 1 >= len(toks) or not _INT_RE.fullmatch(toks[k + 1]):
+                    raise err("CHANNELS must be followed by the number of channels")
+                count = int(toks[k + 1])
+                names = toks[k + 2 :]
+                if len(names) != count:
+                    raise err(f"CHANNELS declares {count} channels but lists {len(names)}")
+                canon = []
+                for c in names:
+                    name = _CHANNEL_BY_LOWER.get(c.lower())
+                    if name is None:
+                        valid = ", ".join(CHANNEL_NAMES)
+                        raise err(f"unknown channel name {_show(c)}; expected one of {valid}")
+                    if name in canon:
+                        raise err(f"channel {name} listed twice for joint {joint.name!r}")
+                    canon.append(name)
+                joint.channels = tuple(canon)
+                break
+            if tok == "}":
+                if kind == "joint":
+                    if joints[idx].offset is None:
+                        raise err(f"joint {joints[idx].name!r} has no OFFSET")
+                elif end_offsets[idx] is None:
+                    raise err("End Site has no OFFSET")
+                stack.pop()
+                k += 1
+                continue
+            if tok == "{":
+                raise err("unbalanced braces: unexpected '{'")
+            raise err(f"unexpected {_show(tok)} in the hierarchy")
+    if motion_line is None:
+        if pending is not None or stack:
+            raise error(last_line, "unexpected end of file inside the hierarchy (missing '}')")
+        raise error(last_line, "missing MOTION section after the hierarchy")
+
+    # -- Frames: / Frame Time:
+    header: list[tuple[int, str]] = []
+    for lineno, next_pos, line in lines:
+        last_line = lineno
+        if line.strip():
+            header.append((lineno, line))
+            if len(header) == 2:
+                data_pos, data_line = next_pos, lineno + 1
+                break
+    else:
+        raise error(last_line, "MOTION must be followed by 'Frames:' and 'Frame Time:' lines")
+    (frames_line, l1), (time_line, l2) = header
+    m = _FRAMES_RE.fullmatch(l1)
+    if m is None:
+        raise error(frames_line, f"expected 'Frames: <count>', found {_show(l1.strip())}")
+    if not _INT_RE.fullmatch(m.group(1)):
+        raise error(frames_line, f"frame count {_show(m.group(1))} is not a valid count (0 to 999999999)")
+    num_frames = int(m.group(1))
+    if num_frames == 0:
+        raise error(frames_line, "the clip has zero frames")
+    m = _FRAME_TIME_RE.fullmatch(l2)
+    if m is None:
+        raise error(time_line, f"expected 'Frame Time: <seconds>', found {_show(l2.strip())}")
+    try:
+        frame_time = float(m.group(1))
+    except ValueError:
+        raise error(time_line, f"frame time {_show(m.group(1))} is not a number") from None
+    if not (math.isfinite(frame_time) and frame_time > 0):
+        raise error(time_line, f"frame time must be positive, got {_show(m.group(1))}")
+
+    # -- the skeleton
+    try:
+        topology = Topology(
+            names=tuple(j.name for j in joints),
+            parents=tuple(j.parent for j in joints),
+            channels=tuple(j.channels or () for j in joints),
+            end_site_parents=tuple(end_parents),
+        )
+    except ValueError as err:  # pragma: no cover - the parser checks all of this first
+        raise error(None, f"invalid hierarchy: {err}") from None
+    num_channels = topology.num_channels
+    if num_channels == 0:
+        raise error(motion_line, "the hierarchy declares no channels, so frames carry no data")
+
+    values = _parse_motion_block(
+        text[data_pos:], data_line, num_channels, num_frames, frames_line, error
+    )
+    return Motion(
+        topology=topology,
+        offsets=np.array([j.offset for j in joints], dtype=np.float64).reshape(-1, 3),
+        end_site_offsets=np.array(end_offsets, dtype=np.float64).reshape(-1, 3),
+        channels=values,
+        frame_time_s=frame_time,
+        source=None if source == "<string>" else src,
+    )
+
+
+def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames_line, error):
+    """[F, C] float64 from the text after 'Frame Time:'; BVHError naming the first bad line.
+
+    One C-level split per line gives the row structure; the values of all rows are then
+    converted by NumPy in one call. Only when that fails are the rows scanned one by one, to
+    name the line of the first bad value.
+    """
+    if not block.isascii():
+        for lineno, _, line in _lines(block, 0, first_line):
+            if not line.isascii():
+                bad = next(ch for ch in line if ord(ch) > 127)
+                raise error(lineno, f"unexpected character {bad!r} in the motion data")
+    # bytes.split() splits on ASCII whitespace only (str.split() also splits on \x1c-\x1f).
+    row_tokens = [line.split() for line in block.encode("ascii").split(b"\n")]
+    counts = np.fromiter(map(len, row_tokens), dtype=np.int64, count=len(row_tokens))
+    rows = np.flatnonzero(counts)  # lines that hold data; blank lines are skipped
+    bad = np.flatnonzero(counts[rows] != num_channels)
+    if bad.size:
+        r = int(rows[bad[0]])
+        raise error(
+            first_line + r,
+            f"frame {int(bad[0])} has {int(counts[r])} values, expected {num_channels} "
+            "(one per channel)",
+        )
+    if rows.size != num_frames:
+        raise error(
+            frames_line,
+            f"'Frames: {num_frames}' but the file has {rows.size} rows of frame data",
+        )
+    try:
+        values = np.array(list(chain.from_iterable(row_tokens)), dtype=np.float64)
+    except ValueError:
+        for r in rows:
+            for tok in row_tokens[r]:
+                if not _is_float(tok):
+                    raise error(
+                        first_line + int(r), f"{_show(tok.decode('ascii'))} is not a number"
+                    ) from None
+        raise error(None, "could not parse the motion data") from None  # pragma: no cover
+    finite = np.isfinite(values)
+    if not finite.all():
+        i = int(np.argmin(finite))
+        r = int(rows[i // num_channels])
+        raise error(
+            first_line + r,
+            f"non-finite value {values[i]} in frame {i // num_channels} "
+            f"(channel {i % num_channels})",
+        )
+    return values.reshape(num_frames, num_channels)
+
+
+def _is_float(tok: bytes) -> bool:
+    try:
+        np.array([tok], dtype=np.float64)
+    except ValueError:
+        return False
+    return True
+
+
+# -- writing -----------------------------------------------------------------------------
+
+
+def _check_writable(topology: Topology) -> None:
+    """BVH stores joints depth first: each joint's parent must be on the current path."""
+    path: list[int] = []
+    for i, p in enumerate(topology.parents):
+        while path and path[-1] != p:
+            path.pop()
+        if p >= 0 and not path:
+            raise ValueError(
+                f"format_bvh: joint {topology.names[i]!r} is not in depth-first order "
+                "(BVH lists every joint right after its parent's earlier subtree); reorder "
+                "the topology before writing"
+            )
+        path.append(i)
+    for name in topology.names:
+        if (
+            not name
+            or name != " ".join(name.split())
+            or "{" in name
+            or "}" in name
+        ):
+            raise ValueError(f"format_bvh: joint name {_show(name)} cannot be written to BVH")
+
+
+def format_bvh(motion: Motion, precision: int = 6) -> str:
+    """The BVH text of `motion` (LF line endings, tab indents, canonical channel names).
+
+    **Arguments:**
+
+    - `motion`: the clip; needs at least one frame and finite values.
+    - `precision`: digits after the decimal point for offsets and channel values.
+
+    **Returns:** the file contents. `parse_bvh(format_bvh(m))` gives the same topology and
+    the same values to within `0.5 * 10**-precision`; the frame time round-trips exactly.
+    """
+    if not isinstance(motion, Motion):
+        raise TypeError(f"format_bvh expects a Motion, got {type(motion).__name__}")
+    if isinstance(precision, bool) or not isinstance(precision, int) or not 0 <= precision <= 17:
+        raise ValueError(f"format_bvh: `precision` must be an int in [0, 17], got {precision!r}")
+    if motion.num_frames == 0:
+        raise ValueError("format_bvh: the motion has no frames (BVH needs at least one)")
+    if motion.num_channels == 0:
+        raise ValueError("format_bvh: the topology has no channels")
+    for what, arr in (
+        ("offsets", motion.offsets),
+        ("end_site_offsets", motion.end_site_offsets),
+        ("channels", motion.channels),
+    ):
+        if not np.isfinite(arr).all():
+            raise ValueError(f"format_bvh: `{what}` holds NaN or infinite values")
+    topo = motion.topology
+    _check_writable(topo)
+
+    f = f"%.{precision}f"
+    out = ["HIERARCHY"]
+    ends = topo.end_site_parents
+    next_end = 0
+
+    def offset_line(depth, xyz):
+        return "\t" * depth + "OFFSET " + " ".join(f % float(v) for v in xyz)
+
+    def write_end_sites(joint, depth):
+        # End Sites of `joint` that come next in file order; writing them here keeps their order.
+        nonlocal next_end
+        while next_end < len(ends) and ends[next_end] == joint:
+            tabs = "\t" * depth
+            out.extend([tabs + "End Site", tabs + "{"])
+            out.append(offset_line(depth + 1, motion.end_site_offsets[next_end]))
+            out.append(tabs + "}")
+            next_end += 1
+
+    depths = topo.depths
+    open_joints: list[int] = []
+    for i, p in enumerate(topo.parents):
+        while open_joints and open_joints[-1] != p:
+            j = open_joints.pop()
+            write_end_sites(j, depths[j] + 1)
+            out.append("\t" * depths[j] + "}")
+        if p >= 0:
+            write_end_sites(p, depths[p] + 1)
+        tabs = "\t" * depths[i]
+        out.append(f"{tabs}{'ROOT' if p < 0 else 'JOINT'} {topo.names[i]}")
+        out.append(tabs + "{")
+        out.append(offset_line(depths[i] + 1, motion.offsets[i]))
+        chans = topo.channels[i]
+        out.append(f"{tabs}\tCHANNELS {len(chans)}" + "".join(" " + c for c in chans))
+        open_joints.append(i)
+    while open_joints:
+        j = open_joints.pop()
+        write_end_sites(j, depths[j] + 1)
+        out.append("\t" * depths[j] + "}")
+    if next_end != len(ends):
+        raise ValueError(
+            "format_bvh: the End Sites are not in file order (each joint's End Sites must "
+            "follow the End Sites of the joints written before it)"
+        )
+    out.append("MOTION")
+    out.append(f"Frames: {motion.num_frames}")
+    out.append(f"Frame Time: {motion.frame_time_s!r}")
+    row = " ".join([f] * motion.num_channels)
+    out.extend(row % tuple(r) for r in motion.channels.tolist())
+    out.append("")
+    return "\n".join(out)
+
+
+def write_bvh(motion: Motion, path: str | os.PathLike, precision: int = 6) -> None:
+    """Write `motion` to `path` as BVH (see `format_bvh`); UTF-8, LF line endings."""
+    text = format_bvh(motion, precision)
+    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
