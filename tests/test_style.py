@@ -420,3 +420,84 @@ def test_gradients_wrt_model_parameters_match_finite_differences(x64):
     _fd_check(loss, flat_a, rtol=1e-5, atol=1e-7)
     # transition timing parameters too
     _fd_check(lambda p: jnp.sum(jnp.sin(style.transition(a, b, t, p[0], p[1]))), [0.8, 1.2], rtol=1e-5, atol=1e-7)
+
+
+# ------------------------------------------------------------------- real clips (CMU, 120 fps)
+
+CLIPS = ("02_01", "02_03")
+
+
+@pytest.fixture(scope="module")
+def cmu():
+    """Fit the bundled walks and runs in ONE batched call (N = 5, Euler features), each model
+    aligned so that θ = 0 is the peak of the left hip's flexion fundamental (the documented
+    fallback gait event of `fourierjax.fourier.channel_event_phase`)."""
+    from fourierjax import data, fourier
+    from fourierjax import motion as fmotion
+
+    import time
+
+    t0 = time.time()
+    motions = {n: data.load(n) for n in CLIPS}  # T-pose (and 07_12's zero frame) dropped
+    feats = {}
+    names = None
+    for n, m in motions.items():
+        feats[n], names = fmotion.features_from_motion(m, "euler")
+    print("features", time.time() - t0)
+    length = max(f.shape[0] for f in feats.values())
+    x = np.zeros((len(CLIPS), length, len(names)))
+    mask = np.zeros((len(CLIPS), length), bool)
+    for i, n in enumerate(CLIPS):
+        x[i, : len(feats[n])] = feats[n]
+        mask[i, : len(feats[n])] = True
+    dt = motions[CLIPS[0]].frame_time_s
+    res = fourier.fit_batch(jnp.asarray(x), jnp.full((len(CLIPS),), dt), 5, mask=jnp.asarray(mask),
+                            channel_names=names)
+    print("fit", time.time() - t0)
+    hip = names.index("LeftUpLeg.Xrotation")
+    models = {}
+    for i, n in enumerate(CLIPS):
+        m = jax.tree.map(lambda leaf, i=i: leaf[i], res.model)
+        # x'(θ) = x(θ + δ): φ_n += n δ (written out: fourier.shift_phase trips rank promotion).
+        delta = fourier.channel_event_phase(m, hip)
+        harmonics = jnp.arange(1, m.num_harmonics + 1, dtype=m.phase.dtype)
+        models[n] = eqx.tree_at(lambda mm: mm.phase, m,
+                                style.wrap_angle(m.phase + harmonics[None, :] * delta))
+    return dict(motions=motions, features=feats, names=names, models=models, frame_time_s=dt)
+
+
+def _angle_jumps_deg(features, names):
+    rot = np.array([not n.startswith("root.") for n in names])
+    return np.degrees(np.abs(np.diff(np.asarray(features, np.float64)[:, rot], axis=0)))
+
+
+@pytest.mark.parametrize("src,dst", [("02_01", "02_03"), ("02_03", "02_01")])
+def test_transition_on_real_clips_has_no_jump_larger_than_the_sources(cmu, src, dst):
+    names, dt = cmu["names"], cmu["frame_time_s"]
+    a, b = cmu["models"][src], cmu["models"][dst]
+    # Source jumps on the captured (continuous-Euler) angles, per channel and overall.
+    j_src = np.maximum(_angle_jumps_deg(cmu["features"][src], names).max(0),
+                       _angle_jumps_deg(cmu["features"][dst], names).max(0))
+    t = jnp.arange(int(round(5.0 / dt))) * dt
+    x, s, theta = style.transition(a, b, t, 1.7, 1.2, return_schedule=True)
+    j = _angle_jumps_deg(x, names)
+    assert j.max() <= j_src.max()  # the acceptance criterion
+    assert np.all(j.max(0) <= j_src + 1e-6)  # stronger: channel by channel
+    assert np.all(np.diff(np.asarray(theta)) > 0)  # the cycle never runs backwards or jumps
+    # Root velocity (heading frame) changes no faster than in the captured clips.
+    iv = [names.index("root.vx"), names.index("root.vz")]
+    dv = np.abs(np.diff(np.asarray(x)[:, iv], axis=0)).max()
+    dv_src = max(np.abs(np.diff(cmu["features"][k][:, iv], axis=0)).max() for k in (src, dst))
+    assert dv <= dv_src
+    # The test has teeth: a hard switch at mid-window breaks it, and so does the naive phase
+    # ω(s(t))·t (its cycle speed jumps by t·dω/dt during the window).
+    hard = np.where((np.asarray(t) < 2.3)[:, None], np.asarray(synthesize_phase(a, a.omega * t)),
+                    np.asarray(synthesize_phase(b, theta)))
+    assert not np.all(_angle_jumps_deg(hard, names).max(0) <= j_src + 1e-6)
+    # (walk -> run: its jumps exceed the sources; run -> walk: the cycle plays backwards for a
+    # while, the unnatural run -> walk Unuma reports).
+    naive_theta = style.interpolate_omega(a.omega, b.omega, s) * t
+    naive = jax.vmap(lambda si, th: synthesize_phase(style.interpolate(a, b, si), th[None])[0])(
+        s, naive_theta)
+    naive_ok = np.all(_angle_jumps_deg(naive, names).max(0) <= j_src + 1e-6)
+    assert not (naive_ok and np.all(np.diff(np.asarray(naive_theta)) > 0))
