@@ -250,6 +250,22 @@ def test_writer_rejects_what_bvh_cannot_hold():
         format_bvh(Motion(spaced, np.zeros((2, 3)), np.zeros((0, 3)), np.zeros((1, 2)), 0.1))
 
 
+DECIMAL_TOKEN = st.from_regex(r"\A[+-]?([0-9]{1,8}(\.[0-9]{0,7})?|\.[0-9]{1,7})\Z")
+ANY_TOKEN = DECIMAL_TOKEN | st.sampled_from(["1e3", "-2.5E-2", "1" * 16, "0." + "3" * 15,
+                                             "+.5", "-0", "-0.000", "007.50"])  # fmt: skip
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.lists(ANY_TOKEN, min_size=3, max_size=3), min_size=1, max_size=8))
+def test_values_equal_python_float_bit_for_bit(rows):
+    """The vectorised decimal path and the generic fallback both give float(token) exactly."""
+    header = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xposition Yrotation Zrotation\n}\n"
+    body = "\n".join(" ".join(r) for r in rows)
+    m = parse_bvh(f"{header}MOTION\nFrames: {len(rows)}\nFrame Time: 0.1\n{body}\n")
+    expected = np.array([[float(t) for t in r] for r in rows])
+    assert np.array_equal(m.channels.view(np.int64), expected.view(np.int64))
+
+
 # -- Motion ----------------------------------------------------------------------------------
 
 
