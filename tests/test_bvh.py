@@ -360,7 +360,7 @@ ERRORS = [
     ("offset value", _edit(8, "\t\tOFFSET 0 five 0"), 8, "'five' is not a number"),
     ("offset nan", _edit(8, "\t\tOFFSET 0 nan 0"), 8, "not a finite number"),
     ("no offset", _edit(8, None), 13, "has no OFFSET"),
-    ("duplicate name", _edit(6, "\tJOINT Hips"), 6, "duplicate joint name 'Hips' (first at line 2)"),
+    ("duplicate name", _edit(6, "\tJOINT Hips"), 6, "joint name 'Hips' (first at line 2)"),
     ("unnamed joint", _edit(6, "\tJOINT"), 6, "without a name"),
     ("junk keyword", _edit(8, "\t\tOFSET 0 5 0"), 8, "unexpected 'OFSET'"),
     ("frames > rows", _edit(17, "Frames: 4"), 17, "'Frames: 4' but the file has 3 rows"),
@@ -381,6 +381,7 @@ ERRORS = [
     ("two dots", _edit(21, "2 1 2 3 4 5 6.0.1 7 8"), 21, "'6.0.1' is not a number"),
     ("nan value", _edit(20, "1 1 2 3 4 NaN 6 7 8"), 20, "non-finite value nan in frame 1"),
     ("inf value", _edit(21, "2 1 2 3 4 5 6 7 -inf"), 21, "non-finite value -inf in frame 2"),
+    ("control character", _edit(20, "1 1 2 3 4\x005 6 7 8"), 20, "control character"),
     ("non-ascii value", _edit(19, "0 1 2 3 4 5 6 7 8\u00b0"), 19, "unexpected character"),
     ("no channels", _edit(5, "\tCHANNELS 0").replace("CHANNELS 3 Zrotation Xrotation Yrotation",
                                                       "CHANNELS 0"), 16, "no channels"),
@@ -506,5 +507,6 @@ def test_fuzz_bytes(tmp_path_factory, d):
 def test_fuzz_random_input(blob):
     text = blob.decode("utf-8", "replace") if isinstance(blob, bytes) else blob
     _check(lambda: parse_bvh(text))
-    _check(lambda: parse_bvh("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\n" + text))
+    one_joint = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\n"
+    _check(lambda: parse_bvh(one_joint + text))
     _check(lambda: parse_bvh("\n".join(SEED_LINES[:-2]) + "\n" + text))
