@@ -153,6 +153,22 @@ class GroundEstimate(NamedTuple):
     speed_threshold: float
 
 
+def floor_heights(ground: GroundEstimate, foot_positions, *, up_axis: int = 1) -> np.ndarray:
+    """Height of each point's floor under it, `[T, F, P]` (`[T, F, 3]` input gives `[T, F, 1]`)."""
+    p = _as_points(foot_positions)
+    return ground.intercepts + np.delete(p, up_axis, axis=-1) @ ground.slope
+
+
+def sole_clearance(ground: GroundEstimate) -> np.ndarray:
+    """`[F, P]` height of each foot point above the foot's lowest point when planted.
+
+    The point with the lowest floor (the toe tip on CMU feet) gets 0; the ankle ~1 CMU unit.
+    These are the sole clearances the hip-height rule uses (`fourierjax.gait`).
+    """
+    a = np.asarray(ground.intercepts)
+    return a - a.min(axis=-1, keepdims=True)
+
+
 def _as_points(foot_positions) -> np.ndarray:
     p = np.asarray(foot_positions, dtype=float)
     if p.ndim == 3:
