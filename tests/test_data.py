@@ -112,6 +112,40 @@ def test_cmu_mb_group_facts(name):
     assert abs(root[-1, 0] - root[0, 0]) < 0.3 * (root[-1, 2] - root[0, 2])
     np.testing.assert_allclose(m.frame_time_s, 1 / 120, rtol=1e-4)
     assert np.any(m.end_site_offsets != 0)
+    constant = {n for n, v in zip(m.topology.flat_channel_names, m.channels.T) if np.ptp(v) == 0}
+    zyx = ("Zrotation", "Yrotation", "Xrotation")
+    expected = {f"{j}.{c}" for j in ("LHipJoint", "RHipJoint", "LeftShoulder", "RightShoulder",
+                                     "LeftHandIndex1", "RightHandIndex1") for c in zyx}  # fmt: skip
+    expected |= {f"{j}.{c}" for j in ("LeftHand", "RightHand") for c in zyx[:2]}
+    assert constant == expected  # 22 channels never move (documented in the data README)
+
+
+def _geodesic_steps_deg(motion, joint):
+    """Rotation change of `joint` from each frame to the next (degrees), via scipy."""
+    from scipy.spatial.transform import Rotation
+
+    k = motion.topology.flat_channel_names.index(f"{joint}.Zrotation")
+    r = Rotation.from_euler("ZYX", motion.channels[:, k : k + 3], degrees=True)
+    return np.degrees((r[1:] * r[:-1].inv()).magnitude()), motion.channels[:, k : k + 3]
+
+
+@pytest.mark.parametrize("name", STYLIZED)
+def test_stylized_root_euler_angles_wrap_but_the_rotation_is_smooth(name):
+    """Documented quirk: fit rotations as quaternions/expmaps, not raw Euler channels."""
+    steps, euler = _geodesic_steps_deg(data.load(name), "Hips")
+    assert steps.max() < 4  # the root turns smoothly ...
+    assert (np.abs(np.diff(euler, axis=0)) > 90).any(axis=1).sum() >= 10  # ... Euler Z/X jump
+    assert np.abs(euler[:, 1]).max() > 85  # the middle (Y) angle reaches gimbal lock
+
+
+def test_142_02_left_arm_glitch():
+    """Documented quirk: a transient left-arm pop around frame 1140 of 142_02 (not in 142_08)."""
+    steps, _ = _geodesic_steps_deg(data.load("142_02"), "LeftArm")
+    assert int(np.argmax(steps)) == 1140 and steps[1140] > 45  # > 5000 deg/s
+    calm = np.delete(steps, np.arange(1134, 1143))
+    assert calm.max() < 15
+    steps, _ = _geodesic_steps_deg(data.load("142_08"), "LeftArm")
+    assert steps.max() < 15
 
 
 def test_detect_rest_frames_on_synthetic_clips():

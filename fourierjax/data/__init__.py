@@ -8,7 +8,9 @@ Quirks handled by `load` (and kept by `load(name, raw=True)`):
 * `cmu_mb` clips (CMU 2010 "MotionBuilder-friendly" BVH release) start with a synthetic
   T-pose frame (whole-degree angles, mostly zero) that the converter inserted; `load` drops it.
 * `07_12` also has an all-zero frame 1 (a glitch of the original take); `load` drops it too.
-* `cmu_stylized` clips have no synthetic frame; nothing is dropped.
+* `cmu_stylized` clips have no synthetic frame; nothing is dropped. Their root Euler angles
+  wrap and pass gimbal lock (fit quaternions/expmaps), and 142_02 has a left-arm glitch
+  around frame 1140 (see `describe`).
 """
 
 from __future__ import annotations
@@ -31,13 +33,17 @@ _STYLIZED_SOURCE = "svdhcn/Style_Learning@d69de4194358c56781e239659d37ea672961e3
 _MB_NOTES = (
     "CMU 2010 MotionBuilder-friendly BVH (cgspeed). Frame 0 is a synthetic T-pose inserted by "
     "the converter (whole-degree angles; its root position copies frame 1); load() drops it. "
-    "Frame Time .0083333 s (120 fps nominal). Finger and thumb joints carry no captured data."
+    "Frame Time .0083333 s (120 fps nominal). 22 channels never move: LHipJoint, RHipJoint, "
+    "the shoulders and HandIndex1 joints (all angles), and Z and Y of both hands."
 )
 _STYLIZED_NOTES = (
     "CMU subject 142 'Stylized Walks', retargeted by a third party to the standard CMU "
     "skeleton (other bone lengths than cmu_mb, all End Site offsets zero). No T-pose: frame 0 "
     "is motion. The subject walks back and forth, mostly along X: segment gait cycles before "
-    "fitting. CRLF line endings. Frame Time 0.008333 s (120 fps nominal)."
+    "fitting. The root turns around, so its ZYX Euler angles pass gimbal lock and wrap (jumps "
+    "of more than 90 degrees between frames while the rotation moves under 4 degrees): fit "
+    "quaternions or continuous exponential maps, not raw Euler channels. CRLF line endings. "
+    "Frame Time 0.008333 s (120 fps nominal)."
 )
 
 
@@ -57,7 +63,7 @@ def _mb(name, description, sha256, frames, rest=1, notes=""):
     }
 
 
-def _stylized(name, description, sha256, frames):
+def _stylized(name, description, sha256, frames, notes=""):
     return {
         "name": name,
         "group": "cmu_stylized",
@@ -67,7 +73,7 @@ def _stylized(name, description, sha256, frames):
         "fps": 120.0,
         "frames_in_file": frames,
         "rest_frames": 0,
-        "notes": _STYLIZED_NOTES,
+        "notes": (_STYLIZED_NOTES + " " + notes).strip(),
         "source": f"{_STYLIZED_SOURCE}:two_cmu_retargeted/{name}.bvh",
         "sha256": sha256,
     }
@@ -93,7 +99,10 @@ _CATALOG: dict[str, dict] = {
         _mb("09_02", "run",
             "de1abe0fcf7d00d376c61d449c7905b866db8bc3eaeb0823d0aa01ce0136033d", 131),
         _stylized("142_02", "stylized walk (clumsy)",
-                  "67fb0699a523640dd0a13f3fde767eba9ecc939cbb09d3572d227ec7393e6e45", 1882),
+                  "67fb0699a523640dd0a13f3fde767eba9ecc939cbb09d3572d227ec7393e6e45", 1882,
+                  notes="Left-arm glitch around frame 1140: LeftShoulder, LeftArm and "
+                  "LeftForeArm swing out and back within about 5 frames (LeftArm turns 60 "
+                  "degrees from frame 1140 to 1141); avoid that stretch for arm channels."),
         _stylized("142_08", "stylized walk (happy)",
                   "4a8afcc58a0ac1526183a505af896daea2a522676055669fca12e97ed0e7d5e4", 3033),
     ]
