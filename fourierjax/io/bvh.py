@@ -6,6 +6,7 @@ import dataclasses
 import math
 import os
 import re
+import warnings
 from collections.abc import Iterator
 from typing import TYPE_CHECKING
 
@@ -533,8 +534,11 @@ def _parse_decimals(data: bytes, a, blank, start_pos, end_pos):
     if digits.min(initial=1) < 1 or digits.max(initial=0) > _MAX_DIGITS:
         return None
     try:
-        mantissa = np.fromstring(data.translate(None, b"."), dtype=np.int64, sep=" ")
-    except ValueError:  # pragma: no cover - the checks above rule this out
+        with warnings.catch_warnings():
+            # Older NumPy warned instead of raising on unparsable text; either means "no".
+            warnings.simplefilter("error", DeprecationWarning)
+            mantissa = np.fromstring(data.translate(None, b"."), dtype=np.int64, sep=" ")
+    except (ValueError, DeprecationWarning):  # pragma: no cover - the checks above rule it out
         return None
     if mantissa.size != num:  # pragma: no cover
         return None
