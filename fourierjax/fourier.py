@@ -40,7 +40,7 @@ Fitting (``fit``): for a fixed ω the coefficients are a closed-form linear leas
 (one small (2N+1)x(2N+1) Gram matrix shared by all channels, solved with a hand-rolled Cholesky
 in plain jnp: batched LAPACK calls hang on 2-core CPUs). ω itself is found by variable projection
 (the residual with the coefficients solved exactly inside): a grid then a golden-section search
-around the spectral (or step-based) estimate, then Newton steps on the projected residual. Clips of
+around the spectral (or step-based) estimate. Clips of
 different lengths are batched by padding at the end and a frame mask.
 """
 
@@ -475,7 +475,7 @@ def _golden_section(f, lo, hi, iterations):
 
 def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_harmonics,
                 f_min_hz, f_max_hz, search_halfwidth, grid_points, golden_iterations,
-                newton_steps, odd_threshold):
+                odd_threshold):
     """Numeric core of :func:`fit` for one clip (plain arrays in and out)."""
     dtype = features.dtype
     T, C = features.shape
@@ -511,7 +511,7 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         return projected_residual(om, features, t_s, num_harmonics, w, cw)
 
     # Grid over [guess / (1 + h), guess * (1 + h)] (log spaced), then golden section in the
-    # best cell, then safeguarded Newton steps on the projected residual.
+    # best cell (40 golden steps shrink it 1e-8-fold; no autodiff, so compiling stays fast).
     ratios = jnp.exp(jnp.linspace(-jnp.log1p(search_halfwidth), jnp.log1p(search_halfwidth),
                                   grid_points, dtype=dtype))
     grid = omega_guess * ratios
@@ -520,16 +520,6 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
     lo = grid[jnp.maximum(j - 1, 0)]
     hi = grid[jnp.minimum(j + 1, grid_points - 1)]
     om = _golden_section(objective, lo, hi, golden_iterations)
-    g_fn = jax.grad(objective)
-    h_fn = jax.grad(g_fn)
-
-    def newton(_, om):
-        g, h = g_fn(om), h_fn(om)
-        step = jnp.where(h > 0, -g / jnp.where(h > 0, h, 1.0), 0.0)
-        cand = jnp.clip(om + step, lo, hi)
-        return jnp.where(objective(cand) <= objective(om), cand, om)
-
-    om = jax.lax.fori_loop(0, newton_steps, newton, om)
 
     mean = _masked_mean(features, w)
     B, coef = _solve_coefficients(features - mean[None, :], w, om * t_s, num_harmonics)
@@ -550,7 +540,7 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
 
 
 _FIT_STATIC = ("num_harmonics", "f_min_hz", "f_max_hz", "search_halfwidth", "grid_points",
-               "golden_iterations", "newton_steps", "odd_threshold")
+               "golden_iterations", "odd_threshold")
 
 
 def _fit_batched_impl(features, mask, frame_time_s, omega_steps, channel_weights, **static):
@@ -586,8 +576,7 @@ def fit_batch(
     f_max_hz: float = 3.0,
     search_halfwidth: float = 0.25,
     grid_points: int = 33,
-    golden_iterations: int = 30,
-    newton_steps: int = 3,
+    golden_iterations: int = 40,
     odd_threshold: float = 0.2,
 ) -> FitResult:
     """Fit many clips in one jit/vmap call: ω three ways and the coefficients.
@@ -596,7 +585,7 @@ def fit_batch(
     Per clip: (a) spectral ω (:func:`spectral_omega`), (b) ω from step events if given
     (``omega_steps`` rad/s, NaN where unknown; Tilmanne §2.2: cycle = two steps), the
     subharmonic guard, then (c) the nonlinear least-squares ω by variable projection (grid,
-    golden section, Newton on :func:`projected_residual`) and the closed-form coefficients.
+    golden section on :func:`projected_residual`) and the closed-form coefficients.
     ``channel_weights`` weigh channels in the ω search (default: 1 for rotations, 0 for ``root.*``).
 
     Returns:
@@ -622,7 +611,7 @@ def fit_batch(
     out = _fit_batched(features, mask, frame_time_s, omega_steps, cw,
                        num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
                        search_halfwidth=search_halfwidth, grid_points=grid_points,
-                       golden_iterations=golden_iterations, newton_steps=newton_steps,
+                       golden_iterations=golden_iterations,
                        odd_threshold=odd_threshold)
     model = FourierModel(out["offset"], out["amplitude"], out["phase"], out["omega"],
                          representation, tuple(channel_names))

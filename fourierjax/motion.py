@@ -1,0 +1,577 @@
+"""Motion <-> Fourier fitting features (Euler / continuous expmap + heading-frame root motion).
+
+The feature layout (one column per channel, radians for rotations) is documented in
+``fourierjax.fourier``: three root channels ``root.vx, root.vz, root.y`` first, then every joint's
+rotation as Euler angles in the file's order (``"<joint>.<Z|Y|X>rotation"``) or as a continuous
+exponential map (``"<joint>.expmap0..2"``). The root's rotation is taken relative to the heading
+frame (a yaw about +Y by the circular mean of the root's facing direction over the clip), so a
+straight walk in any direction gives the same features, and root velocity is expressed in that
+frame. ``motion_from_features`` inverts the conversion (root position integrated from velocity).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fourierjax import rotations
+from fourierjax.errors import UserError
+from fourierjax.fourier import REPRESENTATIONS, ROOT_CHANNELS
+
+__all__ = [
+    "channel_names_for",
+    "heading_of",
+    "features_from_motion",
+    "motion_from_features",
+    "make_euler_continuous",
+    "local_pose_from_features",
+    "root_relative_positions",
+]
+
+_AXES = "XYZ"
+
+
+def _rotation_joints(topology) -> list[tuple[int, str, list[int]]]:
+    """(joint, order, rotation channel indices) for joints with 3 rotation channels."""
+    out = []
+    for j, chans in enumerate(topology.channels):
+        rot = [topology.channel_offsets[j] + k for k, c in enumerate(chans)
+               if c.endswith("rotation")]
+        if not rot:
+            continue
+        order = topology.rotation_orders[j]
+        if order is None or len(order) != 3 or len(rot) != 3:
+            raise UserError(
+                f"joint {topology.names[j]!r}: Fourier features need 3 rotation channels per "
+                f"joint, got {list(chans)}"
+            )
+        out.append((j, order, rot))
+    return out
+
+
+def channel_names_for(topology, representation: str) -> tuple[str, ...]:
+    """Feature channel names for a skeleton: ``ROOT_CHANNELS`` then each joint's rotation."""
+    if representation not in REPRESENTATIONS:
+        raise UserError(f"representation: {representation!r} is not one of {REPRESENTATIONS}")
+    names = list(ROOT_CHANNELS)
+    for j, order, _ in _rotation_joints(topology):
+        joint = topology.names[j]
+        if representation == "euler":
+            names += [f"{joint}.{axis}rotation" for axis in order]
+        else:
+            names += [f"{joint}.expmap{k}" for k in range(3)]
+    return tuple(names)
+
+
+def _np(x) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64)
+
+
+def _yaw_quat(psi: np.ndarray) -> np.ndarray:
+    psi = np.asarray(psi, np.float64)
+    z = np.zeros_like(psi)
+    return np.stack([np.cos(psi / 2), z, np.sin(psi / 2), z], axis=-1)
+
+
+def _root_pose(motion) -> tuple[np.ndarray, np.ndarray]:
+    """Root world position [F, 3] and orientation [F, 4] (wxyz) of every frame."""
+    topo = motion.topology
+    chans = topo.channels[0]
+    base = topo.channel_offsets[0]
+    pos = np.broadcast_to(np.asarray(motion.offsets[0], np.float64),
+                          (motion.num_frames, 3)).copy()
+    for k, c in enumerate(chans):
+        if c.endswith("position"):
+            pos[:, _AXES.index(c[0])] = motion.channels[:, base + k]
+    rot = [base + k for k, c in enumerate(chans) if c.endswith("rotation")]
+    order = topo.rotation_orders[0]
+    if order is None or len(order) != 3:
+        raise UserError(f"root joint {topo.names[0]!r} needs 3 rotation channels, got {chans}")
+    q = _np(rotations.quat_from_euler(np.radians(motion.channels[:, rot]), order))
+    return pos, q
+
+
+def heading_of(motion) -> float:
+    """Circular mean (radians) of the root's facing yaw: its local +Z projected on the floor.
+
+    ``psi = atan2(f_x, f_z)``; a rotation by ``psi`` about +Y takes +Z to the facing direction.
+    """
+    _, q = _root_pose(motion)
+    f = _np(rotations.quat_apply(q, np.array([0.0, 0.0, 1.0])))
+    s, c = f[:, 0].sum(), f[:, 2].sum()
+    if np.hypot(s, c) < 1e-9 * len(f):
+        return 0.0
+    return float(np.arctan2(s, c))
+
+
+def make_euler_continuous(angles: np.ndarray, order: str) -> np.ndarray:
+    """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
+
+    Every rotation has two Euler triples (Tait-Bryan ``(a, b, c) ~ (a + pi, pi - b, c + pi)``;
+    proper Euler ``(a, b, c) ~ (a + pi, -b, c + pi)``), each up to 2 pi per angle. ``np.unwrap``
+    only removes the 2 pi jumps; near gimbal lock a clip can switch triples, which looks like a
+    jump of ~pi in two angles. Each frame takes, of the two triples (each unwrapped towards the
+    previous frame), the one closest to the previous frame. The first frame is kept.
+
+    Arguments:
+        angles: ``[F, ..., 3]`` radians; order: the 3-letter order of the angles.
+    Returns:
+        ``[F, ..., 3]`` the same rotations, continuous over the first axis.
+    """
+    a = np.array(angles, dtype=np.float64, copy=True)
+    if a.shape[0] < 2:
+        return a
+    proper = order[0] == order[2]
+    two_pi = 2 * np.pi
+    for t in range(1, a.shape[0]):
+        prev = a[t - 1]
+        cur = a[t]
+        alt = np.stack([cur[..., 0] + np.pi,
+                        -cur[..., 1] if proper else np.pi - cur[..., 1],
+                        cur[..., 2] + np.pi], axis=-1)
+        best = None
+        best_d = None
+        for cand in (cur, alt):
+            cand = cand + two_pi * np.round((prev - cand) / two_pi)
+            d = np.sum((cand - prev) ** 2, axis=-1)
+            if best is None:
+                best, best_d = cand, d
+            else:
+                take = d < best_d - 1e-12
+                best = np.where(take[..., None], cand, best)
+                best_d = np.minimum(d, best_d)
+        a[t] = best
+    return a
+
+
+def features_from_motion(
+    motion, representation: str = "euler", heading_rad: float | None = None
+) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Fitting features of a clip: heading-frame root velocity and height, joint rotations.
+
+    Arguments:
+        motion: a ``fourierjax.io.bvh.Motion`` (at least 2 frames).
+        representation: ``"euler"`` (file Euler angles, made continuous with
+            :func:`make_euler_continuous`) or ``"expmap"`` (exponential maps made continuous,
+            Tilmanne & Dutoit §2.1).
+        heading_rad: yaw of the heading frame; default :func:`heading_of` the clip.
+    Returns:
+        ``(features [F, C] float64, channel_names)``: ``root.vx, root.vz`` (file units/s, by
+        central differences), ``root.y`` (file units), then rotations in radians.
+    """
+    names = channel_names_for(motion.topology, representation)
+    if motion.num_frames < 2:
+        raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
+    psi = heading_of(motion) if heading_rad is None else float(heading_rad)
+    pos, q_root = _root_pose(motion)
+    c, s = np.cos(psi), np.sin(psi)
+    # World -> heading frame: rotate by -psi about +Y.
+    x_h = c * pos[:, 0] - s * pos[:, 2]
+    z_h = s * pos[:, 0] + c * pos[:, 2]
+    dt = motion.frame_time_s
+    vx, vz = np.gradient(x_h, dt), np.gradient(z_h, dt)
+    q_rel = _np(rotations.quat_multiply(_yaw_quat(-psi), q_root))
+    cols = [vx, vz, pos[:, 1]]
+    for j, order, idx in _rotation_joints(motion.topology):
+        if j == 0:
+            if representation == "euler":
+                ang = make_euler_continuous(_np(rotations.euler_from_quat(q_rel, order)), order)
+            else:
+                ang = _np(rotations.make_expmap_continuous(rotations.expmap_from_quat(q_rel)))
+        else:
+            e = np.radians(motion.channels[:, idx])
+            if representation == "euler":
+                ang = make_euler_continuous(e, order)
+            else:
+                q = rotations.quat_from_euler(e, order)
+                ang = _np(rotations.make_expmap_continuous(rotations.expmap_from_quat(q)))
+        cols += [ang[:, 0], ang[:, 1], ang[:, 2]]
+    return np.stack(cols, axis=1), names
+
+
+def _check_names(topology, channel_names, where: str) -> str:
+    names = tuple(channel_names)
+    for rep in REPRESENTATIONS:
+        if names == channel_names_for(topology, rep):
+            return rep
+    raise UserError(
+        f"{where}: channel names do not match this skeleton (expected the layout of "
+        f"channel_names_for(topology, 'euler' | 'expmap'), got {names[:5]}...)"
+    )
+
+
+def motion_from_features(
+    template,
+    features,
+    channel_names,
+    frame_time_s: float,
+    *,
+    heading_rad: float = 0.0,
+    start_xz: tuple[float, float] = (0.0, 0.0),
+):
+    """A writeable Motion from features (e.g. ``synthesize`` output) on a template's skeleton.
+
+    The root position is integrated from ``root.vx, root.vz`` (trapezoid rule, starting at
+    ``start_xz``) in the heading frame rotated by ``heading_rad`` about +Y (0: walking along +Z);
+    its height is ``root.y``. Rotations are converted back to the file's Euler orders in degrees.
+    Position channels of non-root joints keep the template's first-frame values.
+
+    Arguments:
+        template: Motion supplying topology, offsets and channel layout.
+        features: ``[F, C]``; channel_names: their names (the layout of :func:`channel_names_for`).
+        frame_time_s: seconds per frame of the new motion.
+    Returns:
+        Motion with ``F`` frames.
+    """
+    topo = template.topology
+    rep = _check_names(topo, channel_names, "motion_from_features")
+    x = _np(features)
+    if x.ndim != 2 or x.shape[1] != len(channel_names):
+        raise UserError(
+            f"motion_from_features: features shape {x.shape}, expected [F, {len(channel_names)}]"
+        )
+    F = x.shape[0]
+    out = np.empty((F, topo.num_channels), np.float64)
+    out[:] = template.channels[:1] if template.num_frames else 0.0
+    vx, vz, y = x[:, 0], x[:, 1], x[:, 2]
+    px = np.concatenate([[0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * frame_time_s)])
+    pz = np.concatenate([[0.0], np.cumsum(0.5 * (vz[1:] + vz[:-1]) * frame_time_s)])
+    c, s = np.cos(heading_rad), np.sin(heading_rad)
+    world = {"X": start_xz[0] + c * px + s * pz, "Y": y, "Z": start_xz[1] - s * px + c * pz}
+    col = 3
+    for j, order, idx in _rotation_joints(topo):
+        ang = x[:, col : col + 3]
+        col += 3
+        if j == 0 or rep == "expmap":
+            q = (rotations.quat_from_euler(ang, order) if rep == "euler"
+                 else rotations.quat_from_expmap(ang))
+            if j == 0:
+                q = rotations.quat_multiply(_yaw_quat(heading_rad), q)
+            ang = make_euler_continuous(_np(rotations.euler_from_quat(q, order)), order)
+        out[:, idx] = np.degrees(ang)
+    base = topo.channel_offsets[0]
+    for k, ch in enumerate(topo.channels[0]):
+        if ch.endswith("position"):
+            out[:, base + k] = world[ch[0]]
+    return dataclasses.replace(template, channels=out, frame_time_s=float(frame_time_s),
+                               source=None)
+
+
+def _layout_tables(topology, representation):
+    """Static gather tables: per order, (joints, feature column triples)."""
+    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
+    col = len(ROOT_CHANNELS)
+    for j, order, _ in _rotation_joints(topology):
+        key = order if representation == "euler" else "expmap"
+        js, cols = groups.setdefault(key, ([], []))
+        js.append(j)
+        cols.append([col, col + 1, col + 2])
+        col += 3
+    return {k: (np.asarray(js), np.asarray(cs)) for k, (js, cs) in groups.items()}
+
+
+def local_pose_from_features(skeleton, features, representation: str):
+    """Local translations [J, 3] and rotations [J, 4] of one feature frame (pure JAX).
+
+    The root sits at the origin (root-relative) with its heading-frame orientation; joints
+    without rotation channels keep the identity.
+
+    Arguments:
+        skeleton: ``fourierjax.skeleton.Skeleton``; features: ``[C]`` one frame;
+        representation: the features' representation.
+    Returns:
+        ``(translations [J, 3], quats [J, 4])`` for ``kinematics.forward_kinematics``.
+    """
+    topo = skeleton.topology
+    features = jnp.asarray(features)
+    J = topo.num_joints
+    quats = jnp.zeros((J, 4), features.dtype).at[:, 0].set(1.0)
+    for key, (js, cols) in _layout_tables(topo, representation).items():
+        ang = features[cols]
+        q = rotations.quat_from_expmap(ang) if key == "expmap" else rotations.quat_from_euler(
+            ang, key)
+        quats = quats.at[js].set(q)
+    translations = jnp.asarray(skeleton.offsets, features.dtype).at[0].set(0.0)
+    return translations, quats
+
+
+def root_relative_positions(skeleton, features, representation: str):
+    """Joint positions [T, J, 3] with the root at the origin (heading frame), through FK.
+
+    Arguments:
+        skeleton: the clip's Skeleton; features: ``[T, C]``; representation: of the features.
+    Returns:
+        ``[T, J, 3]`` file units.
+    """
+    from fourierjax.kinematics import forward_kinematics
+
+    def one(f):
+        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f,
+                                                                      representation)).positions
+
+    return jax.vmap(one)(jnp.asarray(features))
+
+
+def steady_segment(
+    motion,
+    *,
+    window_s: float = 0.5,
+    min_speed_fraction: float = 0.75,
+    max_turn_deg_s: float = 30.0,
+    min_duration_s: float = 0.5,
+) -> tuple[int, int]:
+    """The longest steady, straight stretch of a clip: frames ``[start, stop)``.
+
+    The root's horizontal velocity is smoothed over ``+-window_s`` (which averages out the
+    in-step sway); a frame is steady when its smoothed speed is at least
+    ``min_speed_fraction`` of the clip's 90th-percentile speed and its heading turns slower than
+    ``max_turn_deg_s``. Clips that start from standing, stop, or walk back and forth (CMU
+    142_02, 142_08) keep their longest steady run; if no run lasts ``min_duration_s`` the whole
+    clip is returned.
+
+    Arguments:
+        motion: a Motion. Returns: ``(start, stop)`` frame indices into ``motion``.
+    """
+    F = motion.num_frames
+    pos, _ = _root_pose(motion)
+    p = pos[:, [0, 2]]
+    w = max(1, int(round(window_s / motion.frame_time_s)))
+    idx = np.arange(F)
+    hi, lo = np.minimum(idx + w, F - 1), np.maximum(idx - w, 0)
+    span = np.maximum(hi - lo, 1) * motion.frame_time_s
+    v = (p[hi] - p[lo]) / span[:, None]
+    speed = np.hypot(v[:, 0], v[:, 1])
+    heading = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+    turn = np.abs(np.gradient(heading, motion.frame_time_s)) if F > 1 else np.zeros(F)
+    ref = np.percentile(speed, 90)
+    if ref <= 0:
+        return 0, F
+    steady = (speed >= min_speed_fraction * ref) & (np.degrees(turn) <= max_turn_deg_s)
+    best = (0, 0)
+    start = None
+    for i, s in enumerate(np.append(steady, False)):
+        if s and start is None:
+            start = i
+        elif not s and start is not None:
+            if i - start > best[1] - best[0]:
+                best = (start, i)
+            start = None
+    if (best[1] - best[0]) * motion.frame_time_s < min_duration_s:
+        return 0, F
+    return best
+
+
+# ----------------------------------------------------------------------------- clip fitting
+
+
+@dataclasses.dataclass(frozen=True)
+class ClipFit:
+    """A fitted clip: the phase-aligned model plus what was used and how well it fits.
+
+    Frames ``[frame_start, frame_stop)`` index the Motion given to :func:`fit_motions`. ω per
+    method in rad/s (``omega_steps`` is NaN without step events). ``alignment`` names the event
+    at phase 0 (``"left_heel_strike"``, the fallback ``"left_hip_flexion"`` or ``"none"``) and
+    ``phase_shift`` the shift applied (a clip time t has aligned phase ``omega t - phase_shift``).
+    Metrics are over the fitted frames: ``rms`` per channel (radians or file units),
+    ``rms_deg`` and ``variance_explained_angles`` over rotation channels,
+    ``variance_explained_positions`` over root-relative joint positions (through FK).
+    """
+
+    source: str | None
+    frame_start: int
+    frame_stop: int
+    frame_time_s: float
+    model: object
+    raw_model: object
+    alignment: str
+    phase_shift: float
+    omega_spectral: float
+    omega_steps: float
+    omega_fit: float
+    rms: np.ndarray
+    rms_deg: float
+    variance_explained_angles: float
+    variance_explained_positions: float
+    left_heel_strikes: tuple[int, ...]
+    right_heel_strikes: tuple[int, ...]
+
+    @property
+    def fundamental_hz(self) -> float:
+        return self.omega_fit / (2 * np.pi)
+
+    def summary(self) -> dict:
+        """JSON-able summary (frequencies in Hz, metrics as floats)."""
+        hz = 1 / (2 * np.pi)
+
+        def f(v):
+            return None if not np.isfinite(v) else float(v)
+
+        return {
+            "source": self.source,
+            "frame_start": self.frame_start,
+            "frame_stop": self.frame_stop,
+            "num_frames": self.frame_stop - self.frame_start,
+            "frame_time_s": self.frame_time_s,
+            "num_harmonics": int(self.model.num_harmonics),
+            "representation": self.model.representation,
+            "fundamental_hz": f(self.omega_fit * hz),
+            "fundamental_hz_spectral": f(self.omega_spectral * hz),
+            "fundamental_hz_steps": f(self.omega_steps * hz),
+            "fundamental_hz_fit": f(self.omega_fit * hz),
+            "omega_rad_s": {"spectral": f(self.omega_spectral), "steps": f(self.omega_steps),
+                            "fit": f(self.omega_fit)},
+            "rms_deg": float(self.rms_deg),
+            "variance_explained_angles": float(self.variance_explained_angles),
+            "variance_explained_positions": float(self.variance_explained_positions),
+            "alignment": self.alignment,
+            "phase_shift_rad": float(self.phase_shift),
+            "left_heel_strikes": list(self.left_heel_strikes),
+            "right_heel_strikes": list(self.right_heel_strikes),
+        }
+
+
+def _bucket(n: int) -> int:
+    """Pad lengths to a few sizes so jitted FK compiles once per bucket, not per clip."""
+    return max(64, int(2 ** np.ceil(np.log2(n))))
+
+
+def foot_contacts_of(motion) -> np.ndarray | None:
+    """Foot contacts ``bool [F, 2]`` (left, right) of a clip: ``fourierjax.contacts`` on FK foot
+    points (ankle, toe, toe tip). None when the skeleton has no CMU-named feet."""
+    from fourierjax import contacts
+    from fourierjax.kinematics import fk_frames
+
+    try:
+        points = contacts.foot_points(motion.topology)
+    except UserError:
+        return None
+    F = motion.num_frames
+    ch = np.concatenate([motion.channels, np.repeat(motion.channels[-1:], _bucket(F) - F, 0)])
+    fk = fk_frames(motion.skeleton(), jnp.asarray(ch))
+    feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions,
+                                                     points))[:F]
+    return contacts.foot_contacts(feet, motion.frame_time_s)
+
+
+def _steps(contacts_lr, frame_time_s):
+    """(left strikes, right strikes, omega from steps or NaN): Tilmanne §2.2, cycle = 2 steps."""
+    from fourierjax import contacts
+
+    if contacts_lr is None:
+        return np.zeros(0, int), np.zeros(0, int), float("nan")
+    left, right = contacts.step_events(contacts_lr)
+    try:
+        omega = 2 * np.pi / (2 * contacts.mean_step_period_s(contacts_lr, frame_time_s))
+    except UserError:
+        omega = float("nan")
+    return left, right, float(omega)
+
+
+def _position_ve(skeleton, representation, x, xhat, mask):
+    return _position_ve_jit(skeleton, x, xhat, mask, representation)
+
+
+def _position_ve_impl(skeleton, x, xhat, mask, representation):
+    from fourierjax.fourier import variance_explained
+
+    p = root_relative_positions(skeleton, x, representation)
+    ph = root_relative_positions(skeleton, xhat, representation)
+    return variance_explained(p, ph, mask)
+
+
+_position_ve_jit = jax.jit(_position_ve_impl, static_argnames=("representation",))
+
+
+def fit_motions(
+    motions,
+    num_harmonics: int = 3,
+    representation: str = "euler",
+    *,
+    segment: bool = True,
+    use_contacts: bool = True,
+    dtype=None,
+    **fit_kwargs,
+) -> list[ClipFit]:
+    """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
+
+    Per clip: the steady straight stretch (:func:`steady_segment`, unless ``segment=False``),
+    its features (:func:`features_from_motion`), heel strikes from FK foot contacts
+    (``fourierjax.contacts``; ω from steps, Tilmanne §2.2), then ONE batched
+    :func:`fourierjax.fourier.fit_batch` call for all clips that share a channel layout (padding
+    and masks), phase alignment to the left heel strike (fallback: the peak of the left hip
+    flexion fundamental, ``LeftUpLeg.Xrotation`` / ``LeftUpLeg.expmap0``), and the metrics.
+
+    Arguments:
+        motions: a sequence of Motions (e.g. after dropping a rest frame).
+        num_harmonics: N; representation: "euler" | "expmap".
+        fit_kwargs: passed on to ``fit_batch`` (search band, grid...).
+    Returns:
+        One :class:`ClipFit` per motion, in order.
+    """
+    from fourierjax import fourier as fr
+
+    motions = list(motions)
+    if not motions:
+        raise UserError("fit_motions: no motions given")
+    dtype = dtype or jnp.zeros(()).dtype
+    prepared = []
+    for m in motions:
+        a, b = steady_segment(m) if segment else (0, m.num_frames)
+        sub = m[a:b]
+        x, names = features_from_motion(sub, representation)
+        c = foot_contacts_of(sub) if use_contacts else None
+        left, right, om = _steps(c, sub.frame_time_s)
+        prepared.append((m, a, b, sub, x, names, left, right, om))
+    groups: dict[tuple[str, ...], list[int]] = {}
+    for i, p in enumerate(prepared):
+        groups.setdefault(p[5], []).append(i)
+    results: list[ClipFit | None] = [None] * len(prepared)
+    for names, idx in groups.items():
+        T = _bucket(max(prepared[i][4].shape[0] for i in idx))
+        C = len(names)
+        feats = np.zeros((len(idx), T, C))
+        mask = np.zeros((len(idx), T), bool)
+        for k, i in enumerate(idx):
+            x = prepared[i][4]
+            feats[k, : len(x)] = x
+            feats[k, len(x):] = x[-1]
+            mask[k, : len(x)] = True
+        dts = np.array([prepared[i][3].frame_time_s for i in idx])
+        om_steps = np.array([prepared[i][8] for i in idx])
+        res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
+                           mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
+                           representation=representation, channel_names=names, **fit_kwargs)
+        for k, i in enumerate(idx):
+            m, a, b, sub, x, _, left, right, _ = prepared[i]
+            raw = jax.tree.map(lambda v: v[k], res.model)
+            dt = sub.frame_time_s
+            if len(left):
+                model, delta = fr.align_to_events(raw, jnp.asarray(left * dt, dtype))
+                alignment = "left_heel_strike"
+            else:
+                hip = [c for c in ("LeftUpLeg.Xrotation", "LeftUpLeg.expmap0") if c in names]
+                if hip:
+                    delta = fr.channel_event_phase(raw, names.index(hip[0]))
+                    model = fr.shift_phase(raw, delta)
+                    alignment = "left_hip_flexion"
+                else:
+                    model, delta, alignment = raw, jnp.zeros(()), "none"
+            t = jnp.arange(T, dtype=dtype) * dt
+            xhat = fr.synthesize(raw, t)
+            pve = _position_ve(sub.skeleton(), representation, jnp.asarray(feats[k], dtype),
+                               xhat, jnp.asarray(mask[k]))
+            results[i] = ClipFit(
+                source=m.source, frame_start=int(a), frame_stop=int(b), frame_time_s=float(dt),
+                model=model, raw_model=raw, alignment=alignment, phase_shift=float(delta),
+                omega_spectral=float(res.omega_spectral[k]), omega_steps=float(om_steps[k]),
+                omega_fit=float(res.omega_fit[k]), rms=np.asarray(res.rms[k]),
+                rms_deg=float(res.rms_deg[k]),
+                variance_explained_angles=float(res.variance_explained_angles[k]),
+                variance_explained_positions=float(pve),
+                left_heel_strikes=tuple(int(v) for v in left),
+                right_heel_strikes=tuple(int(v) for v in right),
+            )
+    return results  # type: ignore[return-value]
