@@ -62,14 +62,14 @@ def reference_fk(topology, offsets, end_site_offsets, channels):
     world_p = np.zeros((num_frames, num_joints, 3))
     col = 0
     for j in range(num_joints):
-        t = np.tile(np.asarray(offsets[j], dtype=np.float64), (num_frames, 1))
+        t = np.tile(np.array(offsets[j], dtype=np.float64), (num_frames, 1))
         r = Rotation.identity(num_frames)
         for name in topology.channels[j]:
             axis = "XYZ".index(name[0])
             if name.endswith("position"):
                 t[:, axis] = channels[:, col]  # replaces the offset component
             else:
-                r = r * Rotation.from_euler(name[0], channels[:, col], degrees=True)
+                r = r * Rotation.from_euler(name[0], channels[:, col : col + 1], degrees=True)
             col += 1
         p = topology.parents[j]
         if p < 0:
@@ -80,5 +80,5 @@ def reference_fk(topology, offsets, end_site_offsets, channels):
             world_p[:, j] = world_p[:, p] + world_r[p].apply(t)
     ends = np.zeros((num_frames, len(topology.end_site_parents), 3))
     for k, p in enumerate(topology.end_site_parents):
-        ends[:, k] = world_p[:, p] + world_r[p].apply(np.asarray(end_site_offsets[k], float))
+        ends[:, k] = world_p[:, p] + world_r[p].apply(np.array(end_site_offsets[k], dtype=float))
     return world_p, ends
