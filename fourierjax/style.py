@@ -85,9 +85,7 @@ _OMEGA_INTERPS = ("geometric", "linear")
 _EASES = ("smoothstep", "smootherstep", "linear")
 # Gauss-Legendre nodes on [-1, 1] for the phase integral over the transition window; the
 # integrand ω(s(u)) is smooth there, so 16 nodes are exact to rounding in float64.
-_GL_NODES, _GL_WEIGHTS = (
-    np.asarray(x, dtype=np.float64) for x in np.polynomial.legendre.leggauss(16)
-)
+_GL_NODES, _GL_WEIGHTS = (np.asarray(x, dtype=np.float64) for x in np.polynomial.legendre.leggauss(16))
 # Below this squared norm a phasor is treated as zero (amplitude 0, phase 0).
 _TINY = 1e-30
 
@@ -150,9 +148,13 @@ def _evaluate(offset: Array, amplitude: Array, phase: Array, theta: Array) -> Ar
 def _replace(model, **fields):
     """A copy of an equinox module with some leaves replaced (shapes may change)."""
     names = tuple(fields)
-    return eqx.tree_at(
-        lambda m: tuple(getattr(m, k) for k in names), model, tuple(fields[k] for k in names)
-    )
+    return eqx.tree_at(lambda m: tuple(getattr(m, k) for k in names), model, tuple(fields[k] for k in names))
+
+
+def _dtype(model):
+    # The float dtype JAX will compute in (model files hold float64 numpy arrays, which become
+    # float32 unless x64 is enabled; asking for float64 then would warn).
+    return jax.dtypes.canonicalize_dtype(model.offset.dtype)
 
 
 def _num_harmonics(x) -> int:
@@ -196,8 +198,7 @@ def check_compatible(a, b, names: tuple[str, str] = ("a", "b")) -> None:
     ra, rb = getattr(a, "representation", None), getattr(b, "representation", None)
     if ra != rb:
         raise ValueError(
-            f"{nb}: representation {rb!r} does not match {na}'s {ra!r}; refit both on the same "
-            "channel representation"
+            f"{nb}: representation {rb!r} does not match {na}'s {ra!r}; refit both on the same channel representation"
         )
     ca, cb = tuple(getattr(a, "channel_names", ())), tuple(getattr(b, "channel_names", ()))
     if ca != cb:
@@ -221,9 +222,7 @@ def _check_choice(value: str, choices: tuple[str, ...], name: str) -> None:
         raise ValueError(f"{name}={value!r}; expected one of {choices}")
 
 
-def interpolate_omega(
-    omega_a: ArrayLike, omega_b: ArrayLike, s: ArrayLike, omega: OmegaInterp = "geometric"
-) -> Array:
+def interpolate_omega(omega_a: ArrayLike, omega_b: ArrayLike, s: ArrayLike, omega: OmegaInterp = "geometric") -> Array:
     """Fundamental frequency between two models.
 
     **Arguments:** `omega_a`, `omega_b`: rad/s (> 0); `s`: interpolation parameter (any real,
@@ -288,7 +287,7 @@ def interpolate(
     _check_choice(method, _METHODS, "method")
     _check_choice(omega, _OMEGA_INTERPS, "omega")
     a, b = _common_harmonics(a, b)
-    return _interpolate(a, b, jnp.asarray(s, dtype=a.offset.dtype), method, omega)
+    return _interpolate(a, b, jnp.asarray(s, dtype=_dtype(a)), method, omega)
 
 
 @eqx.filter_jit
@@ -298,9 +297,7 @@ def _blend(a, b, s, theta):
     )
 
 
-def blend_time_domain(
-    a: FourierModel, b: FourierModel, s: ArrayLike, phase: ArrayLike
-) -> Float[Array, " channels"]:
+def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: ArrayLike) -> Float[Array, " channels"]:
     """Unuma's time-domain alternative to eq. 3: `(1 − s) Θ(θ) + s Π(θ)`.
 
     Both models are played at the SAME cycle phase θ (their own time axes rescaled so that one
@@ -314,7 +311,7 @@ def blend_time_domain(
     **Returns:** `[C]` channel values in the models' units.
     """
     check_compatible(a, b)
-    dtype = a.offset.dtype
+    dtype = _dtype(a)
     return _blend(a, b, jnp.asarray(s, dtype=dtype), jnp.asarray(phase, dtype=dtype))
 
 
@@ -348,12 +345,7 @@ def _schedule_one(t, omega_a, omega_b, start, duration, ease_kind, omega):
     nodes = jnp.asarray(_GL_NODES, dtype=u_end.dtype)
     weights = jnp.asarray(_GL_WEIGHTS, dtype=u_end.dtype)
     u = 0.5 * u_end * (nodes + 1)
-    window = (
-        duration
-        * 0.5
-        * u_end
-        * jnp.sum(weights * interpolate_omega(omega_a, omega_b, ease(u, ease_kind), omega))
-    )
+    window = duration * 0.5 * u_end * jnp.sum(weights * interpolate_omega(omega_a, omega_b, ease(u, ease_kind), omega))
     before = omega_a * jnp.minimum(t, start)
     after = omega_b * jnp.maximum(t - (start + duration), 0.0)
     return s, before + window + after
@@ -401,9 +393,7 @@ def transition_schedule(
     t_s = jnp.asarray(t_s)
     dtype = jnp.result_type(t_s.dtype, jnp.asarray(omega_a).dtype, float)
     f = functools.partial(jnp.asarray, dtype=dtype)
-    return _schedule(
-        f(t_s), f(omega_a), f(omega_b), f(start_s), f(duration_s), ease_kind=ease, omega=omega
-    )
+    return _schedule(f(t_s), f(omega_a), f(omega_b), f(start_s), f(duration_s), ease_kind=ease, omega=omega)
 
 
 @eqx.filter_jit
@@ -458,7 +448,7 @@ def transition(
     _check_choice(omega, _OMEGA_INTERPS, "omega")
     _check_window(duration_s)
     a, b = _common_harmonics(a, b)
-    dtype = a.offset.dtype
+    dtype = _dtype(a)
     values, s, theta = _transition(
         a,
         b,
@@ -546,7 +536,7 @@ def characteristic_function(char: Characteristic, phase: ArrayLike) -> Float[Arr
     """
     if char.offset.ndim != 1:
         raise ValueError("char: expected one characteristic, got a stacked batch; vmap over it")
-    return _characteristic_function(char, jnp.asarray(phase, dtype=char.offset.dtype))
+    return _characteristic_function(char, jnp.asarray(phase, dtype=_dtype(char)))
 
 
 def stack(items: Sequence):
@@ -585,7 +575,7 @@ def _prepare_superposition(base, characteristics, weights):
     chars = _stacked_characteristics(characteristics)
     check_compatible(base, chars, names=("base", "characteristics"))
     k = chars.offset.shape[0]
-    weights = jnp.asarray(weights, dtype=base.offset.dtype)
+    weights = jnp.asarray(weights, dtype=_dtype(base))
     if weights.shape == () and k == 1:
         weights = weights[None]
     if weights.shape != (k,):
@@ -658,8 +648,9 @@ def superpose(
 def _add_noise(model, key, amplitude, harmonics: tuple[int, ...]):
     c, n = model.amplitude.shape
     k = len(harmonics)
+    phase_dtype = jnp.result_type(model.phase)
     amp = jnp.broadcast_to(amplitude[:, None] if amplitude.ndim == 1 else amplitude, (c, k))
-    phases = jax.random.uniform(key, (c, k), dtype=model.phase.dtype, minval=-jnp.pi, maxval=jnp.pi)
+    phases = jax.random.uniform(key, (c, k), dtype=phase_dtype, minval=-jnp.pi, maxval=jnp.pi)
     new_n = max(max(harmonics), n)
     idx = jnp.asarray(harmonics) - 1
     amplitude_new = jnp.pad(model.amplitude, ((0, 0), (0, new_n - n))).at[:, idx].add(amp)
@@ -701,17 +692,13 @@ def add_noise(
         if not harmonics:
             raise ValueError("harmonics: empty")
         if min(harmonics) <= n:
-            raise ValueError(
-                f"harmonics={harmonics}: noise harmonics must be above the model's N={n}"
-            )
+            raise ValueError(f"harmonics={harmonics}: noise harmonics must be above the model's N={n}")
         if len(set(harmonics)) != len(harmonics):
             raise ValueError(f"harmonics={harmonics}: repeated harmonic")
-    amplitude = jnp.asarray(amplitude, dtype=model.amplitude.dtype)
+    amplitude = jnp.asarray(amplitude, dtype=_dtype(model))
     c = model.offset.shape[-1]
     if amplitude.shape not in ((), (c,), (c, len(harmonics))):
-        raise ValueError(
-            f"amplitude: shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})"
-        )
+        raise ValueError(f"amplitude: shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})")
     return _add_noise(model, key, amplitude, harmonics)
 
 
@@ -756,11 +743,10 @@ def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel
     **Returns:** a FourierModel.
     """
     c, n = like.amplitude.shape
-    vector = jnp.asarray(vector, dtype=like.offset.dtype)
+    vector = jnp.asarray(vector, dtype=_dtype(like))
     if vector.shape != (c * (1 + 2 * n) + 1,):
         raise ValueError(
-            f"vector: shape {vector.shape}, expected ({c * (1 + 2 * n) + 1},) for {c} channels "
-            f"and {n} harmonics"
+            f"vector: shape {vector.shape}, expected ({c * (1 + 2 * n) + 1},) for {c} channels and {n} harmonics"
         )
     return _model_from_style_vector(vector, like)
 
@@ -769,12 +755,8 @@ def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel
 def _model_from_style_vector(vector, like):
     c, n = like.amplitude.shape
     per_channel = jnp.reshape(vector[:-1], (c, 1 + 2 * n))
-    amplitude, phase = _polar_from_phasor(
-        jnp.reshape(per_channel[:, 1:], (c, n, 2)) * jnp.sqrt(2.0)
-    )
-    return _replace(
-        like, offset=per_channel[:, 0], amplitude=amplitude, phase=phase, omega=jnp.exp(vector[-1])
-    )
+    amplitude, phase = _polar_from_phasor(jnp.reshape(per_channel[:, 1:], (c, n, 2)) * jnp.sqrt(2.0))
+    return _replace(like, offset=per_channel[:, 0], amplitude=amplitude, phase=phase, omega=jnp.exp(vector[-1]))
 
 
 def style_matrix(models) -> Float[Array, "models dim"]:
@@ -806,9 +788,7 @@ class StylePCA(eqx.Module):
     explained_variance_ratio: Float[Array, " k"]
 
 
-def style_pca(
-    matrix: Float[ArrayLike, "models dim"], num_components: int | None = None
-) -> StylePCA:
+def style_pca(matrix: Float[ArrayLike, "models dim"], num_components: int | None = None) -> StylePCA:
     """PCA over style vectors (rows of `style_matrix`).
 
     **Arguments:** `matrix`: `[M, D]` with `M ≥ 2`; `num_components`: how many to keep
@@ -856,9 +836,7 @@ def pca_project(pca: StylePCA, vectors: Float[ArrayLike, "*batch dim"]) -> Float
     return jnp.sum(centred[..., None, :] * components, axis=-1)
 
 
-def pca_reconstruct(
-    pca: StylePCA, coords: Float[ArrayLike, "*batch k"]
-) -> Float[Array, "*batch dim"]:
+def pca_reconstruct(pca: StylePCA, coords: Float[ArrayLike, "*batch k"]) -> Float[Array, "*batch dim"]:
     """Style vectors from principal coordinates: `mean + coords · components`.
 
     **Arguments:** `pca`: a StylePCA; `coords`: `[..., K]`.
@@ -877,9 +855,7 @@ def _fit_style_weights(base, chars, target, ridge, include_omega: bool):
     k, c, n, _ = chars.phasor.shape
     # Columns: style-space direction of each characteristic in phasor coordinates; the
     # phasor superposition is linear in w, so least squares is exact and closed form.
-    cols = jnp.concatenate(
-        [chars.offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2
-    )
+    cols = jnp.concatenate([chars.offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2)
     cols = jnp.reshape(cols, (k, -1))
     residual = style_vector(target)[:-1] - style_vector(base)[:-1]
     if include_omega:
@@ -906,10 +882,7 @@ def _spd_solve(gram: Array, rhs: Array) -> Array:
             lower[i][j] = (gram[i, j] - acc) / d
     y = []
     for i in range(k):
-        y.append(
-            (rhs[i] - sum((lower[i][m] * y[m] for m in range(i)), start=jnp.zeros(())))
-            / lower[i][i]
-        )
+        y.append((rhs[i] - sum((lower[i][m] * y[m] for m in range(i)), start=jnp.zeros(()))) / lower[i][i])
     x = [None] * k
     for i in reversed(range(k)):
         acc = sum((lower[m][i] * x[m] for m in range(i + 1, k)), start=jnp.zeros(()))
@@ -950,5 +923,5 @@ def fit_style_weights(
     check_compatible(base, chars, names=("base", "characteristics"))
     n = max(_num_harmonics(base), _num_harmonics(chars), _num_harmonics(target))
     base, chars, target = (pad_harmonics(x, n) for x in (base, chars, target))
-    ridge = jnp.asarray(ridge, dtype=base.offset.dtype)
+    ridge = jnp.asarray(ridge, dtype=_dtype(base))
     return _fit_style_weights(base, chars, target, ridge, bool(include_omega))

@@ -13,6 +13,9 @@ import sys
 COMMANDS: dict[str, str] = {
     "info": "info",
     "positions": "positions",
+    "characteristic": "characteristic",
+    "interpolate": "interpolate",
+    "transition": "transition",
 }
 
 

@@ -1,0 +1,251 @@
+"""`fourierjax interpolate`: a model between (or beyond) two gaits, Unuma 1995 eq. 3.
+
+Also home of the helpers the style commands share (`characteristic`, `transition`): reading a
+gait argument that is either a model file or a BVH clip fitted on the fly, parsing numbers into
+one-line errors, and writing a synthesized motion.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import pathlib
+import sys
+
+HELP = "Inter/extrapolate two gaits (Unuma eq. 3): write the model (.npz) or a motion (.bvh)."
+
+DEFAULT_HARMONICS = 5
+
+
+# ----------------------------------------------------------------------------- shared helpers
+
+
+@dataclasses.dataclass(frozen=True)
+class Gait:
+    """A gait argument, resolved: its model, a Motion whose skeleton can be written (or None),
+    and where it came from."""
+
+    model: object
+    template: object | None
+    frame_time_s: float | None
+    source: str
+    provenance: dict
+    alignment: str = "none"
+
+
+def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
+    """The two positional gaits and the on-the-fly fit options."""
+    parser.add_argument("a", metavar="A", help="first gait: a model file (.npz) or a BVH clip")
+    parser.add_argument("b", metavar="B", help="second gait: a model file (.npz) or a BVH clip")
+    parser.add_argument(
+        "--harmonics",
+        default=str(DEFAULT_HARMONICS),
+        metavar="N",
+        help=f"harmonics when fitting a BVH argument (default {DEFAULT_HARMONICS})",
+    )
+    parser.add_argument(
+        "--representation",
+        default="euler",
+        metavar="REP",
+        help="channel representation when fitting a BVH argument: euler (default) or expmap",
+    )
+
+
+def parse_number(text: str, option: str, *, positive=False, nonnegative=False, integer=False):
+    """A finite float (or int) from a command-line string, else a one-line UserError."""
+    from fourierjax.errors import UserError
+
+    try:
+        value = int(text) if integer else float(text)
+    except ValueError:
+        kind = "an integer" if integer else "a number"
+        raise UserError(f"{option}: {text!r} is not {kind}") from None
+    if not math.isfinite(value):
+        raise UserError(f"{option}: {text!r} is not a finite number")
+    if positive and not value > 0:
+        raise UserError(f"{option}: {text} must be > 0")
+    if nonnegative and value < 0:
+        raise UserError(f"{option}: {text} must be >= 0")
+    return value
+
+
+def _read_clip(path: pathlib.Path):
+    from fourierjax.data import detect_rest_frames
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import read_bvh
+
+    motion = read_bvh(path)
+    rest = detect_rest_frames(motion)
+    motion = motion[rest:]
+    if motion.num_frames < 16:
+        raise UserError(f"{path}: only {motion.num_frames} motion frames, too short to fit")
+    return motion, rest
+
+
+def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
+    """Fit BVH clips as `fourierjax fit` does, in one batched call: drop leading rest frames,
+    then `fourierjax.motion.fit_motions` (steady straight stretch, fit, phase aligned to the
+    left heel strike, falling back to the left hip flexion peak)."""
+    from fourierjax import motion as fmotion
+
+    clips = [_read_clip(p) for p in paths]
+    fits = fmotion.fit_motions([m for m, _ in clips], harmonics, representation)
+    gaits = []
+    for path, (motion, rest), fit in zip(paths, clips, fits):
+        provenance = fit.summary()
+        provenance.update(source=str(path), rest_frames_dropped=rest)
+        gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment))
+    return gaits
+
+
+def _check_path(text: str, argument: str) -> pathlib.Path:
+    from fourierjax.errors import UserError
+
+    path = pathlib.Path(text)
+    if not path.exists():
+        raise UserError(f"{argument}: {text}: no such file")
+    if path.is_dir():
+        raise UserError(f"{argument}: {text} is a directory")
+    return path
+
+
+def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
+    from fourierjax import model_io
+    from fourierjax.errors import UserError
+
+    try:
+        mf = model_io.load_model(path)
+    except UserError as err:
+        hint = ""
+        if "fourier_characteristic" in str(err):
+            hint = " (a characteristic file: apply it with `fourierjax synth --add`)"
+        raise UserError(f"{argument}: {err}{hint}") from None
+    return Gait(
+        mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none"
+    )
+
+
+def load_gaits(texts, arguments, harmonics: int, representation: str) -> list[Gait]:
+    """Gait arguments: model files, or BVH files fitted on the fly (all BVH arguments in one
+    batched fit). Every path is checked before any fitting starts. One-line UserErrors."""
+    paths = [_check_path(t, a) for t, a in zip(texts, arguments)]
+    is_bvh = [p.suffix.lower() == ".bvh" for p in paths]
+    gaits: list[Gait | None] = [None if bvh else _load_model_file(p, a) for p, a, bvh in zip(paths, arguments, is_bvh)]
+    fitted = iter(
+        fit_bvhs([p for p, bvh in zip(paths, is_bvh) if bvh], harmonics, representation) if any(is_bvh) else []
+    )
+    return [g if g is not None else next(fitted) for g in gaits]
+
+
+def load_gait_pair(args: argparse.Namespace):
+    """Both gait arguments of a style command, checked compatible (one-line UserError)."""
+    from fourierjax import fourier, style
+    from fourierjax.errors import UserError
+
+    harmonics = parse_number(args.harmonics, "--harmonics", positive=True, integer=True)
+    if args.representation not in fourier.REPRESENTATIONS:
+        raise UserError(f"--representation: {args.representation!r} is not one of {fourier.REPRESENTATIONS}")
+    a, b = load_gaits((args.a, args.b), ("A", "B"), harmonics, args.representation)
+    try:
+        style.check_compatible(a.model, b.model, names=(f"A ({args.a})", f"B ({args.b})"))
+    except ValueError as err:
+        raise UserError(f"incompatible models: {err}") from None
+    if a.alignment != b.alignment:
+        # Phases are only comparable when θ = 0 is the same gait event in both models.
+        print(
+            f"fourierjax: warning: A is aligned to {a.alignment!r} and B to {b.alignment!r}; "
+            "their phases may not be comparable",
+            file=sys.stderr,
+        )
+    return a, b
+
+
+def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template) -> None:
+    """Write synthesized features as a BVH on `template`'s skeleton."""
+    import numpy as np
+
+    from fourierjax import motion as fmotion
+    from fourierjax.io.bvh import write_bvh
+
+    motion = fmotion.motion_from_features(template, np.asarray(features, np.float64), channel_names, frame_time_s)
+    write_bvh(motion, out)
+
+
+def check_out(text: str, suffixes: tuple[str, ...]) -> pathlib.Path:
+    """The output path: a known suffix and an existing directory, else a one-line UserError."""
+    from fourierjax.errors import UserError
+
+    out = pathlib.Path(text)
+    if out.suffix.lower() not in suffixes:
+        raise UserError(f"--out: {text}: expected a {' or '.join(suffixes)} file")
+    if not out.parent.exists() and str(out.parent) not in ("", "."):
+        raise UserError(f"--out: {out.parent}: no such directory")
+    return out
+
+
+def template_of(a: Gait, b: Gait, command: str):
+    """The skeleton to write a BVH on: A's, else B's, else a one-line UserError."""
+    from fourierjax.errors import UserError
+
+    for g in (a, b):
+        if g.template is not None:
+            return g.template, g.frame_time_s
+    raise UserError(
+        f"{command}: neither {a.source} nor {b.source} carries a skeleton to write a BVH on; "
+        "pass a BVH clip or a model saved with its skeleton"
+    )
+
+
+# ------------------------------------------------------------------------------------ command
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_gait_arguments(parser)
+    parser.add_argument(
+        "--s", required=True, metavar="S", help="blend parameter: 0 gives A, 1 gives B, outside [0, 1] extrapolates"
+    )
+    parser.add_argument(
+        "--out", required=True, metavar="OUT", help="OUT.npz writes the model; OUT.bvh writes a synthesized motion"
+    )
+    parser.add_argument(
+        "--method",
+        default="polar",
+        choices=("polar", "phasor"),
+        help="polar: Unuma eq. 3, shorter-arc phases (default); phasor: the time-domain blend (1-s) A(θ) + s B(θ)",
+    )
+    parser.add_argument(
+        "--seconds", default="4", metavar="S", help="length of the motion for a .bvh output (default 4)"
+    )
+    parser.add_argument(
+        "--fps", default=None, metavar="F", help="frame rate of a .bvh output (default: that of A's clip, else 120)"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import jax.numpy as jnp
+
+    from fourierjax import fourier, model_io, style
+
+    s = parse_number(args.s, "--s")
+    out = check_out(args.out, (".npz", ".bvh"))
+    seconds = parse_number(args.seconds, "--seconds", positive=True)
+    fps = None if args.fps is None else parse_number(args.fps, "--fps", positive=True)
+    a, b = load_gait_pair(args)
+    model = style.interpolate(a.model, b.model, s, method=args.method)
+    if out.suffix.lower() == ".npz":
+        template = a.template if a.template is not None else b.template
+        model_io.save_model(
+            out,
+            model,
+            motion=template,
+            provenance={"command": "interpolate", "a": a.source, "b": b.source, "s": s, "method": args.method},
+            alignment=a.alignment,
+        )
+    else:
+        template, frame_time_s = template_of(a, b, "interpolate")
+        dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
+        t = jnp.arange(max(2, int(round(seconds / dt)))) * dt
+        write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template)
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,62 @@
+"""`fourierjax transition`: a BVH motion that changes from gait A to gait B over a time window."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "Transition from gait A to gait B (e.g. walk -> run, run -> walk) and write a BVH."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from fourierjax.cli.interpolate import add_gait_arguments
+
+    add_gait_arguments(parser)
+    parser.add_argument("--seconds", required=True, metavar="S", help="length of the motion")
+    parser.add_argument("--start", required=True, metavar="T", help="time (s) at which the transition starts")
+    parser.add_argument(
+        "--duration",
+        required=True,
+        metavar="D",
+        help="length (s) of the transition window (about one gait cycle or more looks natural)",
+    )
+    parser.add_argument("--out", required=True, metavar="OUT.bvh", help="BVH file to write")
+    parser.add_argument("--fps", default=None, metavar="F", help="frame rate (default: that of A's clip, else 120)")
+    parser.add_argument(
+        "--ease",
+        default="smoothstep",
+        choices=("smoothstep", "smootherstep", "linear"),
+        help="blend curve s(t) over the window (default smoothstep)",
+    )
+    parser.add_argument(
+        "--method",
+        default="polar",
+        choices=("polar", "phasor"),
+        help="interpolation of the harmonics (default polar, Unuma eq. 3)",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    import jax.numpy as jnp
+
+    from fourierjax import style
+    from fourierjax.cli.interpolate import (
+        check_out,
+        load_gait_pair,
+        parse_number,
+        template_of,
+        write_motion,
+    )
+
+    seconds = parse_number(args.seconds, "--seconds", positive=True)
+    start = parse_number(args.start, "--start", nonnegative=True)
+    duration = parse_number(args.duration, "--duration", positive=True)
+    fps = None if args.fps is None else parse_number(args.fps, "--fps", positive=True)
+    out = check_out(args.out, (".bvh",))
+    a, b = load_gait_pair(args)
+    template, frame_time_s = template_of(a, b, "transition")
+    dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
+    t = jnp.arange(max(2, int(round(seconds / dt)))) * dt
+    values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
+    write_motion(out, values, a.model.channel_names, dt, template)
+    print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
+    return 0

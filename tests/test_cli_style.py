@@ -1,0 +1,186 @@
+"""Command-line tests of `characteristic`, `interpolate` and `transition` (subprocesses)."""
+
+import subprocess
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import data, model_io, style
+from fourierjax import motion as fmotion
+from fourierjax.cli.characteristic import load_characteristic, save_characteristic
+from fourierjax.errors import UserError
+from fourierjax.fourier import FourierModel
+from fourierjax.io.bvh import read_bvh
+
+
+def run_cli(*args, cwd):
+    return subprocess.run(
+        [sys.executable, "-m", "fourierjax", *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=600
+    )
+
+
+def assert_user_error(proc, *fragments):
+    """Exit 2, exactly one line on stderr, no traceback, naming what is wrong."""
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith("fourierjax: error: ")
+    assert "Traceback" not in proc.stderr
+    for f in fragments:
+        assert f in lines[0], lines[0]
+
+
+def _model(seed, names, representation="euler", omega=6.0, speed=20.0):
+    rng = np.random.default_rng(seed)
+    c = len(names)
+    offset = rng.normal(scale=0.1, size=c)
+    offset[:3] = (0.0, speed, 17.0)  # root.vx, root.vz (units/s), root.y
+    return FourierModel(
+        jnp.asarray(offset),
+        jnp.asarray(rng.uniform(0.0, 0.2, size=(c, 3))),
+        jnp.asarray(rng.uniform(-np.pi, np.pi, size=(c, 3))),
+        jnp.asarray(omega),
+        representation,
+        names,
+    )
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    """Two compatible model files (with a skeleton) and an incompatible (expmap) one."""
+    d = tmp_path_factory.mktemp("models")
+    template = data.load("02_01")[:2]
+    euler = fmotion.channel_names_for(template.topology, "euler")
+    expmap = fmotion.channel_names_for(template.topology, "expmap")
+    models = {
+        "a": _model(0, euler),
+        "b": _model(1, euler, omega=8.0, speed=40.0),
+        "x": _model(2, expmap, representation="expmap"),
+    }
+    for k, m in models.items():
+        model_io.save_model(d / f"{k}.npz", m, motion=template, alignment="left_heel_strike")
+    return d, models
+
+
+def test_interpolate_writes_the_model_and_a_motion(files):
+    d, models = files
+    proc = run_cli("interpolate", "a.npz", "b.npz", "--s", "1.25", "--out", "ab.npz", cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    got = model_io.load_model(d / "ab.npz")
+    ref = style.interpolate(models["a"], models["b"], 1.25)
+    np.testing.assert_allclose(got.model.amplitude, ref.amplitude, atol=1e-5)
+    np.testing.assert_allclose(np.cos(got.model.phase - ref.phase), 1.0, atol=1e-5)
+    assert float(got.model.omega) == pytest.approx(6.0**-0.25 * 8.0**1.25, rel=1e-5)
+    assert got.topology == models_topology()
+
+    proc = run_cli(
+        "interpolate",
+        "a.npz",
+        "b.npz",
+        "--s",
+        "0.5",
+        "--out",
+        "ab.bvh",
+        "--seconds",
+        "2",
+        "--fps",
+        "60",
+        "--method",
+        "phasor",
+        cwd=d,
+    )
+    assert proc.returncode == 0, proc.stderr
+    motion = read_bvh(d / "ab.bvh")
+    assert motion.num_frames == 120 and motion.frame_time_s == pytest.approx(1 / 60)
+    # the root walks along +Z at the interpolated speed (0.5 (20 + 40) units/s)
+    assert motion.channels[-1, 2] - motion.channels[0, 2] == pytest.approx(30.0 * 119 / 60, rel=0.05)
+
+
+def models_topology():
+    return data.load("02_01").topology
+
+
+def test_interpolate_bad_number_is_one_line(files):
+    d, _ = files
+    assert_user_error(
+        run_cli("interpolate", "a.npz", "b.npz", "--s", "half", "--out", "o.npz", cwd=d),
+        "--s",
+        "'half' is not a number",
+    )
+
+
+def test_transition_writes_a_bvh(files):
+    d, models = files
+    proc = run_cli(
+        "transition", "a.npz", "b.npz", "--seconds", "3", "--start", "1", "--duration", "1", "--out", "t.bvh", cwd=d
+    )
+    assert proc.returncode == 0, proc.stderr
+    motion = read_bvh(d / "t.bvh")
+    assert motion.num_frames == 360
+    feats, names = fmotion.features_from_motion(motion, "euler", heading_rad=0.0)
+    t = np.arange(360) / 120
+    ref = np.asarray(style.transition(models["a"], models["b"], jnp.asarray(t), 1.0, 1.0))
+    rot = [i for i, n in enumerate(names) if not n.startswith("root.")]
+    # the written angles are the transition's (mod 2π, through Euler round trips and 6 digits)
+    err = np.angle(np.exp(1j * (feats[:, rot] - ref[:, rot])))
+    assert np.abs(err).max() < 1e-3
+
+
+def test_transition_incompatible_models_is_one_line(files):
+    d, _ = files
+    assert_user_error(
+        run_cli(
+            "transition", "a.npz", "x.npz", "--seconds", "3", "--start", "1", "--duration", "1", "--out", "t.bvh", cwd=d
+        ),
+        "incompatible models",
+        "B (x.npz): representation 'expmap'",
+    )
+
+
+def test_characteristic_missing_file_is_one_line(files):
+    d, _ = files
+    assert_user_error(
+        run_cli("characteristic", "a.npz", "nope.bvh", "--out", "c.npz", cwd=d), "B: nope.bvh: no such file"
+    )
+
+
+def test_characteristic_fits_bvh_clips_on_the_fly(tmp_path):
+    # run - walk of subject 02: the run is faster in cadence and in speed.
+    proc = run_cli(
+        "characteristic",
+        data.path("02_03"),
+        data.path("02_01"),
+        "--harmonics",
+        "3",
+        "--out",
+        "runness.npz",
+        cwd=tmp_path,
+    )
+    assert proc.returncode == 0, proc.stderr
+    char, header = load_characteristic(tmp_path / "runness.npz")
+    assert header["a"].endswith("02_03.bvh") and header["alignment"] == "left_heel_strike"
+    assert char.amplitude.shape == (96, 3)
+    # ω ratio 1.30 Hz / 0.907 Hz (the fitted fundamentals of the two clips)
+    assert float(np.exp(char.log_omega)) == pytest.approx(1.300 / 0.907, rel=0.02)
+    vz = char.channel_names.index("root.vz")
+    assert 15.0 < float(char.offset[vz]) < 35.0  # ≈ 46 − 21 units/s
+
+
+def test_characteristic_file_roundtrip_and_errors(tmp_path):
+    names = ("a", "b")
+    ma = FourierModel(jnp.zeros(2), jnp.ones((2, 2)), jnp.zeros((2, 2)), jnp.asarray(6.0), "euler", names)
+    mb = FourierModel(jnp.ones(2), jnp.full((2, 2), 0.5), jnp.ones((2, 2)), jnp.asarray(7.0), "euler", names)
+    char = style.characteristic(ma, mb)
+    save_characteristic(tmp_path / "c.npz", char, a="A", b="B")
+    back, header = load_characteristic(tmp_path / "c.npz")
+    for k in ("offset", "amplitude", "phase", "phasor", "log_omega"):
+        np.testing.assert_allclose(getattr(back, k), getattr(char, k), atol=1e-7)
+    assert back.channel_names == names and header["b"] == "B"
+    model_io.save_model(tmp_path / "m.npz", ma)
+    with pytest.raises(UserError, match="m.npz: format is 'fourierjax.fourier_model'"):
+        load_characteristic(tmp_path / "m.npz")
+    (tmp_path / "junk.npz").write_text("not a zip")
+    with pytest.raises(UserError, match="junk.npz: not a fourierjax characteristic file"):
+        load_characteristic(tmp_path / "junk.npz")
