@@ -202,7 +202,7 @@ def hip_rule(
         raise UserError(f"hip_rule: `leg` must be [T, 2] (L_L, L_R), got shape {leg.shape}")
     if rule == "smooth":
         if temperature is None:
-            temperature = 0.002 * jax.lax.stop_gradient(jnp.max(leg))
+            temperature = 0.002 * jnp.max(leg)
         L = temperature * jax.nn.logsumexp(leg / temperature, axis=-1)
     else:
         L = jnp.max(leg, axis=-1)
@@ -219,7 +219,7 @@ def hip_rule(
         lift = jump * jnp.where(over > 0, over, 0.0)
     else:
         flight = jax.nn.sigmoid((N - gait) / width)
-        lift = flight * jump * _soft_sqrt(gap, (1e-4 * jax.lax.stop_gradient(lmax)) ** 2)
+        lift = flight * jump * _soft_sqrt(gap, (1e-4 * lmax) ** 2)
     return HipRule(L=L, N=N, lift=lift, flight=flight, l_max=lmax)
 
 
@@ -304,7 +304,8 @@ def root_trajectory(
     captured root advance; the rest is skating in the capture.
     """
     T = foot_local.shape[0]
-    scale = jax.lax.stop_gradient(jnp.mean(height))
+    # Scale-relative defaults; differentiated like everything else (true derivatives).
+    scale = jnp.mean(height)
     th = 0.03 * scale if contact_threshold is None else contact_threshold
     tau = 0.003 * scale if temperature is None else temperature
     y = foot_local[..., up_axis]
@@ -436,13 +437,16 @@ def _integrate_trapezoid(v, dt):
 
 
 @eqx.filter_jit
-def _synthesize_gait(model, skeleton, clearance, step, speed, gait, jump, phase0, root_motion, *,
+def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
+                     root_motion, *,
                      num_frames, frame_time_s, feet, groins, rule, width, temperature,
                      num_cycle_samples, up_axis):
     from fourierjax.fourier import synthesize_phase
 
     stepped = apply_step(model, step)
-    phase = integrate_phase(speed, stepped.omega, num_frames, frame_time_s, phase0)
+    # t_eff (the integrated time, computed by the caller) makes speed = 1 bit-identical to
+    # `synthesize(model, k dt)`.
+    phase = stepped.omega * t_eff + phase0
     feats = synthesize_phase(stepped, phase)
     idx = jnp.asarray([feet.left, feet.right])
     rep = model.representation
@@ -555,9 +559,11 @@ def synthesize_gait(
         )
     # One shape for scalar and scheduled speeds: one compilation serves both.
     speed = jnp.broadcast_to(speed, (int(num_frames),))
+    ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
+    t_eff = ticks * float(frame_time_s)
     return _synthesize_gait(
         model, skeleton, clearance,
-        jnp.asarray(step, dtype), speed, jnp.asarray(gait, dtype),
+        jnp.asarray(step, dtype), speed, t_eff, jnp.asarray(gait, dtype),
         jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
         num_frames=int(num_frames), frame_time_s=float(frame_time_s),
         feet=feet, groins=tuple(int(g) for g in groins),

@@ -108,6 +108,7 @@ def test_rule_gradients_finite_everywhere(pairs, gait, jump, tie):
     if tie:  # exact ties L_L = L_R and frames at exactly L = Lmax
         leg[:, 1] = leg[:, 0]
         leg[0] = leg.max()
+    leg = np.concatenate([leg, np.repeat(leg[:1], 8 - len(leg), 0)])  # one shape: one compile
     for rule in G.RULES:
         grads = _grad_all(jnp.asarray(leg), jnp.float32(gait), jnp.float32(jump), rule)
         for g in grads:
@@ -217,3 +218,267 @@ def test_skating_metric_on_real_and_planted_feet():
     assert float(s0.mean_speed) == 0.0 and float(s0.contact_fraction) == 1.0
     depth_max, depth_mean = G.ground_penetration(still - 0.25, np.zeros((2, 3)))
     assert float(depth_max) == pytest.approx(0.25) and float(depth_mean) == pytest.approx(0.25)
+
+
+# --------------------------------------------------------------------- synthesis (Core models)
+
+SECONDS, HARMONICS = 10.0, 5
+
+
+def _fit_numpy(feats, frame_time_s, omega, num_harmonics):
+    """Independent linear least-squares Fourier fit at a fixed ω (numpy lstsq)."""
+    t = np.arange(len(feats)) * frame_time_s
+    n = np.arange(1, num_harmonics + 1)
+    basis = np.concatenate([np.ones((len(t), 1)), np.sin(np.outer(t, n) * omega),
+                            np.cos(np.outer(t, n) * omega)], axis=1)
+    coef = np.linalg.lstsq(basis, feats, rcond=None)[0]
+    return coef[0], coef[1 : 1 + num_harmonics].T, coef[1 + num_harmonics :].T
+
+
+@functools.cache
+def fitted(name: str):
+    """(model, motion, foot points, groins, clearance, real skating) for a bundled clip."""
+    pytest.importorskip("fourierjax.kinematics")
+    pytest.importorskip("fourierjax.motion")
+    from fourierjax import data
+    from fourierjax import fourier as F
+    from fourierjax import motion as M
+
+    mot = data.load(name)
+    feet, _, _, _, ft = clip_pose(name)
+    contacts = C.foot_contacts(feet, ft)
+    omega = 2 * np.pi / (2 * C.mean_step_period_s(contacts, ft))  # cycle = two steps
+    feats, names = M.features_from_motion(mot, "euler")
+    offset, a, b = _fit_numpy(feats, ft, omega, HARMONICS)
+    model = F.FourierModel.from_sin_cos(jnp.asarray(offset, jnp.float32),
+                                        jnp.asarray(a, jnp.float32), jnp.asarray(b, jnp.float32),
+                                        jnp.float32(omega), "euler", names)
+    g = C.estimate_ground(feet, ft)
+    skate = G.foot_skating(feet, ft, C.floor_heights(g, feet), height_threshold=g.height_threshold)
+    return model, mot, C.foot_points(mot.topology), G.groin_joints(mot.topology), \
+        C.sole_clearance(g), skate, g.height_threshold
+
+
+def synth(name, **kw):
+    model, mot, fp, groins, clear, _, _ = fitted(name)
+    T = int(round(SECONDS / mot.frame_time_s))
+    # One static configuration for every call below: one compilation.
+    return G.synthesize_gait(model, mot.skeleton(), T, mot.frame_time_s, feet=fp, groins=groins,
+                             clearance=clear, **kw)
+
+
+def test_synthesized_walk_touches_ground_without_skating():
+    r = synth("07_01")
+    _, mot, _, _, clear, real_skate, th = fitted("07_01")
+    lowest = np.asarray(r.lowest).min(axis=1)
+    assert np.max(np.abs(lowest)) <= 1e-3  # the lowest foot point is on the ground every frame
+    ours = G.foot_skating(r.foot_positions, mot.frame_time_s, jnp.asarray(clear)[None],
+                          height_threshold=th)
+    print(f"\nskating 07_01: synthesized {float(ours.mean_speed):.2f} units/s "
+          f"({float(ours.mean_per_frame):.4f}/frame), real {float(real_skate.mean_speed):.2f} "
+          f"units/s ({float(real_skate.mean_per_frame):.4f}/frame)")
+    assert float(ours.mean_speed) <= float(real_skate.mean_speed)
+    depth_max, _ = G.ground_penetration(r.foot_positions, clear)
+    assert float(depth_max) <= 1e-3
+    # It walks: alternating contacts, double support, no flight, a plausible pace along +Z.
+    c = C.foot_contacts(np.asarray(r.foot_positions), mot.frame_time_s)
+    assert C.flight_fraction(c) == 0.0 and C.double_support_fraction(c) > 0.05
+    assert len(C.step_events(c)[0]) >= 7 and len(C.step_events(c)[1]) >= 7
+    real_speed = (mot.channels[-1, 2] - mot.channels[0, 2]) / mot.duration_s
+    ours_speed = float(r.root_position[-1, 2] - r.root_position[0, 2]) / SECONDS
+    assert 0.8 * real_speed < ours_speed < 1.1 * real_speed, (ours_speed, real_speed)
+
+
+def test_synthesized_run_flies_exactly_where_N_exceeds_gait():
+    gait, jump = 0.06, 1.0
+    r = synth("09_01", gait=gait, jump=jump)
+    lowest = np.asarray(r.lowest).min(axis=1)
+    N = np.asarray(r.hip.N)
+    airborne = lowest > 1e-3
+    np.testing.assert_array_equal(airborne, N > gait)
+    # On the ground elsewhere, exactly.
+    assert np.max(np.abs(lowest[~airborne])) <= 1e-3
+    frac = float(np.mean(airborne))
+    print(f"\nrun 09_01 gait={gait} jump={jump}: flight fraction {frac:.3f}, "
+          f"max lift {float(np.max(r.hip.lift)):.2f} units")
+    assert 0.2 < frac < 0.6  # the real 09_01 is airborne ~34% of the time
+    # Still: lift at take-off is jump * sqrt(gait Lmax) or more (the faithful rule's jump).
+    assert np.min(np.asarray(r.hip.lift)[airborne]) >= jump * np.sqrt(gait * r.hip.l_max) - 1e-4
+
+
+def test_neutral_parameters_reproduce_unconstrained_synthesis():
+    from fourierjax import fourier as F
+
+    model, mot, *_ = fitted("07_01")
+    T = int(round(SECONDS / mot.frame_time_s))
+    plain = F.synthesize(model, jnp.arange(T, dtype=jnp.float32) * mot.frame_time_s)
+    off = synth("07_01", step=1.0, speed=1.0, gait=1.0, jump=0.0, root_motion=False)
+    np.testing.assert_array_equal(off.features, plain)
+    on = synth("07_01", step=1.0, speed=1.0, gait=1.0, jump=0.0)
+    np.testing.assert_array_equal(on.features[:, 3:], plain[:, 3:])
+    assert float(jnp.max(on.hip.lift)) == 0.0
+    # Without root motion the root follows the model's own channels.
+    np.testing.assert_allclose(off.root_position[:, 1], plain[:, 2])
+
+
+def test_speed_to_zero_comes_to_rest_without_a_jump():
+    model, mot, *_ = fitted("07_01")
+    T = int(round(SECONDS / mot.frame_time_s))
+    ramp = np.clip(np.linspace(2.0, -1.0, T), 0.0, 1.0).astype(np.float32)  # 1 ... 0, then 0
+    r = synth("07_01", speed=ramp)
+    ref = synth("07_01")
+    pose_step = np.abs(np.diff(np.asarray(r.features[:, 3:]), axis=0)).max(1)
+    ref_step = np.abs(np.diff(np.asarray(ref.features[:, 3:]), axis=0)).max(1)
+    root_step = np.linalg.norm(np.diff(np.asarray(r.root_position), axis=0), axis=1)
+    ref_root = np.linalg.norm(np.diff(np.asarray(ref.root_position), axis=0), axis=1)
+    assert pose_step.max() <= ref_step.max() + 1e-6
+    assert root_step.max() <= ref_root.max() + 1e-3
+    rest = ramp[:-1] == 0
+    assert np.all(pose_step[rest] == 0.0) and np.all(root_step[rest] < 1e-5)
+    # Still standing on the ground at rest.
+    assert np.max(np.abs(np.asarray(r.lowest).min(1))) <= 1e-3
+
+
+def test_step_scales_harmonics():
+    model, *_ = fitted("07_01")
+    m2 = G.apply_step(model, 1.5)
+    np.testing.assert_allclose(m2.amplitude, 1.5 * model.amplitude, rtol=1e-6)
+    np.testing.assert_array_equal(m2.offset, model.offset)
+    np.testing.assert_array_equal(m2.phase, model.phase)
+    # A longer step moves the walker further per cycle.
+    r = synth("07_01", step=1.3)
+    base = synth("07_01")
+    assert float(r.root_position[-1, 2]) > 1.1 * float(base.root_position[-1, 2])
+
+
+def test_exported_bvh_carries_root_motion(tmp_path):
+    from fourierjax.io.bvh import read_bvh, write_bvh
+
+    model, mot, fp, _, clear, _, _ = fitted("07_01")
+    r = synth("07_01")
+    out = G.gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    write_bvh(out, tmp_path / "walk.bvh")
+    back = read_bvh(tmp_path / "walk.bvh")
+    np.testing.assert_allclose(back.channels[:, :3], np.asarray(r.root_position), atol=1e-4)
+    # Independent numpy FK of the file: the feet stand on the ground and advance.
+    b = _read_bvh(tmp_path / "walk.bvh")
+    pos, es = _fk(b, b["frames"][::7])
+    feet = np.asarray(C.gather_foot_positions(pos, es, fp))
+    low = (feet[..., 1] - clear).min(axis=(1, 2))
+    assert np.max(np.abs(low)) < 2e-3
+    assert back.channels[-1, 2] > 150.0
+
+
+# ------------------------------------------------------- a small leg skeleton: vmap, gradients
+
+
+@functools.cache
+def toy():
+    """Legs-only CMU-like skeleton and a random 2-harmonic model on its channels."""
+    pytest.importorskip("fourierjax.kinematics")
+    pytest.importorskip("fourierjax.motion")
+    from fourierjax import motion as M
+    from fourierjax.skeleton import Skeleton, Topology
+
+    rot = ("Zrotation", "Yrotation", "Xrotation")
+    names = ("Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToeBase",
+             "RightUpLeg", "RightLeg", "RightFoot", "RightToeBase")
+    parents = (-1, 0, 1, 2, 3, 0, 5, 6, 7)
+    chans = (("Xposition", "Yposition", "Zposition") + rot,) + (rot,) * 8
+    topo = Topology(names, parents, chans, end_site_parents=(4, 8))
+    offsets = np.array([[0, 0, 0], [1.7, -1.7, 0.8], [2.4, -6.5, 0], [2.5, -7.0, 0],
+                        [0.2, -0.4, 1.9], [-1.7, -1.7, 0.8], [-2.4, -6.5, 0], [-2.5, -7.0, 0],
+                        [-0.2, -0.4, 1.9]])
+    sk = Skeleton(topo, offsets, np.array([[0, 0, 1.0], [0, 0, 1.0]]))
+    return sk, C.foot_points(topo), G.groin_joints(topo), M.channel_names_for(topo, "euler")
+
+
+def toy_model(seed, scale=0.3):
+    from fourierjax import fourier as F
+
+    sk, _, _, names = toy()
+    rng = np.random.default_rng(seed)
+    c = len(names)
+    off = rng.normal(scale=0.1, size=c)
+    off[2] = 16.0  # root.y
+    return F.FourierModel.from_sin_cos(
+        jnp.asarray(off, jnp.float32), jnp.asarray(rng.normal(scale=scale, size=(c, 2)), jnp.float32),
+        jnp.asarray(rng.normal(scale=scale, size=(c, 2)), jnp.float32), jnp.float32(6.0),
+        "euler", names)
+
+
+def _toy_loss(model, gait, jump, rule="smooth"):
+    sk, fp, groins, _ = toy()
+    r = G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins, gait=gait, jump=jump,
+                          rule=rule, num_cycle_samples=8)
+    return jnp.sum(r.root_position) + jnp.sum(r.hip.lift) + jnp.sum(r.lowest)
+
+
+_toy_grad = jax.jit(jax.grad(_toy_loss, argnums=(0, 1, 2)))
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 10_000), st.floats(-0.1, 1.1), st.floats(0.0, 5.0),
+       st.sampled_from(["moving", "still", "tiny"]))
+def test_smooth_rule_gradients_finite_through_model(seed, gait, jump, kind):
+    model = toy_model(seed)
+    if kind == "still":  # every frame at L = Lmax exactly: the sqrt(0) trap
+        model = G.apply_step(model, 0.0)
+    elif kind == "tiny":
+        model = G.apply_step(model, 1e-6)
+    gm, gg, gj = _toy_grad(model, jnp.float32(gait), jnp.float32(jump))
+    for leaf in jax.tree.leaves((gm, gg, gj)):
+        assert bool(jnp.all(jnp.isfinite(leaf))), (seed, gait, jump, kind)
+
+
+def test_smooth_rule_gradient_matches_finite_differences(x64):
+    model = jax.tree.map(lambda x: x.astype(jnp.float64) if hasattr(x, "astype") else x,
+                         toy_model(3))
+    gait, jump = 0.01, 2.0
+    gm, gg, gj = jax.grad(_toy_loss, argnums=(0, 1, 2))(model, gait, jump)
+    eps = 1e-6
+    fd_j = (_toy_loss(model, gait, jump + eps) - _toy_loss(model, gait, jump - eps)) / (2 * eps)
+    fd_g = (_toy_loss(model, gait + eps, jump) - _toy_loss(model, gait - eps, jump)) / (2 * eps)
+    np.testing.assert_allclose(gj, fd_j, rtol=1e-5)
+    np.testing.assert_allclose(gg, fd_g, rtol=1e-4, atol=1e-6)
+    bump = model.offset.at[5].add(eps)
+    minus = model.offset.at[5].add(-eps)
+    import equinox as eqx
+
+    fd_o = (_toy_loss(eqx.tree_at(lambda m: m.offset, model, bump), gait, jump)
+            - _toy_loss(eqx.tree_at(lambda m: m.offset, model, minus), gait, jump)) / (2 * eps)
+    np.testing.assert_allclose(gm.offset[5], fd_o, rtol=1e-4, atol=1e-6)
+
+
+def test_vmap_over_characters_equals_one_by_one():
+    from fourierjax import fourier as F
+
+    sk, fp, groins, _ = toy()
+    models = [toy_model(s) for s in (1, 2, 3)]
+    gaits = jnp.array([0.02, 0.05, 1.0])
+    stacked = F.stack_models(models)
+
+    def one(m, g):
+        return G.synthesize_gait(m, sk, 12, 1 / 30, feet=fp, groins=groins, gait=g, jump=1.0,
+                                 num_cycle_samples=8)
+
+    batched = jax.vmap(one)(stacked, gaits)
+    for i, m in enumerate(models):
+        single = one(m, gaits[i])
+        np.testing.assert_allclose(batched.root_position[i], single.root_position, rtol=1e-5,
+                                   atol=1e-5)
+        np.testing.assert_allclose(batched.features[i], single.features, rtol=1e-5, atol=1e-5)
+
+
+def test_synthesize_gait_bad_input():
+    sk, fp, groins, _ = toy()
+    model = toy_model(0)
+    with pytest.raises(UserError, match="hip rule"):
+        G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins, rule="hop")
+    with pytest.raises(UserError, match="speed"):
+        G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins, speed=jnp.ones(5))
+    with pytest.raises(UserError, match="clearance"):
+        G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins,
+                          clearance=jnp.zeros((2, 2)))
+    with pytest.raises(UserError, match="RightUpLeg"):
+        G.groin_joints(_Topo(("Hips", "LeftUpLeg"), ()))
