@@ -370,16 +370,17 @@ def test_fit_style_weights_recovers_known_weights(x64):
 
 
 def _fd_check(f, x, eps=1e-6, rtol=1e-6, atol=1e-8):
+    """Reverse-mode Jacobian of f (scalar or vector valued) against central differences."""
     x = np.asarray(x, dtype=np.float64)
     f = jax.jit(f)
-    g = np.asarray(jax.jit(jax.grad(f))(jnp.asarray(x)))
-    assert np.all(np.isfinite(g))
-    fd = np.zeros_like(x)
+    jac = np.asarray(jax.jit(jax.jacrev(f))(jnp.asarray(x)))
+    assert np.all(np.isfinite(jac))
+    fd = np.zeros_like(jac)
     for i in range(x.size):
         e = np.zeros_like(x)
         e.flat[i] = eps
-        fd.flat[i] = (float(f(jnp.asarray(x + e))) - float(f(jnp.asarray(x - e)))) / (2 * eps)
-    np.testing.assert_allclose(g, fd, rtol=rtol, atol=atol)
+        fd[..., i] = (np.asarray(f(jnp.asarray(x + e))) - np.asarray(f(jnp.asarray(x - e)))) / (2 * eps)
+    np.testing.assert_allclose(jac, fd, rtol=rtol, atol=atol)
 
 
 def test_gradients_wrt_style_weights_match_finite_differences(x64):
@@ -388,19 +389,16 @@ def test_gradients_wrt_style_weights_match_finite_differences(x64):
     t = jnp.linspace(0.0, 2.0, 50)
     target = jnp.asarray(np.random.default_rng(0).normal(size=(50, 5)))
 
-    for method in ("polar", "phasor"):
-
-        def loss(w, method=method):
+    def losses(w):  # polar and phasor superposition, and through fit_style_weights itself
+        out = []
+        for method in ("polar", "phasor"):
             m = style.superpose(base, chars, w, method=method)
-            return jnp.mean((synthesize_phase(m, m.omega * t) - target) ** 2)
-
-        _fd_check(loss, [0.3, -0.8, 1.37])
-
-    def loss_fit(w):  # through fit_style_weights itself (target built from weights)
+            out.append(jnp.mean((synthesize_phase(m, m.omega * t) - target) ** 2))
         tgt = style.superpose(base, chars, w, method="phasor")
-        return jnp.sum(style.fit_style_weights(base, chars, tgt, ridge=0.1) ** 2)
+        out.append(jnp.sum(style.fit_style_weights(base, chars, tgt, ridge=0.1) ** 2))
+        return jnp.stack(out)
 
-    _fd_check(loss_fit, [0.3, -0.8, 1.37])
+    _fd_check(losses, [0.3, -0.8, 1.37])
 
 
 def test_gradients_wrt_model_parameters_match_finite_differences(x64):
@@ -424,7 +422,7 @@ def test_gradients_wrt_model_parameters_match_finite_differences(x64):
 
 # ------------------------------------------------------------------- real clips (CMU, 120 fps)
 
-CLIPS = ("02_01", "02_03")
+CLIPS = ("02_01", "02_03", "07_01", "07_12", "07_04")
 
 
 @pytest.fixture(scope="module")
@@ -435,15 +433,11 @@ def cmu():
     from fourierjax import data, fourier
     from fourierjax import motion as fmotion
 
-    import time
-
-    t0 = time.time()
     motions = {n: data.load(n) for n in CLIPS}  # T-pose (and 07_12's zero frame) dropped
     feats = {}
     names = None
     for n, m in motions.items():
         feats[n], names = fmotion.features_from_motion(m, "euler")
-    print("features", time.time() - t0)
     length = max(f.shape[0] for f in feats.values())
     x = np.zeros((len(CLIPS), length, len(names)))
     mask = np.zeros((len(CLIPS), length), bool)
@@ -451,9 +445,7 @@ def cmu():
         x[i, : len(feats[n])] = feats[n]
         mask[i, : len(feats[n])] = True
     dt = motions[CLIPS[0]].frame_time_s
-    res = fourier.fit_batch(jnp.asarray(x), jnp.full((len(CLIPS),), dt), 5, mask=jnp.asarray(mask),
-                            channel_names=names)
-    print("fit", time.time() - t0)
+    res = fourier.fit_batch(jnp.asarray(x), jnp.full((len(CLIPS),), dt), 5, mask=jnp.asarray(mask), channel_names=names)
     hip = names.index("LeftUpLeg.Xrotation")
     models = {}
     for i, n in enumerate(CLIPS):
@@ -461,8 +453,7 @@ def cmu():
         # x'(θ) = x(θ + δ): φ_n += n δ (written out: fourier.shift_phase trips rank promotion).
         delta = fourier.channel_event_phase(m, hip)
         harmonics = jnp.arange(1, m.num_harmonics + 1, dtype=m.phase.dtype)
-        models[n] = eqx.tree_at(lambda mm: mm.phase, m,
-                                style.wrap_angle(m.phase + harmonics[None, :] * delta))
+        models[n] = eqx.tree_at(lambda mm: mm.phase, m, style.wrap_angle(m.phase + harmonics[None, :] * delta))
     return dict(motions=motions, features=feats, names=names, models=models, frame_time_s=dt)
 
 
@@ -476,8 +467,9 @@ def test_transition_on_real_clips_has_no_jump_larger_than_the_sources(cmu, src, 
     names, dt = cmu["names"], cmu["frame_time_s"]
     a, b = cmu["models"][src], cmu["models"][dst]
     # Source jumps on the captured (continuous-Euler) angles, per channel and overall.
-    j_src = np.maximum(_angle_jumps_deg(cmu["features"][src], names).max(0),
-                       _angle_jumps_deg(cmu["features"][dst], names).max(0))
+    j_src = np.maximum(
+        _angle_jumps_deg(cmu["features"][src], names).max(0), _angle_jumps_deg(cmu["features"][dst], names).max(0)
+    )
     t = jnp.arange(int(round(5.0 / dt))) * dt
     x, s, theta = style.transition(a, b, t, 1.7, 1.2, return_schedule=True)
     j = _angle_jumps_deg(x, names)
@@ -491,13 +483,44 @@ def test_transition_on_real_clips_has_no_jump_larger_than_the_sources(cmu, src, 
     assert dv <= dv_src
     # The test has teeth: a hard switch at mid-window breaks it, and so does the naive phase
     # ω(s(t))·t (its cycle speed jumps by t·dω/dt during the window).
-    hard = np.where((np.asarray(t) < 2.3)[:, None], np.asarray(synthesize_phase(a, a.omega * t)),
-                    np.asarray(synthesize_phase(b, theta)))
+    hard = np.where(
+        (np.asarray(t) < 2.3)[:, None],
+        np.asarray(synthesize_phase(a, a.omega * t)),
+        np.asarray(synthesize_phase(b, theta)),
+    )
     assert not np.all(_angle_jumps_deg(hard, names).max(0) <= j_src + 1e-6)
     # (walk -> run: its jumps exceed the sources; run -> walk: the cycle plays backwards for a
     # while, the unnatural run -> walk Unuma reports).
     naive_theta = style.interpolate_omega(a.omega, b.omega, s) * t
-    naive = jax.vmap(lambda si, th: synthesize_phase(style.interpolate(a, b, si), th[None])[0])(
-        s, naive_theta)
+    naive = jax.vmap(lambda si, th: synthesize_phase(style.interpolate(a, b, si), th[None])[0])(s, naive_theta)
     naive_ok = np.all(_angle_jumps_deg(naive, names).max(0) <= j_src + 1e-6)
     assert not (naive_ok and np.all(np.diff(np.asarray(naive_theta)) > 0))
+
+
+def test_briskness_on_real_clips(cmu):
+    """Unuma §3.2 on CMU subject 07: briskness = brisk walk − walk; a brisk run; style weights."""
+    m = cmu["models"]
+    walk, brisk_walk, slow_walk, run = m["07_01"], m["07_12"], m["07_04"], m["02_03"]
+    brisk = style.characteristic(brisk_walk, walk)
+    names = cmu["names"]
+    vz = names.index("root.vz")
+    for method in ("polar", "phasor"):
+        brisk_run = style.superpose(run, brisk, 1.37, method=method)
+        assert np.all(np.isfinite(np.asarray(brisk_run.amplitude)))
+        assert float(brisk_run.omega) == pytest.approx(
+            float(run.omega) * (float(brisk_walk.omega) / float(walk.omega)) ** 1.37, rel=1e-5
+        )
+        # faster than the run by 1.37 x the walks' speed difference (root.vz is a channel)
+        gain = float(brisk_run.offset[vz] - run.offset[vz])
+        assert gain == pytest.approx(1.37 * float(brisk_walk.offset[vz] - walk.offset[vz]), rel=1e-5)
+        assert gain > 0
+    # Projection of real walks onto the briskness axis: the brisk walk itself is +1, the slow
+    # walk is negative (less brisk than normal), and the fit explains part of it.
+    w_brisk = style.fit_style_weights(walk, brisk, brisk_walk)
+    w_slow = style.fit_style_weights(walk, [brisk], slow_walk)
+    assert float(w_brisk[0]) == pytest.approx(1.0, abs=1e-4)
+    assert float(w_slow[0]) < -0.2
+    fit = style.superpose(walk, brisk, w_slow, method="phasor")
+    d_fit = style.style_vector(slow_walk) - style.style_vector(fit)
+    d_base = style.style_vector(slow_walk) - style.style_vector(walk)
+    assert float(jnp.sum(d_fit**2)) < 0.9 * float(jnp.sum(d_base**2))
