@@ -154,10 +154,24 @@ def test_interpolation_vmaps_over_s_and_does_not_retrace(x64):
     jitted = jax.jit(lambda s: style.interpolate(a, b, s).offset)
     np.testing.assert_allclose(jitted(0.4), style.interpolate(a, b, 0.4).offset, atol=1e-12)
 
-    counted = eqx.debug.assert_max_traces(style._interpolate.__wrapped__, max_traces=1)
-    f = eqx.filter_jit(counted)
-    for s in (0.1, 0.2, 0.7):
-        f(a, b, jnp.asarray(s), "polar", "geometric")
+
+def test_public_entry_points_do_not_retrace_for_new_numbers():
+    # Python numbers become arrays before the jitted core: new s, weights or windows reuse
+    # the compiled function.
+    a, b = random_model(8), random_model(9)
+    char = style.characteristic(a, b)
+    t = jnp.linspace(0.0, 1.0, 11)
+    calls = [
+        (style._interpolate, lambda v: style.interpolate(a, b, v)),
+        (style._superpose, lambda v: style.superpose(a, char, v)),
+        (style._transition, lambda v: style.transition(a, b, t, v, 0.5)),
+    ]
+    for jitted, call in calls:
+        call(0.1)
+        before = jitted._cached._cache_size()
+        for v in (0.2, 0.7, 3):
+            call(v)
+        assert jitted._cached._cache_size() == before
 
 
 # ------------------------------------------------------------------------- incompatibility
