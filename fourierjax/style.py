@@ -274,6 +274,13 @@ def interpolate(
     linearly, which is exactly the time-domain blend `(1 − s)Θ(θ) + sΠ(θ)` at a common phase θ
     (see `blend_time_domain`). Models with different harmonic counts are zero-padded.
 
+    Which to use: polar keeps each harmonic's amplitude between the two (a harmonic whose
+    phases oppose does not cancel halfway, as it does with phasors) and is what Unuma
+    animates; phasor is linear in the signals (exact for averaging, PCA, least squares). Each
+    harmonic takes its own shorter arc, so polar interpolation equals a time shift only when the
+    two models are aligned to the same gait event (`nδ` small for every harmonic n); models from
+    `fourierjax.motion.fit_motions` are.
+
     **Arguments:**
 
     - `a`, `b`: FourierModels on the same channels and representation.
