@@ -538,3 +538,27 @@ def test_briskness_on_real_clips(cmu):
     d_fit = style.style_vector(slow_walk) - style.style_vector(fit)
     d_base = style.style_vector(slow_walk) - style.style_vector(walk)
     assert float(jnp.sum(d_fit**2)) < 0.9 * float(jnp.sum(d_base**2))
+
+
+def test_float64_numpy_models_work_without_x64():
+    # Model files hold float64 NumPy arrays; without x64 the style functions compute in float32
+    # (pytest turns the "requested dtype float64 not available" warning into an error).
+    rng = np.random.default_rng(5)
+    a = FourierModel(
+        rng.normal(size=2), rng.uniform(0, 1, (2, 2)), rng.uniform(-3, 3, (2, 2)), np.float64(6.0), "euler", ("p", "q")
+    )
+    b = FourierModel(
+        rng.normal(size=2), rng.uniform(0, 1, (2, 2)), rng.uniform(-3, 3, (2, 2)), np.float64(7.0), "euler", ("p", "q")
+    )
+    char = style.characteristic(a, b)
+    outputs = [
+        style.interpolate(a, b, 0.5).amplitude,
+        style.transition(a, b, np.linspace(0, 1, 5), 0.2, 0.5),
+        style.superpose(a, char, 0.5).phase,
+        style.fit_style_weights(a, char, b),
+        style.add_noise(a, jax.random.key(0), 0.1).amplitude,
+        style.model_from_style_vector(style.style_vector(a), like=a).offset,
+        style.blend_time_domain(a, b, 0.3, 1.0),
+        style.characteristic_function(char, 1.0),
+    ]
+    assert all(o.dtype == jnp.float32 and np.all(np.isfinite(o)) for o in outputs)
