@@ -398,6 +398,27 @@ def flight_fraction(lowest, *, tolerance=1e-3):
     return jnp.mean(jnp.min(lowest, axis=-1) > tolerance)
 
 
+def estimate_sole_clearance(foot_local, *, up_axis: int = 1):
+    """Sole clearance of each foot point, estimated from poses (e.g. one cycle of a model).
+
+    For each foot, over the frames where it is the lower foot (stance), the median height of
+    each point above the foot's lowest point; the lowest point of a planted foot gets 0.
+    (`contacts.sole_clearance` measures the same from a real clip's fitted floor.)
+
+    **Arguments:** `foot_local`: `[K, 2, P, 3]` foot points over K poses.
+
+    **Returns:** `[2, P]` clearances ≥ 0 (file units). Pure jnp.
+    """
+    y = jnp.asarray(foot_local)[..., up_axis]  # [K, 2, P]
+    low = jnp.min(y, axis=-1)  # [K, 2]
+    rel = y - low[..., None]
+    stance = jnp.stack([low[:, 0] <= low[:, 1], low[:, 1] <= low[:, 0]], axis=-1)  # [K, 2]
+    vals = jnp.where(stance[..., None], rel, jnp.nan)
+    c = jnp.nanmedian(vals, axis=0)
+    c = jnp.where(jnp.isnan(c), 0.0, c)
+    return c - jnp.min(c, axis=-1, keepdims=True)
+
+
 # ------------------------------------------------------------------------ gait synthesis
 
 
@@ -413,6 +434,7 @@ class GaitResult(eqx.Module):
     - `lowest`: `[T, 2]` height of each foot's lowest point above the ground (sole clearance
       taken off).
     - `hip`: the `HipRule` (L, N, lift, flight, l_max).
+    - `clearance`: `[2, P]` the sole clearances used.
     """
 
     features: Array
@@ -421,6 +443,7 @@ class GaitResult(eqx.Module):
     foot_positions: Array
     lowest: Array
     hip: HipRule
+    clearance: Array
 
 
 def _pose_points(skeleton, representation, idx, groins, feat):
@@ -458,6 +481,10 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule.
     grid = jnp.linspace(0.0, 2 * jnp.pi, num_cycle_samples, endpoint=False, dtype=phase.dtype)
     cyc_feet, cyc_groins = jax.vmap(points)(synthesize_phase(stepped, grid))
+    if clearance is None:
+        # From the unstepped model: the sole geometry must not change with the step length.
+        base_feet, _ = jax.vmap(points)(synthesize_phase(model, grid))
+        clearance = estimate_sole_clearance(base_feet, up_axis=up_axis)
     soft = temperature if rule == "smooth" else None
     cyc_leg = leg_heights(cyc_groins, cyc_feet, clearance, up_axis=up_axis, temperature=soft)
     leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
@@ -485,7 +512,7 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     root = jnp.where(root_motion, root_on, root_off)
     foot_world = foot_local + root[:, None, None, :]  # explicit ranks: [T, 2, P, 3]
     lowest = lowest_points(foot_world, clearance, up_axis=up_axis)
-    return GaitResult(feats, phase, root, foot_world, lowest, hip)
+    return GaitResult(feats, phase, root, foot_world, lowest, hip, clearance)
 
 
 def synthesize_gait(
@@ -527,7 +554,8 @@ def synthesize_gait(
     - `model`: a `FourierModel` on `motion.channel_names_for(topology, representation)`.
     - `skeleton`: the `Skeleton` it animates; `num_frames`, `frame_time_s`: output sampling.
     - `feet`: `contacts.FootPoints`; `groins`: `(left, right)` joint indices (`groin_joints`).
-    - `clearance`: `[2, P]` sole clearances (`contacts.sole_clearance`); default zeros.
+    - `clearance`: `[2, P]` sole clearances (`contacts.sole_clearance` of the source clip);
+      default `None` estimates them from one cycle of the model (`estimate_sole_clearance`).
     - `step`, `gait`, `jump`: scalars; `speed`: scalar or `[num_frames]` schedule.
     - `rule`: `"unuma1995" | "continuous" | "smooth"`; `width`, `temperature`: `hip_rule`.
     - `phase0`: phase of the first frame (radians).
@@ -543,10 +571,9 @@ def synthesize_gait(
     if len(feet.left) != len(feet.right):
         raise UserError("synthesize_gait: both feet must have the same number of points")
     num_points = len(feet.left)
-    if clearance is None:
-        clearance = jnp.zeros((2, num_points))
-    clearance = jnp.asarray(clearance, dtype=model.offset.dtype)
-    if clearance.shape != (2, num_points):
+    if clearance is not None:
+        clearance = jnp.asarray(clearance, dtype=model.offset.dtype)
+    if clearance is not None and clearance.shape != (2, num_points):
         raise UserError(
             f"synthesize_gait: clearance must be [2, {num_points}], got {clearance.shape}"
         )

@@ -417,6 +417,7 @@ def _toy_loss(model, gait, jump, rule="smooth"):
 _toy_grad = jax.jit(jax.grad(_toy_loss, argnums=(0, 1, 2)))
 
 
+@pytest.mark.slow
 @settings(max_examples=15, deadline=None)
 @given(st.integers(0, 10_000), st.floats(-0.1, 1.1), st.floats(0.0, 5.0),
        st.sampled_from(["moving", "still", "tiny"]))
@@ -431,6 +432,7 @@ def test_smooth_rule_gradients_finite_through_model(seed, gait, jump, kind):
         assert bool(jnp.all(jnp.isfinite(leaf))), (seed, gait, jump, kind)
 
 
+@pytest.mark.slow
 def test_smooth_rule_gradient_matches_finite_differences(x64):
     model = jax.tree.map(lambda x: x.astype(jnp.float64) if hasattr(x, "astype") else x,
                          toy_model(3))
@@ -482,3 +484,50 @@ def test_synthesize_gait_bad_input():
                           clearance=jnp.zeros((2, 2)))
     with pytest.raises(UserError, match="RightUpLeg"):
         G.groin_joints(_Topo(("Hips", "LeftUpLeg"), ()))
+
+
+def test_estimated_sole_clearance_matches_the_real_floor_fit():
+    for name in ("07_01", "09_01"):
+        fl, _, clear, *_ = _measured(name)
+        est = np.asarray(G.estimate_sole_clearance(jnp.asarray(fl)))
+        np.testing.assert_allclose(est, clear, atol=0.3)  # ~5% of a foot length
+        assert np.all(est[:, 0] > 0.5)  # the ankle stands well above the sole
+
+
+# ------------------------------------------------------------------------------ command line
+
+
+def _toy_template():
+    from fourierjax.io.bvh import Motion
+
+    sk, *_ = toy()
+    topo = sk.topology
+    return Motion(topo, np.asarray(sk.offsets), np.asarray(sk.end_site_offsets),
+                  np.zeros((1, topo.num_channels)), 1 / 30)
+
+
+def test_cli_gait_flags():
+    import argparse
+
+    from fourierjax.cli._gait_args import add_gait_arguments, apply_gait
+
+    p = argparse.ArgumentParser()
+    add_gait_arguments(p)
+    a = p.parse_args([])
+    assert (a.step, a.speed, a.gait, a.jump, a.hip_rule, a.root_motion) == (
+        1.0, 1.0, 1.0, 0.0, "unuma1995", True)
+    a = p.parse_args(["--step", "1.2", "--speed", "0.5", "--gait", "0.05", "--jump", "2",
+                      "--hip-rule", "smooth", "--no-root-motion"])
+    assert (a.step, a.speed, a.gait, a.jump, a.hip_rule, a.root_motion) == (
+        1.2, 0.5, 0.05, 2.0, "smooth", False)
+    with pytest.raises(SystemExit):
+        p.parse_args(["--hip-rule", "hop"])
+    template = _toy_template()
+    model = toy_model(5)
+    motion, summary = apply_gait(p.parse_args(["--gait", "0.02", "--jump", "1"]), model,
+                                 template, 12, 1 / 30)
+    assert motion.num_frames == 12 and "flight" in summary
+    assert np.any(motion.channels[:, 2] != motion.channels[0, 2])  # the root moves
+    for bad in (["--gait", "1.5"], ["--jump", "-1"], ["--speed", "-0.1"], ["--step", "nan"]):
+        with pytest.raises(UserError, match=bad[0]):
+            apply_gait(p.parse_args(bad), model, template, 12, 1 / 30)
