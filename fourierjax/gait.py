@@ -278,6 +278,7 @@ def root_trajectory(
     up_axis: int = 1,
     contact_threshold=None,
     temperature=None,
+    flight_step=None,
 ) -> Float[Array, "T 3"]:
     """Root positions over time from the feet on the ground (no foot skating).
 
@@ -298,6 +299,8 @@ def root_trajectory(
     - `contact_threshold`: height (file units) below which the lowest point is on the ground;
       default `0.03 · mean(height)` (CMU: ~0.5 units ≈ 3 cm).
     - `temperature`: τ in file units; default `0.003 · mean(height)` (CMU: ~0.05 units).
+    - `flight_step`: optional `[T - 1, 2]` horizontal root moves to use in flight instead of
+      the carried velocity (`synthesize_gait` passes the model's own root velocity there).
 
     **Returns:** `[T, 3]` root positions; horizontal components start at 0, the up component
     is `height`. Validated on real clips: from their own poses it recovers 93% (07_01) of the
@@ -319,16 +322,20 @@ def root_trajectory(
     ground = jax.nn.sigmoid((th - low) / (0.1 * th))  # 1 on the ground, 0 in flight
     dphase = phase[1:] - phase[:-1]
 
-    def body(vel, inputs):
-        step, a, dth = inputs
-        # Velocity per radian of phase, learned while on the ground; shim the 0/0 at rest.
-        moving = jnp.abs(dth) > 1e-12
-        safe = jnp.where(moving, dth, 1.0)
-        vel_new = jnp.where((a > 0.5) & moving, step / safe, vel)
-        return vel_new, a * step + (1.0 - a) * vel * dth
+    if flight_step is not None:
+        moves = ground[:, None] * stance_step + (1.0 - ground[:, None]) * flight_step
+    else:
 
-    vel0 = jnp.zeros((2,), foot_local.dtype)
-    _, moves = jax.lax.scan(body, vel0, (stance_step, ground, dphase))
+        def body(vel, inputs):
+            step, a, dth = inputs
+            # Velocity per radian of phase, learned on the ground; shim the 0/0 at rest.
+            moving = jnp.abs(dth) > 1e-12
+            safe = jnp.where(moving, dth, 1.0)
+            vel_new = jnp.where((a > 0.5) & moving, step / safe, vel)
+            return vel_new, a * step + (1.0 - a) * vel * dth
+
+        vel0 = jnp.zeros((2,), foot_local.dtype)
+        _, moves = jax.lax.scan(body, vel0, (stance_step, ground, dphase))
     path = jnp.concatenate([jnp.zeros((1, 2), moves.dtype), jnp.cumsum(moves, axis=0)])
     out = jnp.zeros((T, 3), foot_local.dtype)
     out = out.at[:, horiz[0]].set(path[:, 0]).at[:, horiz[1]].set(path[:, 1])
@@ -494,11 +501,15 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     hip = hip_rule(leg, gait, jump, rule=rule, l_max=l_max, temperature=temperature,
                    width=width)
     horiz = [k for k in range(3) if k != up_axis]
-    speed_t = jnp.broadcast_to(jnp.asarray(speed, feats.dtype), (num_frames,))
     # Both roots are cheap next to FK: compute both and select, so `root_motion` is traced
     # (one compilation serves both).
+    speed_t = jnp.broadcast_to(jnp.asarray(speed, feats.dtype), (num_frames,))
     height = contact_height(foot_local, clearance, up_axis=up_axis) + hip.lift
-    root_on = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis)
+    # In flight the root moves with the model's own (captured) root velocity at this pace.
+    v_model = feats[:, :2] * speed_t[:, None]
+    flight_step = 0.5 * (v_model[1:] + v_model[:-1]) * frame_time_s
+    root_on = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis,
+                              flight_step=flight_step)
     vel = jnp.gradient(root_on, axis=0) / frame_time_s
     feats_on = feats.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]])
     feats_on = feats_on.at[:, 2].set(height)
@@ -541,7 +552,8 @@ def synthesize_gait(
     Joint angles come from the model at the integrated phase (`apply_step`,
     `integrate_phase`); with `root_motion` the root height is the hip-height rule's
     (`root_height`: the lowest foot point on the ground, plus the flight lift of eq. 5) and its
-    horizontal path comes from the feet on the ground (`root_trajectory`). Without it, the root
+    horizontal path comes from the feet on the ground (`root_trajectory`; in flight, from the
+    model's own root velocity at the current pace). Without it, the root
     follows the model's own `root.*` channels (velocities scaled by `speed`). `Lmax` is taken
     over one cycle of the stepped model (`num_cycle_samples` phases).
 
