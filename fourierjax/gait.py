@@ -612,6 +612,40 @@ def synthesize_gait(
     )
 
 
+@eqx.filter_jit
+def _cycle_points(model, skeleton, feet, groins, num_samples):
+    from fourierjax.fourier import synthesize_phase
+
+    idx = jnp.asarray([feet.left, feet.right])
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False,
+                        dtype=model.offset.dtype)
+    foot_local, groin_local = jax.vmap(
+        lambda f: _pose_points(skeleton, model.representation, idx, groins, f)
+    )(synthesize_phase(model, grid))
+    return grid, foot_local, groin_local
+
+
+def model_hip_curves(model, skeleton, *, feet, groins, gait, jump, clearance=None,
+                     num_samples: int = 128, width: float = 0.01, temperature=None,
+                     up_axis: int = 1):
+    """The three hip rules over one cycle of a model: the data of a side-by-side plot.
+
+    **Arguments:** `model`, `skeleton`, `feet`, `groins`, `clearance` as `synthesize_gait`;
+    `gait`, `jump`, `width`, `temperature` as `hip_rule`; `num_samples` phases per cycle.
+
+    **Returns:** `dict`: `"phase"` `[K]` (radians), `"L_L"`, `"L_R"`, and the
+    `hip_rule_curves` entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
+    """
+    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, tuple(groins),
+                                                  int(num_samples))
+    if clearance is None:
+        clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
+    leg = leg_heights(groin_local, foot_local, jnp.asarray(clearance), up_axis=up_axis)
+    out = hip_rule_curves(leg, gait, jump, width=width, temperature=temperature)
+    out.update(phase=grid, L_L=leg[:, 0], L_R=leg[:, 1])
+    return out
+
+
 def gait_motion(template, result: GaitResult, channel_names, frame_time_s: float):
     """A writeable `Motion` of a synthesized gait, carrying its root trajectory (edge, NumPy).
 

@@ -531,3 +531,13 @@ def test_cli_gait_flags():
     for bad in (["--gait", "1.5"], ["--jump", "-1"], ["--speed", "-0.1"], ["--step", "nan"]):
         with pytest.raises(UserError, match=bad[0]):
             apply_gait(p.parse_args(bad), model, template, 12, 1 / 30)
+
+
+def test_model_hip_curves_one_call_for_the_plot():
+    sk, fp, groins, _ = toy()
+    out = G.model_hip_curves(toy_model(7), sk, feet=fp, groins=groins, gait=0.02, jump=1.0,
+                             num_samples=32)
+    assert out["phase"].shape == (32,)
+    np.testing.assert_allclose(out["L"], np.maximum(out["L_L"], out["L_R"]), rtol=1e-6)
+    assert bool(jnp.all(out["unuma1995"] >= out["continuous"] - 1e-6))
+    assert bool(jnp.all(out["continuous"] >= out["L"] - 1e-6))
