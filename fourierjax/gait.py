@@ -583,13 +583,14 @@ def synthesize_gait(
     if len(feet.left) != len(feet.right):
         raise UserError("synthesize_gait: both feet must have the same number of points")
     num_points = len(feet.left)
+    # The model's float type as JAX holds it (a float64 NumPy model is float32 without x64).
+    dtype = jnp.asarray(model.offset).dtype
     if clearance is not None:
-        clearance = jnp.asarray(clearance, dtype=model.offset.dtype)
+        clearance = jnp.asarray(clearance, dtype=dtype)
     if clearance is not None and clearance.shape != (2, num_points):
         raise UserError(
             f"synthesize_gait: clearance must be [2, {num_points}], got {clearance.shape}"
         )
-    dtype = model.offset.dtype
     speed = jnp.asarray(speed, dtype)
     if speed.ndim not in (0, 1) or (speed.ndim == 1 and speed.shape[0] != num_frames):
         raise UserError(
@@ -618,7 +619,7 @@ def _cycle_points(model, skeleton, feet, groins, num_samples):
 
     idx = jnp.asarray([feet.left, feet.right])
     grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False,
-                        dtype=model.offset.dtype)
+                        dtype=jnp.asarray(model.offset).dtype)
     foot_local, groin_local = jax.vmap(
         lambda f: _pose_points(skeleton, model.representation, idx, groins, f)
     )(synthesize_phase(model, grid))

@@ -523,7 +523,11 @@ def test_cli_gait_flags():
     with pytest.raises(SystemExit):
         p.parse_args(["--hip-rule", "hop"])
     template = _toy_template()
-    model = toy_model(5)
+    m = toy_model(5)
+    # Model files load as float64 NumPy arrays: they must run warning-free without x64.
+    model = type(m)(*(np.asarray(x, np.float64) for x in (m.offset, m.amplitude, m.phase,
+                                                            m.omega)), m.representation,
+                    m.channel_names)
     motion, summary = apply_gait(p.parse_args(["--gait", "0.02", "--jump", "1"]), model,
                                  template, 12, 1 / 30)
     assert motion.num_frames == 12 and "flight" in summary
