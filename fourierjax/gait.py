@@ -32,10 +32,14 @@ The hip-height rule, as implemented here
   groins are level, and keeps the stance foot exactly on the ground when they are not (a
   tilted pelvis would otherwise push a foot through the floor).
 
-Root motion: the horizontal root advance comes from the feet on the ground: a point in contact
-stays put, so the root moves by minus its displacement (a contact-weighted mean over the points
-of both feet). In flight the root keeps its last horizontal velocity *per radian of phase*, so
-slowing the phase (speed → 0) brings the root to rest too.
+Root motion: the horizontal root advance comes from the feet on the ground: the foot point
+carrying the body (a soft argmin of the point heights over both feet) stays put, so the root
+moves by minus its displacement. In flight (no point within the contact threshold) the root
+moves with the model's own root velocity at the current pace (`synthesize_gait`), or keeps its
+last velocity per radian of phase (`root_trajectory` alone); either way slowing the phase
+(speed → 0) brings the root to rest. A limit worth knowing: Unuma's N(t) does not tell a
+run's flight from its mid-stance knee bend (both have N ≈ 0.06-0.08 on CMU 09_01), so runs
+synthesized with the rule advance slower than captured (09_01: ~55 vs 63 units/s).
 """
 
 from __future__ import annotations
