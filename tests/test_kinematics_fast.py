@@ -1,0 +1,48 @@
+"""The batched FK path (frame-minor layout, joint scan, fused sincos) against the one-frame FK."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import kinematics
+from fourierjax.kinematics import _sincos
+from fourierjax.skeleton import Skeleton
+from tests.helpers import random_topology
+
+
+def test_sincos_float32_matches_float64_reference():
+    x = np.concatenate([np.linspace(-1e4, 1e4, 200_001), np.linspace(-7, 7, 100_001),
+                        np.arange(-64, 65) * np.pi / 4, [0.0, -0.0, 1e-30]]).astype(np.float32)
+    s, c = jax.jit(_sincos)(jnp.asarray(x))
+    ref = x.astype(np.float64)
+    assert np.abs(np.asarray(s, np.float64) - np.sin(ref)).max() < 2e-7
+    assert np.abs(np.asarray(c, np.float64) - np.cos(ref)).max() < 2e-7
+    # Gradients are the other function (to float32 rounding).
+    ds = jax.vmap(jax.grad(lambda v: _sincos(v)[0]))(jnp.asarray(x[:1000]))
+    np.testing.assert_allclose(ds, np.cos(ref[:1000]), atol=2e-6)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_fk_frames_equals_vmapped_one_frame_fk(seed):
+    rng = np.random.default_rng(seed)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)) * 10,
+                    rng.normal(size=(topo.num_end_sites, 3)) * 5)
+    ch = jnp.asarray(rng.uniform(-720, 720, size=(2, 5, topo.num_channels)), jnp.float32)
+    fast = kinematics.fk_frames(skel, ch)
+    ref = jax.vmap(jax.vmap(lambda c: kinematics.fk_from_channels(skel, c)))(ch)
+    assert fast.positions.shape == (2, 5, topo.num_joints, 3)
+    for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(ref)):
+        np.testing.assert_allclose(a, b, atol=5e-4, rtol=1e-5)
+    np.testing.assert_allclose(kinematics.joint_positions(skel, ch), ref.positions, atol=5e-4, rtol=1e-5)
+    g = jax.grad(lambda c: kinematics.fk_frames(skel, c).positions.sum())(ch)
+    assert np.all(np.isfinite(g))
+
+
+def test_fk_frames_rejects_wrong_channel_count():
+    rng = np.random.default_rng(0)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, np.zeros((topo.num_joints, 3)))
+    with pytest.raises(ValueError, match="channels"):
+        kinematics.fk_frames(skel, jnp.zeros((3, topo.num_channels + 1)))
