@@ -16,6 +16,8 @@ COMMANDS: dict[str, str] = {
     "characteristic": "characteristic",
     "interpolate": "interpolate",
     "transition": "transition",
+    "plot": "plot",
+    "demo": "demo",
 }
 
 

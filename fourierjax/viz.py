@@ -1,0 +1,458 @@
+"""Plots and stick-figure animations of gaits, spectra, style spaces and stances (matplotlib, Agg).
+
+An edge module: NumPy in, matplotlib figures out; the core never imports it. Every function
+takes plain arrays (joint positions ``[J, 3]`` or ``[F, J, 3]`` in file units, Y up, parents as
+a tuple) so it works for BVH clips, synthesized gaits and solved stances alike. Functions that
+draw return the ``matplotlib.figure.Figure``; :func:`save_figure` writes PNGs, :func:`save_gif`
+writes animated GIFs with the pillow writer.
+
+Stick figures are drawn in an oblique orthographic view: the figure walks along +Z, the camera
+looks from the walker's left (+X) rotated by ``azimuth_deg`` about +Y, so the horizontal axis of
+the picture is mostly Z (forward) and the vertical axis is Y (up). Left limbs are blue, right
+limbs red, the trunk grey.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+
+import matplotlib
+
+matplotlib.use("Agg")  # never open a window; safe on headless CI
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib import animation  # noqa: E402
+
+__all__ = [
+    "CMU_UNIT_M",
+    "limb_colors",
+    "project",
+    "plot_spectrum",
+    "plot_decomposition",
+    "plot_style_scatter",
+    "draw_stick_figure",
+    "plot_stick_figure",
+    "plot_stick_strip",
+    "plot_hip_rule",
+    "plot_posture_range",
+    "save_figure",
+    "save_gif",
+]
+
+#: One CMU length unit in metres (the CMU skeletons are in inches / 0.45).
+CMU_UNIT_M = 0.0564
+
+_LEFT, _RIGHT, _TRUNK = "#1f5fbf", "#c8322a", "#555555"
+
+
+def _close(fig) -> None:
+    plt.close(fig)
+
+
+def save_figure(fig, path: str | os.PathLike, *, dpi: int = 100) -> str:
+    """Write a figure to ``path`` (PNG by extension) and close it. Returns the path as str."""
+    fig.savefig(path, dpi=dpi, bbox_inches="tight")
+    _close(fig)
+    return os.fspath(path)
+
+
+def limb_colors(names: Sequence[str]) -> list[str]:
+    """Colour per joint (the bone to its parent): blue for ``Left*``, red for ``Right*``, grey else.
+
+    Also recognises ``L``/``R`` prefixes followed by an upper-case letter (``LHipJoint``) and
+    ``l_``/``r_`` prefixes (the stance skeleton).
+    """
+    out = []
+    for n in names:
+        low = n.lower()
+        if low.startswith("left") or low.startswith("l_") or (len(n) > 1 and n[0] == "L" and n[1].isupper()):
+            out.append(_LEFT)
+        elif low.startswith("right") or low.startswith("r_") or (len(n) > 1 and n[0] == "R" and n[1].isupper()):
+            out.append(_RIGHT)
+        else:
+            out.append(_TRUNK)
+    return out
+
+
+def project(positions, azimuth_deg: float = 25.0, up_axis: int = 1) -> np.ndarray:
+    """Oblique orthographic projection of points ``[..., 3]`` to picture coordinates ``[..., 2]``.
+
+    The picture's horizontal axis is ``z cos(a) - x sin(a)`` (forward, +Z, seen from the walker's
+    left side turned by ``a = azimuth_deg`` towards the front) and its vertical axis is the up
+    axis, so lengths along Z and Y are true lengths when ``a = 0``.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    if p.shape[-1] != 3:
+        raise ValueError(f"project: positions must be [..., 3], got shape {p.shape}")
+    a = np.radians(azimuth_deg)
+    x, z = p[..., 0], p[..., 2]
+    if up_axis != 1:
+        raise ValueError("project: only Y-up positions are supported (up_axis=1)")
+    return np.stack([z * np.cos(a) - x * np.sin(a), p[..., 1]], axis=-1)
+
+
+def _check_skeleton(positions: np.ndarray, parents: Sequence[int]) -> None:
+    if positions.shape[-2] != len(parents):
+        raise ValueError(
+            f"positions have {positions.shape[-2]} joints but parents has {len(parents)} entries"
+        )
+
+
+def draw_stick_figure(ax, positions, parents: Sequence[int], *, names: Sequence[str] | None = None,
+                      azimuth_deg: float = 25.0, scale: float = 1.0, offset=(0.0, 0.0),
+                      linewidth: float = 2.0, alpha: float = 1.0, joints: bool = True):
+    """Draw one pose ``[J, 3]`` as bones (joint to parent) on ``ax``; returns the Line2D list.
+
+    ``scale`` multiplies lengths (e.g. :data:`CMU_UNIT_M` to draw in metres), ``offset`` shifts the
+    projected picture (after scaling).
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    _check_skeleton(p, parents)
+    q = project(p, azimuth_deg) * scale + np.asarray(offset, dtype=np.float64)
+    colors = limb_colors(names) if names is not None else [_TRUNK] * len(parents)
+    lines = []
+    for j, par in enumerate(parents):
+        if par < 0:
+            continue
+        (ln,) = ax.plot(q[[par, j], 0], q[[par, j], 1], color=colors[j], lw=linewidth,
+                        alpha=alpha, solid_capstyle="round")
+        lines.append(ln)
+    if joints:
+        ax.plot(q[:, 0], q[:, 1], "o", color="k", ms=1.5, alpha=alpha)
+    return lines
+
+
+def _ground(ax, y: float, x0: float, x1: float) -> None:
+    ax.axhline(y, color="#999999", lw=1.0, zorder=0)
+    ax.set_xlim(x0, x1)
+
+
+def plot_stick_figure(positions, parents: Sequence[int], *, names: Sequence[str] | None = None,
+                      title: str | None = None, azimuth_deg: float = 25.0,
+                      scale: float = CMU_UNIT_M, unit: str = "m", ground: float | None = None):
+    """One pose as a stick figure with labelled axes (Z forward, Y up).
+
+    Arguments:
+        positions: ``[J, 3]`` joint positions (file units); parents: parent index per joint
+            (-1 for the root); names: joint names (colours left/right limbs).
+        scale: file units -> ``unit`` (default CMU units -> metres); ground: floor height in
+            file units (default the lowest joint).
+    Returns:
+        Figure.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    fig, ax = plt.subplots(figsize=(3.2, 4.2))
+    draw_stick_figure(ax, p, parents, names=names, azimuth_deg=azimuth_deg, scale=scale)
+    q = project(p, azimuth_deg) * scale
+    g = (p[:, 1].min() if ground is None else ground) * scale
+    pad = 0.25 * (q[:, 1].max() - g)
+    _ground(ax, g, q[:, 0].min() - pad, q[:, 0].max() + pad)
+    ax.set_ylim(g - 0.05 * pad, q[:, 1].max() + pad / 2)
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"forward, Z ({unit})")
+    ax.set_ylabel(f"up, Y ({unit})")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_stick_strip(poses: Sequence, parents: Sequence[int], labels: Sequence[str], *,
+                     names: Sequence[str] | None = None, title: str | None = None,
+                     azimuth_deg: float = 25.0, scale: float = CMU_UNIT_M, unit: str = "m",
+                     frames_per_pose: int = 1):
+    """A row of stick figures side by side (Unuma 1995 Fig. 3: inter/extrapolated walks).
+
+    Arguments:
+        poses: one ``[J, 3]`` pose per panel, or ``[K, J, 3]`` per panel to overlay K frames of a
+            cycle as a faded trail (the last is drawn solid); each is re-centred horizontally
+            on its root.
+        parents, names: the skeleton; labels: a caption under each panel (e.g. ``s = -0.5``).
+    Returns:
+        Figure.
+    """
+    panels = [np.asarray(p, dtype=np.float64) for p in poses]
+    panels = [p[None] if p.ndim == 2 else p for p in panels]
+    if len(labels) != len(panels):
+        raise ValueError(f"plot_stick_strip: {len(labels)} labels for {len(panels)} poses")
+    ground = min(p[..., 1].min() for p in panels) * scale
+    height = max(p[..., 1].max() for p in panels) * scale - ground
+    width = 0.75 * height
+    fig, ax = plt.subplots(figsize=(1.6 * len(panels) + 0.6, 3.4))
+    for i, (p, lab) in enumerate(zip(panels, labels, strict=True)):
+        root = project(p[-1, 0], azimuth_deg)[0] * scale
+        k = len(p)
+        for f in range(k):
+            alpha = 1.0 if f == k - 1 else 0.15 + 0.35 * f / max(k - 1, 1)
+            draw_stick_figure(ax, p[f], parents, names=names, azimuth_deg=azimuth_deg,
+                              scale=scale, offset=(i * width - root, 0.0),
+                              linewidth=2.0 if f == k - 1 else 1.0, alpha=alpha,
+                              joints=f == k - 1)
+        ax.text(i * width, ground - 0.09 * height, lab, ha="center", va="top", fontsize=9)
+    _ground(ax, ground, -0.6 * width, (len(panels) - 0.4) * width)
+    ax.set_ylim(ground - 0.2 * height, ground + 1.08 * height)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_ylabel(f"up, Y ({unit})")
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_spectrum(freqs_hz, amplitude, *, channel_names: Sequence[str] | None = None,
+                  fundamental_hz: float | None = None, max_hz: float = 8.0,
+                  unit: str = "rad", title: str | None = None, skip_dc: bool = False,
+                  stems: bool = False):
+    """Amplitude spectra of many channels superimposed (Tilmanne & Dutoit Fig. 1).
+
+    Arguments:
+        freqs_hz: ``[K]`` frequencies; amplitude: ``[K, C]`` single-sided amplitudes (e.g.
+            ``fourier.amplitude_spectrum``); fundamental_hz: draws the gait-cycle frequency and
+            its harmonics as dashed lines; unit: the channels' unit for the y label; stems:
+            draw each frequency as a vertical stem (a line spectrum, e.g. a model's harmonics).
+    Returns:
+        Figure.
+    """
+    f = np.asarray(freqs_hz, dtype=np.float64)
+    a = np.asarray(amplitude, dtype=np.float64)
+    if a.ndim != 2 or a.shape[0] != f.shape[0]:
+        raise ValueError(f"plot_spectrum: amplitude {a.shape} must be [K={f.shape[0]}, C]")
+    keep = f <= max_hz
+    if skip_dc:
+        keep &= f > 0
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    if stems:
+        for k in range(a.shape[1]):
+            ax.plot(f[keep], a[keep, k], "o", ms=3, alpha=0.6)
+        ax.vlines(np.repeat(f[keep], a.shape[1]), 0, a[keep].ravel(), lw=0.6, alpha=0.4)
+    else:
+        ax.plot(f[keep], a[keep], lw=0.8, alpha=0.7)
+    if fundamental_hz is not None and np.isfinite(fundamental_hz):
+        for n in range(1, int(max_hz / fundamental_hz) + 1):
+            ax.axvline(n * fundamental_hz, color="r" if n == 1 else "#e08080", ls="--", lw=0.9,
+                       label=f"gait cycle {fundamental_hz:.2f} Hz and harmonics" if n == 1 else None)
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"amplitude ({unit})")
+    ax.set_xlim(0, max_hz)
+    n = a.shape[1]
+    ax.set_title(title or f"Amplitude spectrum of {n} channels (superimposed)", fontsize=10)
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def plot_decomposition(t_s, data, offset, amplitude, phase, omega: float, *,
+                       channel_labels: Sequence[str], unit: str = "rad",
+                       title: str | None = None):
+    """Data, offset, each harmonic and the sum, in stacked panels (Tilmanne & Dutoit Fig. 3).
+
+    Arguments:
+        t_s: ``[T]`` seconds (the data's, in the model's time axis); data: ``[T, K]`` K channels;
+        offset ``[K]``, amplitude ``[K, N]``, phase ``[K, N]``, omega (rad/s): their Fourier model
+        (Unuma eq. 1, sine convention); channel_labels: K legend entries.
+    Returns:
+        Figure with ``N + 3`` panels: data, constant, harmonics 1..N, approximation (over data).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    x = np.asarray(data, dtype=np.float64)
+    off = np.asarray(offset, dtype=np.float64)
+    amp = np.asarray(amplitude, dtype=np.float64)
+    ph = np.asarray(phase, dtype=np.float64)
+    if x.ndim != 2 or x.shape[0] != t.shape[0] or off.shape != (x.shape[1],):
+        raise ValueError(f"plot_decomposition: data {x.shape}, t {t.shape}, offset {off.shape}")
+    K, N = amp.shape
+    n = np.arange(1, N + 1)
+    comps = amp[None, :, :] * np.sin(n[None, None, :] * omega * t[:, None, None] + ph[None])
+    approx = off[None, :] + comps.sum(-1)
+    rows = [("motion capture", x), ("constant", np.broadcast_to(off, x.shape))]
+    names = {1: "fundamental", 2: "2nd harmonic", 3: "3rd harmonic"}
+    rows += [(names.get(k, f"{k}th harmonic"), comps[:, :, k - 1]) for k in n]
+    rows += [(f"sum of {N} harmonics + constant", approx)]
+    fig, axes = plt.subplots(len(rows), 1, figsize=(6.4, 1.25 * len(rows) + 0.6), sharex=True)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for ax, (name, y) in zip(axes, rows, strict=True):
+        for k in range(K):
+            ax.plot(t, y[:, k], color=colors[k % len(colors)], lw=1.2,
+                    label=channel_labels[k] if ax is axes[0] else None)
+            if ax is axes[-1]:
+                ax.plot(t, x[:, k], color=colors[k % len(colors)], lw=0.8, ls=":", alpha=0.8)
+        ax.set_ylabel(unit, fontsize=8)
+        ax.set_title(name, fontsize=9, loc="left", pad=2)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=K, loc="upper right")
+    axes[-1].set_xlabel("time (s)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_style_scatter(coords, labels: Sequence[str], *, explained: Sequence[float] | None = None,
+                       groups: Sequence[str] | None = None, title: str | None = None,
+                       arrows: Sequence[tuple[int, int]] = ()):
+    """Models as points on the first two principal components of style space (Troje).
+
+    Arguments:
+        coords: ``[M, >=2]`` PCA coordinates (``style.pca_project``); labels: one per model;
+        explained: variance ratio per component (axis labels); groups: a category per model
+        (colour and legend, e.g. "walk"/"run"); arrows: index pairs to join with an arrow
+        (e.g. a characteristic).
+    Returns:
+        Figure.
+    """
+    c = np.asarray(coords, dtype=np.float64)
+    if c.ndim != 2 or c.shape[1] < 2 or c.shape[0] != len(labels):
+        raise ValueError(f"plot_style_scatter: coords {c.shape} for {len(labels)} labels")
+    fig, ax = plt.subplots(figsize=(5.6, 4.4))
+    groups = list(groups) if groups is not None else ["model"] * len(labels)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for k, g in enumerate(dict.fromkeys(groups)):
+        idx = [i for i, gi in enumerate(groups) if gi == g]
+        ax.scatter(c[idx, 0], c[idx, 1], s=40, color=colors[k % len(colors)], label=g, zorder=3)
+    for i, lab in enumerate(labels):
+        ax.annotate(lab, c[i, :2], textcoords="offset points", xytext=(4, 4), fontsize=8)
+    for i, j in arrows:
+        ax.annotate("", c[j, :2], c[i, :2], arrowprops=dict(arrowstyle="->", color="#888888"))
+    ev = list(explained) if explained is not None else None
+    ax.set_xlabel("PC 1" + (f" ({100 * ev[0]:.0f}% of variance)" if ev else ""))
+    ax.set_ylabel("PC 2" + (f" ({100 * ev[1]:.0f}% of variance)" if ev and len(ev) > 1 else ""))
+    ax.axhline(0, color="#cccccc", lw=0.8, zorder=0)
+    ax.axvline(0, color="#cccccc", lw=0.8, zorder=0)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ax.set_title(title or "Style space (PCA of phasor style vectors)", fontsize=10)
+    return fig
+
+
+def plot_hip_rule(phase, curves: dict, *, gait: float, jump: float, unit: str = "file units",
+                  title: str | None = None):
+    """The three hip-height rules side by side (Unuma 1995 eq. 4-5; ``gait.hip_rule_curves``).
+
+    Arguments:
+        phase: ``[T]`` x axis (cycle phase in radians, or time); curves: dict with ``"L"``,
+            ``"N"``, ``"unuma1995"``, ``"continuous"``, ``"smooth"`` (each ``[T]``).
+    Returns:
+        Figure with two panels: L and the three L_run curves; N(t) against the gait threshold.
+    """
+    x = np.asarray(phase, dtype=np.float64)
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 4.8), sharex=True,
+                                 gridspec_kw={"height_ratios": [2, 1]})
+    a1.plot(x, np.asarray(curves["L"]), color="k", lw=1.0, ls=":", label="L = max(L_L, L_R) (eq. 4)")
+    styles = {"unuma1995": ("C3", "-", "faithful eq. 5 (jumps at threshold)"),
+              "continuous": ("C0", "--", "continuous"),
+              "smooth": ("C2", "-.", "smooth (differentiable)")}
+    for key, (col, ls, lab) in styles.items():
+        if key in curves:
+            a1.plot(x, np.asarray(curves[key]), color=col, ls=ls, lw=1.4, label=lab)
+    a1.set_ylabel(f"hip height L_run ({unit})")
+    a1.legend(fontsize=8, loc="lower right")
+    a1.grid(alpha=0.3)
+    a2.plot(x, np.asarray(curves["N"]), color="k", lw=1.0, label="N = (Lmax - L) / Lmax")
+    a2.axhline(gait, color="C3", ls="--", lw=1.0, label=f"gait = {gait:g}")
+    a2.set_ylabel("N")
+    a2.set_xlabel("cycle phase (rad)")
+    a2.legend(fontsize=8, loc="upper right")
+    a2.grid(alpha=0.3)
+    fig.suptitle(title or f"Hip-height rule, gait = {gait:g}, jump = {jump:g}", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_posture_range(poses: Sequence, parents: Sequence[int], intensities: Sequence[float], *,
+                       names: Sequence[str] | None = None, title: str | None = None,
+                       scale: float = 1.0, unit: str = "m", azimuth_deg: float = 90.0):
+    """A continuous range of postures side by side (Neff & Fiume 2004 Fig. 5).
+
+    Arguments:
+        poses: ``[J, 3]`` joint positions per intensity (stance skeleton: metres, Y up, facing
+            +Z; the default azimuth 90 shows the figure from its side, sagittal curves visible);
+        intensities: the shape-set intensity of each pose (captions).
+    Returns:
+        Figure.
+    """
+    labels = [f"{v:+.2f}" for v in intensities]
+    fig = plot_stick_strip(poses, parents, labels, names=names, azimuth_deg=azimuth_deg,
+                           scale=scale, unit=unit,
+                           title=title or "Posture range (intensity under each figure)")
+    return fig
+
+
+def save_gif(sequences: Sequence, parents: Sequence[int], path: str | os.PathLike, *,
+             frame_time_s: float, names: Sequence[str] | None = None,
+             titles: Sequence[str] | None = None, max_frames: int = 40, dpi: int = 50,
+             azimuth_deg: float = 25.0, scale: float = CMU_UNIT_M, unit: str = "m",
+             follow: bool = True, title: str | None = None) -> str:
+    """Animated stick figures side by side, written as a GIF (pillow writer).
+
+    Arguments:
+        sequences: one ``[F, J, 3]`` array per figure (same skeleton, same F); parents, names:
+            the skeleton; frame_time_s: seconds per frame of the sequences; titles: a caption
+            per figure; max_frames: the animation is subsampled to at most this many frames
+            (playback stays real time); dpi: resolution (keep GIFs small);
+            follow: the camera follows each figure's root along the ground (ticks on the
+            ground line show the motion), else a fixed camera over the whole path.
+    Returns:
+        The path written.
+    """
+    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
+    if not seqs:
+        raise ValueError("save_gif: no sequences")
+    F = seqs[0].shape[0]
+    for s in seqs:
+        if s.ndim != 3 or s.shape[0] != F:
+            raise ValueError(f"save_gif: every sequence must be [F={F}, J, 3] (the same F), got {s.shape}")
+        _check_skeleton(s, parents)
+    step = max(1, int(np.ceil(F / max_frames)))
+    idx = np.arange(0, F, step)
+    proj = [project(s, azimuth_deg) * scale for s in seqs]  # [F, J, 2]
+    ground = min(s[..., 1].min() for s in seqs) * scale
+    height = max(s[..., 1].max() for s in seqs) * scale - ground
+    half = 0.5 * height
+    n = len(seqs)
+    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, 3.0), squeeze=False)
+    axes = axes[0]
+    colors = limb_colors(names) if names is not None else [_TRUNK] * len(parents)
+    artists = []
+    for k, ax in enumerate(axes):
+        lines = [ax.plot([], [], color=colors[j], lw=2.0, solid_capstyle="round")[0]
+                 for j, par in enumerate(parents) if par >= 0]
+        ticks = ax.plot([], [], "|", color="#999999", ms=6)[0]
+        ax.axhline(ground, color="#999999", lw=1.0, zorder=0)
+        ax.set_ylim(ground - 0.05 * height, ground + 1.1 * height)
+        if not follow:
+            lo, hi = proj[k][..., 0].min(), proj[k][..., 0].max()
+            ax.set_xlim(lo - 0.1 * height, hi + 0.1 * height)
+        ax.set_aspect("equal")
+        ax.set_yticks([])
+        ax.set_xticks([])
+        ax.set_xlabel(f"forward Z ({unit})" if k == 0 else "", fontsize=7)
+        if titles is not None:
+            ax.set_title(titles[k], fontsize=8)
+        artists.append((lines, ticks))
+    if title:
+        fig.suptitle(title, fontsize=9)
+    bones = [(j, par) for j, par in enumerate(parents) if par >= 0]
+
+    def update(i):
+        out = []
+        for k, (lines, ticks) in enumerate(artists):
+            q = proj[k][idx[i]]
+            for ln, (j, par) in zip(lines, bones, strict=True):
+                ln.set_data(q[[par, j], 0], q[[par, j], 1])
+            if follow:
+                cx = q[0, 0]
+                axes[k].set_xlim(cx - half * 1.2, cx + half * 1.2)
+                spacing = 0.25 * height
+                first = np.floor((cx - 2 * half) / spacing) * spacing
+                tx = first + spacing * np.arange(int(4 * half / spacing) + 3)
+                ticks.set_data(tx, np.full_like(tx, ground))
+            out += lines + [ticks]
+        return out
+
+    anim = animation.FuncAnimation(fig, update, frames=len(idx), blit=False)
+    fps = max(1.0, 1.0 / (frame_time_s * step))
+    anim.save(os.fspath(path), writer=animation.PillowWriter(fps=fps), dpi=dpi)
+    _close(fig)
+    return os.fspath(path)

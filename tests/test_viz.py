@@ -1,0 +1,133 @@
+"""Plots and GIFs of fourierjax.viz on small synthetic inputs (Agg backend, no display)."""
+
+import matplotlib
+import numpy as np
+import pytest
+from PIL import Image
+
+from fourierjax import viz
+
+# A 6-joint stick figure: pelvis, spine, head, left/right hip-knee chains (Y up, facing +Z).
+PARENTS = (-1, 0, 1, 0, 3, 0, 5)
+NAMES = ("Hips", "Spine", "Head", "LeftUpLeg", "LeftLeg", "RightUpLeg", "RightLeg")
+POSE = np.array([[0, 10, 0], [0, 14, 0], [0, 18, 0], [1, 9, 0], [1, 1, 1], [-1, 9, 0],
+                 [-1, 1, -1]], float)
+
+
+def test_backend_is_agg():
+    assert matplotlib.get_backend().lower() == "agg"
+
+
+def test_project_side_view_and_oblique():
+    p = np.array([[1.0, 2.0, 3.0]])
+    np.testing.assert_allclose(viz.project(p, 0.0), [[3.0, 2.0]])
+    a = np.radians(30.0)
+    np.testing.assert_allclose(viz.project(p, 30.0), [[3 * np.cos(a) - np.sin(a), 2.0]])
+    with pytest.raises(ValueError, match=r"\[\.\.\., 3\]"):
+        viz.project(np.zeros((2, 2)))
+
+
+def test_limb_colors_left_right_trunk():
+    c = viz.limb_colors(["LeftLeg", "RightArm", "Spine", "LHipJoint", "r_knee", "Head"])
+    assert c[0] == c[3] != c[1] == c[4]
+    assert c[2] == c[5] not in (c[0], c[1])
+
+
+def _texts(fig):
+    ax = fig.axes[0]
+    return ax.get_xlabel(), ax.get_ylabel(), ax.get_title()
+
+
+def test_stick_figure_labels_and_bones(tmp_path):
+    fig = viz.plot_stick_figure(POSE, PARENTS, names=NAMES, title="t")
+    x, y, t = _texts(fig)
+    assert "(m)" in x and "(m)" in y and t == "t"
+    # One line per bone plus the joint markers plus the ground line (axhline).
+    ax = fig.axes[0]
+    bone_lines = [ln for ln in ax.lines if ln.get_linestyle() == "-" and len(ln.get_xdata()) == 2
+                  and ln.get_color() != "#999999"]
+    assert len(bone_lines) == len(PARENTS) - 1
+    path = viz.save_figure(fig, tmp_path / "stick.png")
+    with Image.open(path) as im:
+        assert im.size[0] > 100
+
+
+def test_stick_figure_rejects_wrong_parent_count():
+    with pytest.raises(ValueError, match="7 joints but parents has 3"):
+        viz.plot_stick_figure(POSE, (-1, 0, 1))
+
+
+def test_spectrum_finds_the_peak_and_labels(tmp_path):
+    dt = 1 / 120
+    t = np.arange(600) * dt
+    x = np.stack([0.3 * np.sin(2 * np.pi * 1.0 * t), 0.1 * np.sin(2 * np.pi * 2.0 * t)], 1)
+    freqs = np.fft.rfftfreq(len(t), dt)
+    amp = 2 * np.abs(np.fft.rfft(x, axis=0)) / len(t)
+    fig = viz.plot_spectrum(freqs, amp, fundamental_hz=1.0, max_hz=5)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "frequency (Hz)" and "rad" in ax.get_ylabel()
+    assert ax.get_legend() is not None
+    # The plotted curve peaks at the 1 Hz bin with the sinusoid's amplitude.
+    y = ax.lines[0].get_ydata()
+    xs = ax.lines[0].get_xdata()
+    assert abs(xs[np.argmax(y)] - 1.0) < 1e-9 and abs(y.max() - 0.3) < 1e-6
+    viz.save_figure(fig, tmp_path / "s.png")
+    fig = viz.plot_spectrum(freqs[:4], amp[:4], stems=True)
+    viz.save_figure(fig, tmp_path / "s2.png")
+    with pytest.raises(ValueError, match="must be"):
+        viz.plot_spectrum(freqs[:5], amp)
+
+
+def test_decomposition_panels_sum_to_the_approximation(tmp_path):
+    t = np.linspace(0, 2, 100)
+    off = np.array([0.5, -0.2])
+    amp = np.array([[0.3, 0.1], [0.2, 0.05]])
+    ph = np.array([[0.1, 0.2], [1.0, -1.0]])
+    om = 2 * np.pi
+    n = np.arange(1, 3)
+    data = off + (amp[None] * np.sin(n * om * t[:, None, None] + ph[None])).sum(-1)
+    fig = viz.plot_decomposition(t, data, off, amp, ph, om, channel_labels=["a", "b"])
+    axes = fig.axes
+    assert len(axes) == 2 + 3  # data, constant, 2 harmonics, sum
+    comps = sum(axes[k].lines[0].get_ydata() for k in range(1, 4))
+    np.testing.assert_allclose(comps, axes[-1].lines[0].get_ydata(), atol=1e-12)
+    np.testing.assert_allclose(axes[-1].lines[0].get_ydata(), data[:, 0], atol=1e-12)
+    assert axes[-1].get_xlabel() == "time (s)"
+    viz.save_figure(fig, tmp_path / "d.png")
+
+
+def test_style_scatter_and_hip_rule_and_strip(tmp_path):
+    fig = viz.plot_style_scatter(np.array([[0, 0], [1, 2], [3, 1.0]]), ["a", "b", "c"],
+                                 explained=[0.7, 0.2], groups=["walk", "walk", "run"],
+                                 arrows=[(0, 1)])
+    ax = fig.axes[0]
+    assert "70%" in ax.get_xlabel() and "20%" in ax.get_ylabel()
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["walk", "run"]
+    viz.save_figure(fig, tmp_path / "pca.png")
+    ph = np.linspace(0, 2 * np.pi, 50)
+    curves = {"L": 15 + np.sin(ph), "N": (16 - (15 + np.sin(ph))) / 16,
+              "unuma1995": 15 + np.sin(ph), "continuous": 15 + np.sin(ph), "smooth": 15 + np.sin(ph)}
+    fig = viz.plot_hip_rule(ph, curves, gait=0.05, jump=1.0)
+    assert len(fig.axes[0].get_legend().get_texts()) == 4
+    viz.save_figure(fig, tmp_path / "hip.png")
+    fig = viz.plot_stick_strip([POSE, np.stack([POSE, POSE + 1])], PARENTS, ["a", "b"], names=NAMES)
+    viz.save_figure(fig, tmp_path / "strip.png")
+    fig = viz.plot_posture_range([POSE / 10, POSE / 10], PARENTS, [-1.0, 1.0], names=NAMES)
+    assert fig.axes[0].texts[0].get_text() == "-1.00"
+    viz.save_figure(fig, tmp_path / "range.png")
+    with pytest.raises(ValueError, match="labels"):
+        viz.plot_stick_strip([POSE], PARENTS, ["a", "b"])
+
+
+def test_gif_has_the_requested_frames_and_is_small(tmp_path):
+    F = 30
+    seq = np.repeat(POSE[None], F, 0)
+    seq[:, :, 2] += np.arange(F)[:, None] * 0.5  # walks forward
+    seq[:, 4, 2] += np.sin(np.arange(F) / 3)
+    path = viz.save_gif([seq, seq], PARENTS, tmp_path / "a.gif", frame_time_s=1 / 30, names=NAMES,
+                        titles=["x", "y"], max_frames=10, dpi=40)
+    with Image.open(path) as im:
+        assert im.n_frames == 10
+    assert (tmp_path / "a.gif").stat().st_size < 200_000
+    with pytest.raises(ValueError, match="same"):
+        viz.save_gif([seq, seq[:5]], PARENTS, tmp_path / "b.gif", frame_time_s=0.1)
