@@ -142,9 +142,19 @@ def _wrap_angle(x: Array) -> Array:
     return jnp.where(x > math.pi, x - _TWO_PI, jnp.where(x <= -math.pi, x + _TWO_PI, x))
 
 
+def _unstack(x: Array) -> list[Array]:
+    """The components along the last axis. A split (whose transpose is one concatenate) compiles
+    much faster under grad than per-component indexing (each a slice, transposed to pad + add)."""
+    return [jnp.squeeze(part, axis=-1) for part in jnp.split(x, x.shape[-1], axis=-1)]
+
+
+def _unstack_rows(m: Array) -> list[Array]:
+    return [jnp.squeeze(part, axis=-2) for part in jnp.split(m, m.shape[-2], axis=-2)]
+
+
 def _cross(a: Array, b: Array) -> Array:
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
+    ax, ay, az = _unstack(a)
+    bx, by, bz = _unstack(b)
     return jnp.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
 
 
@@ -206,7 +216,7 @@ def matrix_from_euler(angles: Float[Array, "... 3"], order: str) -> Float[Array,
     order = _check_order(order, fn)
     angles = _vec(angles, 3, "angles", fn)
     c, s = jnp.cos(angles), jnp.sin(angles)  # each trig value once
-    mats = [_axis_matrix(_AXIS_INDEX[ax], c[..., i], s[..., i]) for i, ax in enumerate(order)]
+    mats = [_axis_matrix(_AXIS_INDEX[ax], ci, si) for ax, ci, si in zip(order, _unstack(c), _unstack(s))]
     return matrix_multiply(matrix_multiply(mats[0], mats[1]), mats[2])
 
 
@@ -226,8 +236,8 @@ def quat_multiply(q1: Float[Array, "... 4"], q2: Float[Array, "... 4"]) -> Float
     q1 = _vec(q1, 4, "q1", "quat_multiply")
     q2 = _vec(q2, 4, "q2", "quat_multiply")
     q1, q2 = _common_dtype(*_broadcast_batch(q1, 1, q2, 1))
-    w1, x1, y1, z1 = (q1[..., i] for i in range(4))
-    w2, x2, y2, z2 = (q2[..., i] for i in range(4))
+    w1, x1, y1, z1 = _unstack(q1)
+    w2, x2, y2, z2 = _unstack(q2)
     return jnp.stack(
         [
             w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
@@ -249,7 +259,8 @@ def quat_conjugate(q: Float[Array, "... 4"]) -> Float[Array, "... 4"]:
         ``[..., 4]`` conjugates.
     """
     q = _vec(q, 4, "q", "quat_conjugate")
-    return jnp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
+    w, xyz = jnp.split(q, [1], axis=-1)
+    return jnp.concatenate([w, -xyz], axis=-1)
 
 
 def quat_normalize(q: Float[Array, "... 4"]) -> Float[Array, "... 4"]:
@@ -282,7 +293,7 @@ def quat_apply(q: Float[Array, "... 4"], v: Float[Array, "... 3"]) -> Float[Arra
     q = _vec(q, 4, "q", "quat_apply")
     v = _vec(v, 3, "v", "quat_apply")
     q, v = _common_dtype(*_broadcast_batch(q, 1, v, 1))
-    w, u = q[..., :1], q[..., 1:]
+    w, u = jnp.split(q, [1], axis=-1)
     t = 2.0 * _cross(u, v)
     return v + w * t + _cross(u, t)
 
@@ -297,7 +308,7 @@ def matrix_from_quat(q: Float[Array, "... 4"]) -> Float[Array, "... 3 3"]:
         ``[..., 3, 3]`` rotation matrices.
     """
     q = _vec(q, 4, "q", "matrix_from_quat")
-    w, x, y, z = (q[..., i] for i in range(4))
+    w, x, y, z = _unstack(q)
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
@@ -312,7 +323,7 @@ def matrix_from_quat(q: Float[Array, "... 4"]) -> Float[Array, "... 3 3"]:
 
 def _canonical_sign(q: Array) -> Array:
     """Flip q so that its first non-zero component (in w, x, y, z order) is positive."""
-    w, x, y, z = (q[..., i] for i in range(4))
+    w, x, y, z = _unstack(q)
     negative = jnp.where(w != 0, w < 0, jnp.where(x != 0, x < 0, jnp.where(y != 0, y < 0, z < 0)))
     return jnp.where(negative[..., None], -q, q)
 
@@ -332,9 +343,7 @@ def quat_from_matrix(R: Float[Array, "... 3 3"]) -> Float[Array, "... 4"]:
         first non-zero of ``x, y, z`` is positive, as scipy's ``canonical=True``).
     """
     R = _mat(R, "R", "quat_from_matrix")
-    r00, r01, r02 = R[..., 0, 0], R[..., 0, 1], R[..., 0, 2]
-    r10, r11, r12 = R[..., 1, 0], R[..., 1, 1], R[..., 1, 2]
-    r20, r21, r22 = R[..., 2, 0], R[..., 2, 1], R[..., 2, 2]
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (_unstack(row) for row in _unstack_rows(R))
     trace = r00 + r11 + r22
     # Candidate c is 4 * q_c * q for a unit q: the largest q_c gives the best-conditioned one.
     candidates = _stack_matrix(
@@ -374,9 +383,9 @@ def quat_from_euler(angles: Float[Array, "... 3"], order: str) -> Float[Array, "
     half = 0.5 * angles
     c, s = jnp.cos(half), jnp.sin(half)
     quats = []
-    for i, ax in enumerate(order):
-        comps = [c[..., i]] + [jnp.zeros_like(c[..., i])] * 3
-        comps[1 + _AXIS_INDEX[ax]] = s[..., i]
+    for ax, ci, si in zip(order, _unstack(c), _unstack(s)):
+        comps = [ci] + [jnp.zeros_like(ci)] * 3
+        comps[1 + _AXIS_INDEX[ax]] = si
         quats.append(jnp.stack(comps, axis=-1))
     return quat_multiply(quat_multiply(quats[0], quats[1]), quats[2])
 
@@ -409,7 +418,8 @@ def euler_from_quat(q: Float[Array, "... 4"], order: str) -> Float[Array, "... 3
     if symmetric:
         k = 3 - i - j
     sign = (i - j) * (j - k) * (k - i) // 2  # +1 for an even permutation of (x, y, z), -1 odd
-    w, qi, qj, qk = q[..., 0], q[..., 1 + i], q[..., 1 + j], q[..., 1 + k] * sign
+    comps = _unstack(q)
+    w, qi, qj, qk = comps[0], comps[1 + i], comps[1 + j], comps[1 + k] * sign
     if symmetric:
         a, b, c, d = w, qi, qj, qk
     else:  # rotate the quaternion so that the Tait-Bryan case becomes a proper-Euler one
@@ -484,7 +494,8 @@ def expmap_from_quat(q: Float[Array, "... 4"]) -> Float[Array, "... 3"]:
     """
     q = _vec(q, 4, "q", "expmap_from_quat")
     q = jnp.where(q[..., :1] < 0, -q, q)  # w >= 0: angle in [0, pi]
-    w, xyz = q[..., 0], q[..., 1:]
+    w, xyz = jnp.split(q, [1], axis=-1)
+    w = jnp.squeeze(w, axis=-1)
     n_sq = jnp.sum(xyz * xyz, axis=-1)
     use_taylor = n_sq <= _taylor_threshold(q.dtype) * w * w
     # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.

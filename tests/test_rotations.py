@@ -1,6 +1,5 @@
 """Rotation conversions against scipy's Rotation, finite differences and closed forms."""
 
-import functools
 import math
 
 import jax
@@ -322,17 +321,10 @@ def test_make_expmap_continuous_crossing_pi(x64):
 # ----------------------------------------------------------------------------- gradients
 
 
-def _grad_fn(f):
-    """Jitted gradient of sum(f(x) * w): one compile per function (eager grad is very slow)."""
-    return jax.jit(jax.grad(lambda x, w: jnp.sum(f(x) * w)))
+# Every jit below is a compile (0.1 to 1 s of CPU each): the tests group work into few of them.
+# Eager jax.grad is far slower still (op-by-op dispatch of the backward pass).
 
-
-def _assert_grad_finite(f, x):
-    w = jnp.asarray(np.random.default_rng(12).normal(size=f(x).shape), x.dtype)
-    g = _grad_fn(f)(x, w)
-    assert g.dtype == x.dtype
-    bad = ~np.all(np.isfinite(np.asarray(g).reshape(len(x), -1)), axis=-1)
-    assert not bad.any(), (f, np.asarray(x)[bad])
+_ORDERS_BY_PARITY = ("ZYX", "XYZ", "ZXZ", "ZYZ")  # both parities, Tait-Bryan and proper
 
 
 def _special_matrices(orders) -> np.ndarray:
@@ -344,51 +336,71 @@ def _special_matrices(orders) -> np.ndarray:
     return np.concatenate(mats)
 
 
+def _from_matrix_all(R):
+    """All conversions out of a matrix; they share one quat_from_matrix inside the jit."""
+    outs = [rot.euler_from_matrix(R, order) for order in _ORDERS_BY_PARITY]
+    return jnp.concatenate([*outs, rot.expmap_from_matrix(R), rot.quat_from_matrix(R)], axis=-1)
+
+
+def _from_quat_all(q):
+    outs = [rot.quat_normalize(q), rot.quat_slerp(q, q, 0.3), rot.euler_from_quat(q, "XZY")]
+    return jnp.concatenate(outs, axis=-1)
+
+
+def _from_vector_all(v):  # v as an expmap and as Euler angles
+    outs = [rot.matrix_from_expmap(v).reshape(*v.shape[:-1], 9), rot.quat_from_euler(v, "YZY")]
+    return jnp.concatenate(outs, axis=-1)
+
+
+def _grads(f, x):
+    """Per-row gradient of sum(f(x) * w) for a fixed random w, jitted."""
+    w = jnp.asarray(np.random.default_rng(12).normal(size=jax.eval_shape(f, x).shape), x.dtype)
+    return jax.jit(jax.grad(lambda x: jnp.sum(f(x) * w)))(x)
+
+
 @pytest.mark.parametrize("dtype", ["float32", "float64"])
 def test_gradients_finite_at_zero_and_gimbal_lock(x64, dtype):
-    # The Euler code depends on the order only through the axis permutation and its parity:
-    # cover both parities of Tait-Bryan and proper orders.
-    orders = ("ZYX", "XYZ", "ZXZ", "ZYZ")
-    mats = jnp.asarray(_special_matrices(orders), dtype)
-    quats = jnp.concatenate([rot.quat_from_matrix(mats), -rot.quat_from_matrix(mats)])
-    expmaps = jnp.asarray([[0.0, 0, 0], [1e-20, 0, 0], [1e-4, -1e-4, 2e-4], [0, 0, np.pi]], dtype)
-    for order in orders:
-        _assert_grad_finite(functools.partial(rot.euler_from_matrix, order=order), mats)
-    _assert_grad_finite(functools.partial(rot.euler_from_quat, order="XZY"), quats)
-    euler = jnp.asarray([[0.0, 0, 0], [0.3, np.pi / 2, -0.2], [0.3, 0, -0.2]], dtype)
-    _assert_grad_finite(functools.partial(rot.matrix_from_euler, order="YZY"), euler)
-    _assert_grad_finite(functools.partial(rot.quat_from_euler, order="YZY"), euler)
-    _assert_grad_finite(rot.quat_from_matrix, mats)
-    _assert_grad_finite(rot.expmap_from_matrix, mats)
-    _assert_grad_finite(rot.expmap_from_quat, quats)
-    _assert_grad_finite(rot.matrix_from_quat, quats)
-    _assert_grad_finite(rot.quat_from_expmap, expmaps)
-    _assert_grad_finite(rot.matrix_from_expmap, expmaps)
-    _assert_grad_finite(rot.quat_normalize, jnp.concatenate([quats, jnp.zeros((1, 4), dtype)]))
-    _assert_grad_finite(lambda q: rot.quat_slerp(q, q, 0.3), quats)  # q0 == q1
-
-
-def _check_fd(f, x, h=1e-6, rtol=1e-6, atol=1e-8):
-    """Gradient of sum(f * w) against central differences along random directions."""
-    rng = np.random.default_rng(13)
-    w = jnp.asarray(rng.normal(size=f(x).shape))
-    scalar = jax.jit(lambda x: jnp.sum(f(x) * w))
-    g = jax.grad(scalar)(x)
-    for _ in range(3):
-        d = jnp.asarray(rng.normal(size=x.shape))
-        fd = (scalar(x + h * d) - scalar(x - h * d)) / (2 * h)
-        np.testing.assert_allclose(jnp.sum(g * d), fd, rtol=rtol, atol=atol)
+    mats = jnp.asarray(_special_matrices(_ORDERS_BY_PARITY), dtype)
+    quats = rot.quat_from_matrix(mats)
+    quats = jnp.concatenate([quats, -quats, jnp.zeros((1, 4), dtype)])  # zero: quat_normalize
+    vecs = jnp.asarray([[0.0, 0, 0], [1e-20, 0, 0], [1e-4, -1e-4, 2e-4], [0, 0, np.pi], [0.3, np.pi / 2, 0]], dtype)
+    groups = [(_from_matrix_all, mats), (_from_quat_all, quats), (_from_vector_all, vecs)]
+    if dtype == "float64":  # the dtype-dependent thresholds matter most at gimbal lock
+        groups = groups[:1]
+    for f, x in groups:
+        g = _grads(f, x)
+        assert g.dtype == dtype
+        bad = ~np.all(np.isfinite(np.asarray(g).reshape(len(x), -1)), axis=-1)
+        assert not bad.any(), (f.__name__, np.asarray(x)[bad])
 
 
 def test_gradients_match_finite_differences(x64):
+    """Reverse-mode gradients of composite conversions against central differences."""
     rng = np.random.default_rng(14)
-    v = jnp.asarray(rng.normal(size=(5, 3)))
-    angles = jnp.asarray(random_angles(rng, 5))
-    _check_fd(lambda x: rot.euler_from_quat(rot.quat_from_euler(x, "XZY"), "XZY"), angles)
-    _check_fd(lambda x: rot.euler_from_matrix(rot.matrix_from_expmap(x), "ZXZ"), v)
-    _check_fd(lambda x: rot.expmap_from_matrix(rot.matrix_from_euler(x, "YXZ")), angles)
-    # Near zero (in the Taylor branches) with a step well inside them.
-    _check_fd(lambda x: rot.expmap_from_quat(rot.quat_from_expmap(x)), 1e-5 * v, h=1e-9)
+    angles = random_angles(rng, 5)
+    v = rng.normal(size=(5, 3))
+    x0 = jnp.asarray(np.concatenate([angles, v, 1e-5 * v]))  # small ones: in the Taylor branches
+    w = jnp.asarray(rng.normal(size=(15, 3)))
+
+    def parts(x):  # four scalars, each exercising a different chain
+        a, e, s = x[:5], x[5:10], x[10:]
+        return jnp.stack(
+            [
+                jnp.sum(w[:5] * rot.euler_from_quat(rot.quat_from_euler(a, "XZY"), "XZY")),
+                jnp.sum(w[5:10] * rot.euler_from_matrix(rot.matrix_from_expmap(e), "ZXZ")),
+                jnp.sum(w[:5] * rot.expmap_from_matrix(rot.matrix_from_euler(a, "YXZ"))),
+                jnp.sum(w[10:] * rot.expmap_from_quat(rot.quat_from_expmap(s))),
+            ]
+        )
+
+    jac = jax.jit(jax.jacrev(parts))(x0)  # [4, 15, 3]
+    f = jax.jit(parts)
+    scale = jnp.asarray([1.0] * 10 + [1e-5] * 5)[:, None]  # step relative to the input's size
+    for d in rng.normal(size=(3, 15, 3)):
+        d = jnp.asarray(d) * scale
+        h = 1e-6
+        fd = (f(x0 + h * d) - f(x0 - h * d)) / (2 * h)
+        np.testing.assert_allclose(jnp.sum(jac * d[None], axis=(1, 2)), fd, rtol=1e-6, atol=1e-9)
 
 
 def test_jacobians_closed_form(x64):
@@ -402,12 +414,17 @@ def test_jacobians_closed_form(x64):
         dtype=np.float64,
     )
     points = np.array([[0.0, 0.0, 0.0], [1e-4, -2e-4, 3e-5], [1.0, -2.0, 0.5]])
-    exp_jac = jax.jit(jax.vmap(jax.jacobian(rot.matrix_from_expmap)))
-    log_exp_jac = jax.jit(jax.vmap(jax.jacobian(lambda v: rot.expmap_from_matrix(rot.matrix_from_expmap(v)))))
+
+    def jacobians(v):
+        return (
+            jax.jacobian(rot.matrix_from_expmap)(v),
+            jax.jacobian(lambda v: rot.expmap_from_matrix(rot.matrix_from_expmap(v)))(v),
+        )
+
     for dtype, atol in ((jnp.float32, 2e-5), (jnp.float64, 1e-12)):
-        v = jnp.asarray(points, dtype)
-        np.testing.assert_allclose(np.moveaxis(exp_jac(v)[0], -1, 0), hat, atol=atol)
-        np.testing.assert_allclose(log_exp_jac(v), np.broadcast_to(np.eye(3), (3, 3, 3)), atol=atol)
+        exp_jac, log_exp_jac = jax.jit(jax.vmap(jacobians))(jnp.asarray(points, dtype))
+        np.testing.assert_allclose(np.moveaxis(exp_jac[0], -1, 0), hat, atol=atol)
+        np.testing.assert_allclose(log_exp_jac, np.broadcast_to(np.eye(3), (3, 3, 3)), atol=atol)
 
 
 # ---------------------------------------------------------------------- jit, vmap, dtypes
@@ -439,23 +456,23 @@ def _all_functions():
 
 
 def test_jit_and_vmap():
-    """jit(f)(x) == f(x) and vmap(f)(x)[i] == f(x[i]) for every function."""
+    """jit(vmap(f))(x)[i] == f(x[i]) (eager), in one compile, for the functions with structure
+    beyond elementwise arithmetic (gathers, argmax, scans, explicit broadcasting, static orders)."""
     rng = np.random.default_rng(15)
-    for f, shape in _all_functions():
-        x = jnp.asarray(rng.normal(size=(4, *shape)), jnp.float32)
-        batched = jax.jit(jax.vmap(f))(x)
-        assert batched.dtype == jnp.float32
+    fns = [_all_functions()[i] for i in (2, 3, 4, 7, 13, 14, 15, 16, 17, 18)]
+    xs = [jnp.asarray(rng.normal(size=(4, *shape)), jnp.float32) for _, shape in fns]
+    batched = jax.jit(lambda xs: [jax.vmap(f)(x) for (f, _), x in zip(fns, xs)])(xs)
+    for (f, _), x, out in zip(fns, xs, batched):
+        assert out.dtype == jnp.float32
         for i in (0, 3):
-            np.testing.assert_allclose(batched[i], f(x[i]), rtol=1e-5, atol=1e-6)
+            np.testing.assert_allclose(out[i], f(x[i]), rtol=1e-5, atol=1e-6)
 
 
 def test_dtypes_preserved(x64):
-    """float32 in, float32 out (even under x64); float64 in, float64 out."""
-    rng = np.random.default_rng(16)
+    """float32 in, float32 out (even under x64); float64 in, float64 out (traced, not run)."""
     for f, shape in _all_functions():
         for dtype in (jnp.float32, jnp.float64):
-            x = jnp.asarray(rng.normal(size=shape), dtype)
-            assert f(x).dtype == dtype
+            assert jax.eval_shape(f, jax.ShapeDtypeStruct(shape, dtype)).dtype == dtype
 
 
 def test_integer_input_becomes_float():
