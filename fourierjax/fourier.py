@@ -490,12 +490,14 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
     # Subharmonic / harmonic guard. A gait cycle is two steps; the N-harmonic model at w/2
     # contains the one at w, so residuals alone prefer subharmonics. With step events the
     # candidate (w/2, w, 2w) closest to 1 / (2 mean step) wins; without them, w/2 wins only if
-    # its odd harmonics carry real energy (and the clip holds >= 2 of its cycles), 2w wins if
-    # the odd harmonics of w are empty.
+    # its odd harmonics carry real energy (> odd_threshold of the harmonic energy, and the clip
+    # holds >= 2 of its cycles), 2w wins if the odd harmonics of w are nearly empty.
     cands = jnp.stack([omega_spec / 2, omega_spec, omega_spec * 2])
-    have_steps = jnp.isfinite(omega_steps)
-    steps_safe = jnp.where(have_steps, omega_steps, 1.0)
-    by_steps = cands[jnp.argmin(jnp.abs(jnp.log(cands / steps_safe)))]
+    steps_safe = jnp.where(jnp.isfinite(omega_steps), omega_steps, 1.0)
+    log_err = jnp.abs(jnp.log(cands / steps_safe))
+    by_steps = cands[jnp.argmin(log_err)]
+    # Steps within 25% of a candidate pick it (the spectral value is the more precise one).
+    have_steps = jnp.isfinite(omega_steps) & (jnp.min(log_err) < jnp.log(1.25))
     nh = max(num_harmonics, 2)
     odd_half = _odd_energy_fraction(features, w, t_s, omega_spec / 2, nh, cw)
     odd_full = _odd_energy_fraction(features, w, t_s, omega_spec, nh, cw)
@@ -505,7 +507,10 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         omega_spec / 2,
         jnp.where(odd_full < odd_threshold / 4, omega_spec * 2, omega_spec),
     )
-    omega_guess = jnp.where(have_steps, by_steps, by_energy)
+    # Step events that match no spectral candidate mean the spectrum is dominated by drift or
+    # style (a spectral peak below the gait band's content): the steps themselves are the guess.
+    omega_guess = jnp.where(have_steps, by_steps,
+                            jnp.where(jnp.isfinite(omega_steps), omega_steps, by_energy))
 
     def objective(om):
         return projected_residual(om, features, t_s, num_harmonics, w, cw)
@@ -577,7 +582,7 @@ def fit_batch(
     search_halfwidth: float = 0.25,
     grid_points: int = 33,
     golden_iterations: int = 40,
-    odd_threshold: float = 0.2,
+    odd_threshold: float = 0.1,
 ) -> FitResult:
     """Fit many clips in one jit/vmap call: ω three ways and the coefficients.
 
@@ -587,6 +592,9 @@ def fit_batch(
     subharmonic guard, then (c) the nonlinear least-squares ω by variable projection (grid,
     golden section on :func:`projected_residual`) and the closed-form coefficients.
     ``channel_weights`` weigh channels in the ω search (default: 1 for rotations, 0 for ``root.*``).
+    Step-based ω picks ω_spectral / 2, ω_spectral or 2 ω_spectral when one lies within 25% of
+    it, and is used itself otherwise (the spectrum is then dominated by drift or style);
+    ``search_halfwidth`` is the relative half-width of the variable-projection search around the chosen candidate.
 
     Returns:
         FitResult with a leading batch axis on every leaf.
@@ -656,7 +664,9 @@ def shift_phase(model: FourierModel, delta: Float[Array, ""]) -> FourierModel:
     ``phase_n -> wrap(phase_n + n * delta)``; amplitudes, offset and omega are unchanged.
     """
     n = jnp.arange(1, model.num_harmonics + 1, dtype=model.phase.dtype)
-    new_phase = wrap_angle(model.phase + n * jnp.asarray(delta, model.phase.dtype)[..., None, None])
+    d = jnp.asarray(delta, model.phase.dtype)
+    shift = jnp.expand_dims(d, (-2, -1)) * n.reshape((1,) * (d.ndim + 1) + (-1,))
+    new_phase = wrap_angle(model.phase + shift)
     return eqx.tree_at(lambda m: m.phase, model, new_phase)
 
 

@@ -70,6 +70,30 @@ def _np(x) -> np.ndarray:
     return np.asarray(x, dtype=np.float64)
 
 
+def _bucket(n: int) -> int:
+    """Pad lengths to a few sizes so jitted code compiles once per bucket, not per clip."""
+    return max(64, int(2 ** np.ceil(np.log2(max(n, 1)))))
+
+
+_JITTED: dict = {}
+
+
+def _rot(name: str, *arrays, **static) -> np.ndarray:
+    """``rotations.<name>(*arrays)`` on NumPy arrays whose first axis is time: padded to a
+    length bucket and run through one cached jit per function (eager JAX ops would compile
+    again for every clip length)."""
+    F = arrays[0].shape[0]
+    Fp = _bucket(F)
+    padded = [np.concatenate([a, np.repeat(a[-1:], Fp - F, axis=0)]) for a in arrays]
+    key = (name, tuple(sorted(static.items())))
+    fn = _JITTED.get(key)
+    if fn is None:
+        import functools
+
+        fn = _JITTED[key] = jax.jit(functools.partial(getattr(rotations, name), **static))
+    return _np(fn(*padded))[:F]
+
+
 def _yaw_quat(psi: np.ndarray) -> np.ndarray:
     psi = np.asarray(psi, np.float64)
     z = np.zeros_like(psi)
@@ -90,7 +114,7 @@ def _root_pose(motion) -> tuple[np.ndarray, np.ndarray]:
     order = topo.rotation_orders[0]
     if order is None or len(order) != 3:
         raise UserError(f"root joint {topo.names[0]!r} needs 3 rotation channels, got {chans}")
-    q = _np(rotations.quat_from_euler(np.radians(motion.channels[:, rot]), order))
+    q = _rot("quat_from_euler", np.radians(motion.channels[:, rot]), order=order)
     return pos, q
 
 
@@ -100,14 +124,14 @@ def heading_of(motion) -> float:
     ``psi = atan2(f_x, f_z)``; a rotation by ``psi`` about +Y takes +Z to the facing direction.
     """
     _, q = _root_pose(motion)
-    f = _np(rotations.quat_apply(q, np.array([0.0, 0.0, 1.0])))
+    f = _rot("quat_apply", q, np.tile([0.0, 0.0, 1.0], (len(q), 1)))
     s, c = f[:, 0].sum(), f[:, 2].sum()
     if np.hypot(s, c) < 1e-9 * len(f):
         return 0.0
     return float(np.arctan2(s, c))
 
 
-def make_euler_continuous(angles: np.ndarray, order: str) -> np.ndarray:
+def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndarray:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
     Every rotation has two Euler triples (Tait-Bryan ``(a, b, c) ~ (a + pi, pi - b, c + pi)``;
@@ -116,8 +140,13 @@ def make_euler_continuous(angles: np.ndarray, order: str) -> np.ndarray:
     jump of ~pi in two angles. Each frame takes, of the two triples (each unwrapped towards the
     previous frame), the one closest to the previous frame. The first frame is kept.
 
+    Frames with ``valid`` False (capture glitches) are repaired too but never serve as the
+    reference: the next valid frame follows the last valid one, so a glitch that passes near
+    gimbal lock cannot leave the rest of the clip on the other triple, 2 pi away.
+
     Arguments:
-        angles: ``[F, ..., 3]`` radians; order: the 3-letter order of the angles.
+        angles: ``[F, ..., 3]`` radians; order: the 3-letter order of the angles;
+        valid: optional ``bool [F]``.
     Returns:
         ``[F, ..., 3]`` the same rotations, continuous over the first axis.
     """
@@ -126,8 +155,10 @@ def make_euler_continuous(angles: np.ndarray, order: str) -> np.ndarray:
         return a
     proper = order[0] == order[2]
     two_pi = 2 * np.pi
+    ok = np.ones(a.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    ref = 0
     for t in range(1, a.shape[0]):
-        prev = a[t - 1]
+        prev = a[ref] if ok[t] else a[t - 1]
         cur = a[t]
         alt = np.stack([cur[..., 0] + np.pi,
                         -cur[..., 1] if proper else np.pi - cur[..., 1],
@@ -144,11 +175,13 @@ def make_euler_continuous(angles: np.ndarray, order: str) -> np.ndarray:
                 best = np.where(take[..., None], cand, best)
                 best_d = np.minimum(d, best_d)
         a[t] = best
+        if ok[t] or not ok[ref]:
+            ref = t
     return a
 
 
 def features_from_motion(
-    motion, representation: str = "euler", heading_rad: float | None = None
+    motion, representation: str = "euler", heading_rad: float | None = None, valid=None
 ) -> tuple[np.ndarray, tuple[str, ...]]:
     """Fitting features of a clip: heading-frame root velocity and height, joint rotations.
 
@@ -158,6 +191,7 @@ def features_from_motion(
             :func:`make_euler_continuous`) or ``"expmap"`` (exponential maps made continuous,
             Tilmanne & Dutoit §2.1).
         heading_rad: yaw of the heading frame; default :func:`heading_of` the clip.
+        valid: optional ``bool [F]``, False at capture glitches (Euler continuity skips them).
     Returns:
         ``(features [F, C] float64, channel_names)``: ``root.vx, root.vz`` (file units/s, by
         central differences), ``root.y`` (file units), then rotations in radians.
@@ -173,22 +207,27 @@ def features_from_motion(
     z_h = s * pos[:, 0] + c * pos[:, 2]
     dt = motion.frame_time_s
     vx, vz = np.gradient(x_h, dt), np.gradient(z_h, dt)
-    q_rel = _np(rotations.quat_multiply(_yaw_quat(-psi), q_root))
+    q_rel = _rot("quat_multiply", np.tile(_yaw_quat(-psi), (len(q_root), 1)), q_root)
     cols = [vx, vz, pos[:, 1]]
-    for j, order, idx in _rotation_joints(motion.topology):
-        if j == 0:
-            if representation == "euler":
-                ang = make_euler_continuous(_np(rotations.euler_from_quat(q_rel, order)), order)
-            else:
-                ang = _np(rotations.make_expmap_continuous(rotations.expmap_from_quat(q_rel)))
+    joints = _rotation_joints(motion.topology)
+    blocks: dict[int, np.ndarray] = {}
+    # Joints sharing a rotation order are converted together: [F, J_g, 3].
+    for order in dict.fromkeys(o for _, o, _ in joints):
+        group = [(j, idx) for j, o, idx in joints if o == order]
+        e = np.radians(motion.channels[:, np.array([idx for _, idx in group])])
+        if group[0][0] == 0:  # the root: its orientation relative to the heading frame
+            e[:, 0] = _rot("euler_from_quat", q_rel, order=order)
+        if representation == "euler":
+            ang = make_euler_continuous(e, order, valid)
         else:
-            e = np.radians(motion.channels[:, idx])
-            if representation == "euler":
-                ang = make_euler_continuous(e, order)
-            else:
-                q = rotations.quat_from_euler(e, order)
-                ang = _np(rotations.make_expmap_continuous(rotations.expmap_from_quat(q)))
-        cols += [ang[:, 0], ang[:, 1], ang[:, 2]]
+            q = _rot("quat_from_euler", e, order=order)
+            if group[0][0] == 0:
+                q[:, 0] = q_rel
+            ang = _rot("make_expmap_continuous", _rot("expmap_from_quat", q))
+        for k, (j, _) in enumerate(group):
+            blocks[j] = ang[:, k]
+    for j, _, _ in joints:
+        cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
     return np.stack(cols, axis=1), names
 
 
@@ -246,11 +285,11 @@ def motion_from_features(
         ang = x[:, col : col + 3]
         col += 3
         if j == 0 or rep == "expmap":
-            q = (rotations.quat_from_euler(ang, order) if rep == "euler"
-                 else rotations.quat_from_expmap(ang))
+            q = (_rot("quat_from_euler", ang, order=order) if rep == "euler"
+                 else _rot("quat_from_expmap", ang))
             if j == 0:
-                q = rotations.quat_multiply(_yaw_quat(heading_rad), q)
-            ang = make_euler_continuous(_np(rotations.euler_from_quat(q, order)), order)
+                q = _rot("quat_multiply", np.tile(_yaw_quat(heading_rad), (F, 1)), q)
+            ang = make_euler_continuous(_rot("euler_from_quat", q, order=order), order)
         out[:, idx] = np.degrees(ang)
     base = topo.channel_offsets[0]
     for k, ch in enumerate(topo.channels[0]):
@@ -315,6 +354,29 @@ def root_relative_positions(skeleton, features, representation: str):
     return jax.vmap(one)(jnp.asarray(features))
 
 
+def glitch_frames(motion, max_joint_speed_deg_s: float = 5000.0, pad_s: float = 0.1):
+    """Capture glitches: ``bool [F]``, True within ``pad_s`` of a frame where some joint turns
+    faster than ``max_joint_speed_deg_s`` (CMU 142_02's left arm jumps 60 degrees in one frame
+    at frame 1140; captured motion stays under ~3200 deg/s, even at toes and fingers).
+
+    ``fit_motions`` masks these frames out of the fit (time stays continuous around them).
+    """
+    F = motion.num_frames
+    glitch = np.zeros(F, bool)
+    joints = _rotation_joints(motion.topology)
+    for order in dict.fromkeys(o for _, o, _ in joints):
+        idx = np.array([i for _, o, i in joints if o == order])
+        q = _rot("quat_from_euler", np.radians(motion.channels[:, idx]), order=order)
+        dot = np.clip(np.abs(np.sum(q[1:] * q[:-1], axis=-1)), 0.0, 1.0)  # [F-1, J_g]
+        fast = np.degrees(2 * np.arccos(dot)) / motion.frame_time_s > max_joint_speed_deg_s
+        glitch[1:] |= fast.any(axis=1)
+    out = glitch.copy()
+    pad = max(1, int(round(pad_s / motion.frame_time_s)))
+    for i in np.nonzero(glitch)[0]:
+        out[max(0, i - pad) : i + pad + 1] = True
+    return out
+
+
 def steady_segment(
     motion,
     *,
@@ -330,7 +392,8 @@ def steady_segment(
     ``min_speed_fraction`` of the clip's 90th-percentile speed and its heading turns slower than
     ``max_turn_deg_s``. Clips that start from standing, stop, or walk back and forth (CMU
     142_02, 142_08) keep their longest steady run; if no run lasts ``min_duration_s`` the whole
-    clip is returned.
+    clip is returned. (Capture glitches inside it are masked by ``fit_motions``, see
+    :func:`glitch_frames`.)
 
     Arguments:
         motion: a Motion. Returns: ``(start, stop)`` frame indices into ``motion``.
@@ -378,6 +441,7 @@ class ClipFit:
     Metrics are over the fitted frames: ``rms`` per channel (radians or file units),
     ``rms_deg`` and ``variance_explained_angles`` over rotation channels,
     ``variance_explained_positions`` over root-relative joint positions (through FK).
+    ``masked_frames`` counts capture-glitch frames left out of the fit (:func:`glitch_frames`).
     """
 
     source: str | None
@@ -397,6 +461,7 @@ class ClipFit:
     variance_explained_positions: float
     left_heel_strikes: tuple[int, ...]
     right_heel_strikes: tuple[int, ...]
+    masked_frames: int = 0
 
     @property
     def fundamental_hz(self) -> float:
@@ -430,12 +495,8 @@ class ClipFit:
             "phase_shift_rad": float(self.phase_shift),
             "left_heel_strikes": list(self.left_heel_strikes),
             "right_heel_strikes": list(self.right_heel_strikes),
+            "masked_glitch_frames": self.masked_frames,
         }
-
-
-def _bucket(n: int) -> int:
-    """Pad lengths to a few sizes so jitted FK compiles once per bucket, not per clip."""
-    return max(64, int(2 ** np.ceil(np.log2(n))))
 
 
 def foot_contacts_of(motion) -> np.ndarray | None:
@@ -457,17 +518,24 @@ def foot_contacts_of(motion) -> np.ndarray | None:
 
 
 def _steps(contacts_lr, frame_time_s):
-    """(left strikes, right strikes, omega from steps or NaN): Tilmanne §2.2, cycle = 2 steps."""
+    """(left strikes, right strikes, omega from steps or NaN): Tilmanne §2.2, cycle = 2 steps.
+
+    The cycle is the MEDIAN of the strike-to-strike intervals of each foot (one full cycle
+    each), so that a spurious extra strike (stumbling, CMU 142_02) does not halve it; with fewer
+    than two strikes per foot, twice the median alternating step (``fourierjax.contacts``).
+    """
     from fourierjax import contacts
 
     if contacts_lr is None:
         return np.zeros(0, int), np.zeros(0, int), float("nan")
     left, right = contacts.step_events(contacts_lr)
-    try:
-        omega = 2 * np.pi / (2 * contacts.mean_step_period_s(contacts_lr, frame_time_s))
-    except UserError:
-        omega = float("nan")
-    return left, right, float(omega)
+    cycles = np.concatenate([np.diff(left), np.diff(right)])
+    if len(cycles):
+        period = float(np.median(cycles)) * frame_time_s
+    else:
+        steps = contacts.step_intervals(contacts_lr)
+        period = 2 * float(np.median(steps)) * frame_time_s if len(steps) else float("nan")
+    return left, right, float(2 * np.pi / period) if np.isfinite(period) else float("nan")
 
 
 def _position_ve(skeleton, representation, x, xhat, mask):
@@ -497,7 +565,8 @@ def fit_motions(
 ) -> list[ClipFit]:
     """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
 
-    Per clip: the steady straight stretch (:func:`steady_segment`, unless ``segment=False``),
+    Per clip: the steady straight stretch (:func:`steady_segment`, unless ``segment=False``)
+    with capture glitches masked out (:func:`glitch_frames`),
     its features (:func:`features_from_motion`), heel strikes from FK foot contacts
     (``fourierjax.contacts``; ω from steps, Tilmanne §2.2), then ONE batched
     :func:`fourierjax.fourier.fit_batch` call for all clips that share a channel layout (padding
@@ -521,10 +590,11 @@ def fit_motions(
     for m in motions:
         a, b = steady_segment(m) if segment else (0, m.num_frames)
         sub = m[a:b]
-        x, names = features_from_motion(sub, representation)
+        keep = ~glitch_frames(sub)
+        x, names = features_from_motion(sub, representation, valid=keep)
         c = foot_contacts_of(sub) if use_contacts else None
         left, right, om = _steps(c, sub.frame_time_s)
-        prepared.append((m, a, b, sub, x, names, left, right, om))
+        prepared.append((m, a, b, sub, x, names, left, right, om, keep))
     groups: dict[tuple[str, ...], list[int]] = {}
     for i, p in enumerate(prepared):
         groups.setdefault(p[5], []).append(i)
@@ -538,18 +608,22 @@ def fit_motions(
             x = prepared[i][4]
             feats[k, : len(x)] = x
             feats[k, len(x):] = x[-1]
-            mask[k, : len(x)] = True
+            mask[k, : len(x)] = prepared[i][9]
         dts = np.array([prepared[i][3].frame_time_s for i in idx])
         om_steps = np.array([prepared[i][8] for i in idx])
         res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
                            mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
                            representation=representation, channel_names=names, **fit_kwargs)
         for k, i in enumerate(idx):
-            m, a, b, sub, x, _, left, right, _ = prepared[i]
+            m, a, b, sub, x, _, left, right, _, keep = prepared[i]
             raw = jax.tree.map(lambda v: v[k], res.model)
             dt = sub.frame_time_s
             if len(left):
-                model, delta = fr.align_to_events(raw, jnp.asarray(left * dt, dtype))
+                # Circular mean of the strikes' phases (fourier.align_to_events, in NumPy so
+                # that clips with different strike counts share compiled code).
+                th = float(raw.omega) * np.asarray(left) * dt
+                delta = float(np.arctan2(np.sin(th).sum(), np.cos(th).sum()))
+                model = fr.shift_phase(raw, delta)
                 alignment = "left_heel_strike"
             else:
                 hip = [c for c in ("LeftUpLeg.Xrotation", "LeftUpLeg.expmap0") if c in names]
@@ -573,5 +647,6 @@ def fit_motions(
                 variance_explained_positions=float(pve),
                 left_heel_strikes=tuple(int(v) for v in left),
                 right_heel_strikes=tuple(int(v) for v in right),
+                masked_frames=int(np.sum(~keep)),
             )
     return results  # type: ignore[return-value]

@@ -16,8 +16,11 @@ COMMANDS: dict[str, str] = {
     "characteristic": "characteristic",
     "interpolate": "interpolate",
     "transition": "transition",
+    "fit": "fit",
+    "synth": "synth",
     "plot": "plot",
     "demo": "demo",
+    "stance": "stance",
 }
 
 

@@ -1,0 +1,101 @@
+"""`fourierjax synth`: synthesize a BVH motion of any length from a Fourier model file."""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+
+HELP = ("Synthesize a BVH motion from a model file, optionally with weighted characteristics "
+        "(Unuma eq. 8) and noise harmonics.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="model file written by `fourierjax fit`")
+    parser.add_argument("--seconds", required=True, type=float, metavar="S",
+                        help="length of the motion in seconds")
+    parser.add_argument("--fps", type=float, default=None, metavar="F",
+                        help="frame rate (default: the source clip's, else 120)")
+    parser.add_argument("--add", action="append", default=[], metavar="CHARACTERISTIC=WEIGHT",
+                        help="superpose a characteristic file (from `fourierjax characteristic`) "
+                        "with a weight, e.g. brisk.npz=1.37; repeatable")
+    parser.add_argument("--noise", type=float, default=0.0, metavar="X",
+                        help="amplitude in degrees of random higher harmonics on every rotation "
+                        "channel (Unuma's shivering; default 0)")
+    parser.add_argument("--noise-harmonics", type=int, default=3, metavar="K",
+                        help="number of noise harmonics above the model's N (default 3)")
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the noise (default 0)")
+    parser.add_argument("--out", required=True, metavar="OUT.bvh", help="BVH file to write")
+
+
+def _parse_add(text: str):
+    from fourierjax.errors import UserError
+
+    path, sep, weight = text.rpartition("=")
+    if not sep or not path:
+        raise UserError(f"--add: {text!r}: expected CHARACTERISTIC=WEIGHT, e.g. brisk.npz=1.37")
+    try:
+        w = float(weight)
+    except ValueError:
+        raise UserError(f"--add: {text!r}: weight {weight!r} is not a number") from None
+    return path, w
+
+
+def run(args: argparse.Namespace) -> int:
+    import math
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from fourierjax import fourier, model_io
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import write_bvh
+    from fourierjax.motion import motion_from_features
+
+    out = pathlib.Path(args.out)
+    if out.suffix.lower() != ".bvh":
+        raise UserError(f"--out: {args.out}: expected a .bvh file")
+    if not out.parent.exists():
+        raise UserError(f"--out: {out.parent}: no such directory")
+    if not (math.isfinite(args.seconds) and args.seconds > 0):
+        raise UserError(f"--seconds: must be a positive number, got {args.seconds}")
+    if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
+        raise UserError(f"--fps: must be a positive number, got {args.fps}")
+    if not math.isfinite(args.noise) or args.noise < 0:
+        raise UserError(f"--noise: must be >= 0 degrees, got {args.noise}")
+    adds = [_parse_add(a) for a in args.add]
+    mf = model_io.load_model(args.model)
+    template = mf.template_motion()
+    if template is None:
+        raise UserError(f"{args.model}: the model file carries no skeleton to write a BVH on")
+    model = mf.model
+    if adds:
+        from fourierjax import style
+        from fourierjax.cli.characteristic import load_characteristic
+
+        chars = [load_characteristic(p)[0] for p, _ in adds]
+        for (p, _), c in zip(adds, chars, strict=True):
+            if tuple(c.channel_names) != tuple(model.channel_names):
+                raise UserError(f"--add: {p}: its channels do not match the model's "
+                                f"({len(c.channel_names)} vs {model.num_channels} channels)")
+        try:
+            model = style.superpose(model, chars, jnp.asarray([w for _, w in adds]))
+        except ValueError as err:
+            raise UserError(f"--add: {err}") from None
+    if args.noise > 0:
+        from fourierjax import style
+
+        if args.noise_harmonics < 1:
+            raise UserError(f"--noise-harmonics: must be >= 1, got {args.noise_harmonics}")
+        amp = np.where(fourier.angle_channel_mask(model.channel_names), np.radians(args.noise),
+                       0.0)
+        model = style.add_noise(model, jax.random.key(args.seed), jnp.asarray(amp),
+                                harmonics=args.noise_harmonics)
+    dt = 1.0 / args.fps if args.fps else (mf.frame_time_s or 1 / 120)
+    num = max(2, int(round(args.seconds / dt)))
+    t = jnp.arange(num) * dt
+    features = np.asarray(fourier.synthesize(model, t), np.float64)
+    write_bvh(motion_from_features(template, features, model.channel_names, dt), out)
+    print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
+          f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
+    return 0

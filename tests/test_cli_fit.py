@@ -1,0 +1,92 @@
+"""Subprocess tests of `fourierjax fit` and `fourierjax synth`, with user mistakes."""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from fourierjax import data
+
+
+def _run(*args, cwd=None):
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    return subprocess.run([sys.executable, "-m", "fourierjax", *args], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=600)
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("models")
+    r = _run("fit", str(data.path("02_01")), "07_12", "--harmonics", "3", "--json",
+             "--out", str(out))
+    return r, out
+
+
+def test_fit_json_and_rest_frame_notice(fitted):
+    r, out = fitted
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert [row["file"] for row in rows] == [str(data.path("02_01")), "07_12"]
+    for row in rows:
+        for key in ("file", "fundamental_hz", "rms_deg", "variance_explained_angles",
+                    "variance_explained_positions", "frames_used", "omega_rad_s",
+                    "fundamental_hz_spectral", "fundamental_hz_steps", "alignment"):
+            assert key in row, key
+        assert 0.8 < row["fundamental_hz"] < 1.3  # walks: about one cycle per second
+        assert row["variance_explained_positions"] > 0.9
+        assert set(row["omega_rad_s"]) == {"spectral", "steps", "fit"}
+    # The T-pose (and 07_12's zero frame) is dropped with a notice; frames are file frames.
+    assert "dropped 1 leading rest frame" in r.stderr
+    assert "dropped 2 leading rest frame" in r.stderr
+    assert rows[0]["frames_used"][0] >= 1 and rows[1]["frames_used"][0] >= 2
+    assert (out / "02_01.npz").exists() and (out / "07_12.npz").exists()
+
+
+def test_synth_writes_bvh_with_characteristic_and_noise(fitted, tmp_path):
+    from fourierjax import model_io, style
+    from fourierjax.cli.characteristic import save_characteristic
+    from fourierjax.io.bvh import read_bvh
+
+    r, out = fitted
+    walk = model_io.load_model(out / "02_01.npz")
+    brisk = model_io.load_model(out / "07_12.npz")
+    char_path = tmp_path / "brisk.npz"
+    save_characteristic(char_path, style.characteristic(brisk.model, walk.model))
+    bvh = tmp_path / "out.bvh"
+    r2 = _run("synth", str(out / "02_01.npz"), "--seconds", "2", "--fps", "60",
+              "--add", f"{char_path}=1.0", "--noise", "1.5", "--out", str(bvh))
+    assert r2.returncode == 0, r2.stderr
+    m = read_bvh(bvh)
+    assert m.num_frames == 120 and abs(m.frame_time_s - 1 / 60) < 1e-6
+    assert np.all(np.isfinite(m.channels))
+    assert m.channels[-1, 2] - m.channels[0, 2] > 10  # walks forward along +Z
+    # Superposing (brisk - walk) onto the walk gives the brisk walk's gait frequency.
+    f_brisk = float(brisk.model.omega) / (2 * np.pi)
+    assert f"{f_brisk:.3f} Hz" in r2.stdout
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("fit", "07_12", "--harmonics", "0"), "--harmonics"),
+        (("fit", "no_such_clip.bvh", "--harmonics", "3"), "no such file"),
+        (("synth", "MODEL", "--seconds", "2", "--out", "x.txt"), "--out"),
+        (("synth", "BAD", "--seconds", "2", "--out", "x.bvh"), "not a fourierjax model file"),
+        (("synth", "MODEL", "--seconds", "2", "--add", "brisk.npz", "--out", "x.bvh"),
+         "CHARACTERISTIC=WEIGHT"),
+    ],
+)
+def test_user_mistakes_exit_2_with_one_line(fitted, tmp_path, args, message):
+    _, out = fitted
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not a model")
+    args = [str(out / "02_01.npz") if a == "MODEL" else str(bad) if a == "BAD" else a
+            for a in args]
+    r = _run(*args, cwd=tmp_path)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert message in r.stderr
+    assert r.stderr.startswith("fourierjax: error:") and r.stderr.count("\n") == 1
+    assert "Traceback" not in r.stderr
