@@ -1,0 +1,71 @@
+"""Solved stance poses (or an eased animation between them) as a BVH `Motion` for Blender."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fourierjax import rotations
+from fourierjax.errors import UserError
+from fourierjax.io.bvh import Motion, write_bvh
+from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose
+
+
+def ease_in_out(t):
+    """The ease-in, ease-out curve used for all transitions (Neff & Fiume, sec. 7): 3t^2 - 2t^3."""
+    t = jnp.clip(jnp.asarray(t), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def animate(poses: list[StancePose], frames_per_transition: int = 30) -> StancePose:
+    """Frames easing from each pose to the next (root lerp, joint slerp on the eased time).
+
+    Arguments:
+        poses: two or more poses to pass through (e.g. anticipation, then the action).
+        frames_per_transition: frames from one pose to the next (>= 1).
+
+    Returns:
+        A `StancePose` with a leading frame axis (`root_position [F, 3]`, `quats [F, J, 4]`).
+    """
+    if len(poses) < 2:
+        raise UserError("animate: give at least two poses")
+    if frames_per_transition < 1:
+        raise UserError("animate: frames_per_transition must be >= 1")
+    t = ease_in_out(jnp.arange(frames_per_transition) / frames_per_transition)
+    roots, quats = [], []
+    for a, b in zip(poses[:-1], poses[1:]):
+        roots.append(a.root_position[None] + t[:, None] * (b.root_position - a.root_position)[None])
+        quats.append(rotations.quat_slerp(a.quats[None], b.quats[None], t[:, None]))
+    roots.append(poses[-1].root_position[None])
+    quats.append(poses[-1].quats[None])
+    return StancePose(jnp.concatenate(roots), jnp.concatenate(quats))
+
+
+def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0) -> Motion:
+    """A BVH `Motion` of one pose (leaves `[3]`, `[J, 4]`) or of frames (`[F, 3]`, `[F, J, 4]`).
+
+    Every joint gets Z X Y rotation channels in degrees (the 48 DOFs plus zeros on the
+    non-DOF axes), the root also X Y Z positions; offsets in metres, Y up, facing +Z.
+    """
+    root = np.asarray(poses.root_position, np.float64)
+    quats = np.asarray(poses.quats, np.float64)
+    if root.ndim == 1:
+        root, quats = root[None], quats[None]
+    eul = np.degrees(np.asarray(jax.jit(rotations.euler_from_quat, static_argnums=1)(
+        jnp.asarray(quats), ROTATION_ORDER)))  # fmt: skip
+    frames = root.shape[0]
+    channels = np.concatenate([root, eul.reshape(frames, -1)], axis=1)
+    return Motion(
+        topology=TOPOLOGY,
+        offsets=np.asarray(body.offsets, np.float64),
+        end_site_offsets=np.asarray(body.skeleton.end_site_offsets, np.float64),
+        channels=channels,
+        frame_time_s=frame_time_s,
+        source=None,
+    )
+
+
+def write_stance_bvh(path, body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0):
+    """Write a pose or an animation (see `pose_to_motion`) to a BVH file that opens in Blender."""
+    if not np.isfinite(np.asarray(poses.quats)).all():
+        raise UserError("write_stance_bvh: the pose holds NaN values")
+    write_bvh(pose_to_motion(body, poses, frame_time_s), path)

@@ -1,0 +1,44 @@
+"""Gaze (Neff & Fiume 2004, sec. 5.4): the head turned toward a world point, weighted."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from fourierjax import rotations
+from fourierjax.stance import _util as u
+
+_EY = jnp.array([0.0, 1.0, 0.0])
+_EZ = jnp.array([0.0, 0.0, 1.0])
+
+
+def gaze_rotation(
+    R_head_local: Float[Array, "3 3"],
+    R_parent_world: Float[Array, "3 3"],
+    head_position: Float[Array, "3"],
+    point: Float[Array, "3"],
+    weight: Float[Array, ""],
+) -> Float[Array, "3 3"]:
+    """Local head rotation blended from its shape pose toward looking at `point`.
+
+    Full alignment (weight 1) turns the head's +Z (face) onto the direction to `point`
+    with its +Y as close to world up as possible; weight 0 keeps `R_head_local`; in between
+    is a slerp (the paper's gaze weight: how much of the gaze the head does, the eyes doing
+    the rest).
+
+    Arguments:
+        R_head_local: `[3, 3]` the head's local rotation from the spine shape.
+        R_parent_world: `[3, 3]` world rotation of the neck.
+        head_position: `[3]` world head joint.
+        point: `[3]` world point to look at.
+        weight: blend in [0, 1] (values outside extrapolate).
+
+    Returns:
+        `[3, 3]` local head rotation.
+    """
+    fwd = u.safe_normalize(point - head_position, u.mv(R_parent_world, _EZ))
+    side = u.safe_normalize(u.cross(_EY, fwd), jnp.array([1.0, 0.0, 0.0]))
+    up = u.cross(fwd, side)
+    R_look = u.mm(u.tr(R_parent_world), u.columns(side, up, fwd))
+    q = rotations.quat_slerp(
+        rotations.quat_from_matrix(R_head_local), rotations.quat_from_matrix(R_look), weight
+    )
+    return rotations.matrix_from_quat(q)

@@ -1,0 +1,333 @@
+"""A stance problem (shape vector, states, constraints) and the pose it builds (sec. 5)."""
+
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from fourierjax import rotations
+from fourierjax.errors import UserError
+from fourierjax.stance import _util as u
+from fourierjax.stance.arms import arm_free, arm_to_target
+from fourierjax.stance.balance import balance_point, broyden_2d
+from fourierjax.stance.gaze import gaze_rotation
+from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
+from fourierjax.stance.penalties import HermitePenalty, quadratic_penalty, reach_penalty
+from fourierjax.stance.skeleton48 import (
+    ANKLE,
+    COLLAR,
+    ELBOW,
+    HIP,
+    JOINT_NAMES,
+    KNEE,
+    LEFT,
+    RIGHT,
+    SHOULDER,
+    SPINE,
+    WRIST,
+    Body,
+    J,
+    StancePose,
+    center_of_mass_matrices,
+    fk_matrices,
+)
+from fourierjax.stance.torso import class_weights, collar_quats, collar_sign, spine_quats
+
+#: The numeric shape vector (Neff & Fiume sec. 6): all zeros is the neutral pose. The first
+#: six are the torso amplitudes the solver optimises (their values here are the desired
+#: points of their penalties); the rest are set directly. Radians, except the two balance
+#: shifts (fractions in [-1, 1], see `balance_point`) and the gaze weight (0..1).
+SHAPE_PARAMS: tuple[str, ...] = (
+    "sagittal", "coronal", "transverse", "collar_y", "collar_z", "abdomen_x",
+    "knee_right", "knee_left", "pelvis_x", "pelvis_y", "pelvis_z",
+    "weight_shift", "forward_shift",
+    "elbow_right", "elbow_left", "arm_out_right", "arm_out_left",
+    "swivel_right", "swivel_left",
+    "gaze_weight",
+)  # fmt: skip
+P = {name: i for i, name in enumerate(SHAPE_PARAMS)}
+NUM_AMPLITUDES = 6
+AMPLITUDES = SHAPE_PARAMS[:NUM_AMPLITUDES]
+HANDS = ("right", "left")
+
+
+class StanceProblem(eqx.Module):
+    """Everything that defines one pose to solve; all arrays, so problems batch with vmap.
+
+    - `body`, `feet`: the character and where its feet are planted.
+    - `shape`: `[20]` shape vector (`SHAPE_PARAMS`).
+    - `sagittal_weights`, `coronal_weights`: `[4]` shape-class weights (`torso`).
+    - `collar_signs`: `[2]` Y and Z collar states (+1 aligned, -1 opposed).
+    - `free`: `[6]` 1 where the solver may move a torso amplitude, 0 to hold it.
+    - `amplitude_penalty`: `HermitePenalty` with `[6]` leaves, in offsets from the desired
+      point (its `desired` is 0); `amplitude_weights` `[6]`: the w_i of eq. 5.
+    - `targets`: `[2, 3]` wrist targets (right, left); `target_active` `[2]` 0/1.
+    - `reach`: `HermitePenalty` with `[2]` leaves on the shoulder-target distance;
+      `reach_weights` `[2]`.
+    - `gaze_point`: `[3]` world point the head turns to (with the `gaze_weight` parameter).
+    - `dominant`: "right" or "left" (static): the foot that carries balance.
+    """
+
+    body: Body
+    feet: Feet
+    shape: Float[Array, "20"]
+    sagittal_weights: Float[Array, "4"]
+    coronal_weights: Float[Array, "4"]
+    collar_signs: Float[Array, "2"]
+    free: Float[Array, "6"]
+    amplitude_penalty: HermitePenalty
+    amplitude_weights: Float[Array, "6"]
+    targets: Float[Array, "2 3"]
+    target_active: Float[Array, "2"]
+    reach: HermitePenalty
+    reach_weights: Float[Array, "2"]
+    gaze_point: Float[Array, "3"]
+    dominant: str = eqx.field(static=True, default="right")
+
+
+def make_problem(
+    body: Body,
+    shape=None,
+    *,
+    feet: Feet | None = None,
+    sagittal_class: str = "straight",
+    coronal_class: str = "straight",
+    collar_y: str = "aligned",
+    collar_z: str = "aligned",
+    abdomen_offset: bool = False,
+    target_right=None,
+    target_left=None,
+    gaze_point=None,
+    amplitude_scale: float = 0.25,
+    reach_weight: float = 10.0,
+    dominant: str = "right",
+) -> StanceProblem:
+    """Build a `StanceProblem` from names (the low-level interface of sec. 3).
+
+    Arguments:
+        body: the character (`make_body`).
+        shape: `[20]` shape vector, or a dict {name: value} over `SHAPE_PARAMS` (missing
+            names are 0). Default: neutral.
+        feet: planted feet (default `make_feet(body)`).
+        sagittal_class, coronal_class: spine shape classes (`torso.SHAPE_CLASSES`).
+        collar_y, collar_z: "aligned" or "opposed".
+        abdomen_offset: let the solver move the abdomen X offset.
+        target_right, target_left: `[3]` world wrist targets (m) or None.
+        gaze_point: `[3]` world point to look at (default: 2 m ahead at eye height).
+        amplitude_scale: rad; the amplitude penalties are ((a - desired)/scale)^2 near the
+            desired point.
+        reach_weight: weight of each reach penalty in eq. 5.
+        dominant: "right" or "left".
+
+    Returns:
+        A `StanceProblem`.
+    """
+    if dominant not in ("right", "left"):
+        raise UserError(f"dominant must be 'right' or 'left', got {dominant!r}")
+    dtype = body.offsets.dtype
+    if shape is None:
+        vec = jnp.zeros(len(SHAPE_PARAMS), dtype)
+    elif isinstance(shape, dict):
+        unknown = sorted(set(shape) - set(SHAPE_PARAMS))
+        if unknown:
+            raise UserError(f"unknown shape parameter(s) {unknown}; known: {list(SHAPE_PARAMS)}")
+        vec = jnp.array([float(shape.get(n, 0.0)) for n in SHAPE_PARAMS], dtype)
+    else:
+        vec = jnp.asarray(shape, dtype)
+        if vec.shape != (len(SHAPE_PARAMS),):
+            raise UserError(f"shape must have {len(SHAPE_PARAMS)} values, got shape {vec.shape}")
+    if feet is None:
+        feet = make_feet(body)
+    targets, active = [], []
+    for hand, t in (("right", target_right), ("left", target_left)):
+        if t is None:
+            targets.append(jnp.zeros(3, dtype))
+            active.append(0.0)
+        else:
+            t = jnp.asarray(t, dtype)
+            if t.shape != (3,):
+                raise UserError(f"target_{hand} must be 3 coordinates, got shape {t.shape}")
+            targets.append(t)
+            active.append(1.0)
+    if gaze_point is None:
+        gaze_point = jnp.array([0.0, 0.94 * body.height_m, 2.0], dtype)
+    arm = arm_lengths(body)
+    free = jnp.array([1.0] * 5 + [1.0 if abdomen_offset else 0.0], dtype)
+    reach = reach_penalty(arm[0])
+    reach = HermitePenalty(*(jnp.stack([x, x]) for x in (reach.desired, reach.widths,
+                                                          reach.values, reach.slopes)))  # fmt: skip
+    return StanceProblem(
+        body=body,
+        feet=feet,
+        shape=vec,
+        sagittal_weights=class_weights("sagittal", sagittal_class),
+        coronal_weights=class_weights("coronal", coronal_class),
+        collar_signs=jnp.array([collar_sign(collar_y), collar_sign(collar_z)], dtype),
+        free=free,
+        amplitude_penalty=quadratic_penalty(jnp.zeros(NUM_AMPLITUDES), amplitude_scale),
+        amplitude_weights=jnp.ones(NUM_AMPLITUDES, dtype),
+        targets=jnp.stack(targets),
+        target_active=jnp.array(active, dtype),
+        reach=reach,
+        reach_weights=jnp.full(2, reach_weight, dtype),
+        gaze_point=jnp.asarray(gaze_point, dtype),
+        dominant=dominant,
+    )
+
+
+def arm_lengths(body: Body) -> Float[Array, "2"]:
+    """Shoulder-to-wrist length of the right and left arm (m)."""
+    off = body.offsets
+    return jnp.stack(
+        [u.safe_norm(off[ELBOW[s]]) + u.safe_norm(off[WRIST[s]]) for s in (RIGHT, LEFT)]
+    )
+
+
+class PoseInfo(eqx.Module):
+    """What `build_pose` measures on the way (all world, metres)."""
+
+    com: Float[Array, "3"]
+    shoulders: Float[Array, "2 3"]
+    wrists: Float[Array, "2 3"]
+    reach_gaps: Float[Array, "2"]
+    free_foot_gap: Float[Array, ""]
+
+
+def build_rotations(
+    problem: StanceProblem, amplitudes: Float[Array, "6"], balance_xz: Float[Array, "2"]
+) -> tuple[Float[Array, "3"], Float[Array, "joints 3 3"], PoseInfo]:
+    """`build_pose` on rotation matrices: `(root_position, local rotations [J, 3, 3], info)`."""
+    body, s = problem.body, problem.shape
+    sag, cor, trans, cy, cz, abx = (amplitudes[i] for i in range(NUM_AMPLITUDES))
+    lb = lower_body_ik(
+        body,
+        problem.feet,
+        jnp.stack([s[P["knee_right"]], s[P["knee_left"]]]),
+        balance_xz,
+        jnp.stack([s[P["pelvis_x"]], s[P["pelvis_y"]], s[P["pelvis_z"]]]),
+        problem.dominant,
+    )
+    off = body.offsets
+    L = [None] * len(JOINT_NAMES)
+    L[0] = lb.pelvis
+    for k in (RIGHT, LEFT):
+        L[HIP[k]], L[KNEE[k]], L[ANKLE[k]] = lb.hips[k], lb.knees[k], lb.ankles[k]
+    spine = spine_quats(sag, cor, trans, abx, problem.sagittal_weights, problem.coronal_weights)
+    for i, j in enumerate(SPINE):
+        L[j] = spine[i]
+    collars = collar_quats(cy, cz, problem.collar_signs)
+    # World frames of the shoulders' parents and the neck (they do not depend on the arms).
+    R_abd = u.mm(lb.pelvis, spine[0])
+    R_chest = u.mm(R_abd, spine[1])
+    p_chest = lb.root_position + u.mv(lb.pelvis, off[J["abdomen"]]) + u.mv(R_abd, off[J["chest"]])
+    R_neck = u.mm(R_chest, spine[2])
+    p_head = p_chest + u.mv(R_chest, off[J["neck"]]) + u.mv(R_neck, off[J["head"]])
+    gaps, shoulders = [], []
+    names = (("elbow_right", "arm_out_right", "swivel_right"),
+             ("elbow_left", "arm_out_left", "swivel_left"))  # fmt: skip
+    for k, side in ((RIGHT, -1.0), (LEFT, 1.0)):
+        elbow_n, out_n, swivel_n = names[k]
+        L[COLLAR[k]] = collars[k]
+        R_collar = u.mm(R_chest, collars[k])
+        p_shoulder = p_chest + u.mv(R_chest, off[COLLAR[k]]) + u.mv(R_collar, off[SHOULDER[k]])
+        shoulders.append(p_shoulder)
+        outward = lb.pelvis[:, 0] * side
+        upper = u.safe_norm(off[ELBOW[k]])
+        fore = u.safe_norm(off[WRIST[k]])
+        R_sh_t, R_el_t, gap = arm_to_target(
+            p_shoulder, R_collar, upper, fore, problem.targets[k], s[P[swivel_n]], outward
+        )
+        R_sh_f, R_el_f = arm_free(s[P[elbow_n]], s[P[out_n]], side)
+        on = problem.target_active[k] > 0.5
+        L[SHOULDER[k]] = jnp.where(on, R_sh_t, R_sh_f)
+        L[ELBOW[k]] = jnp.where(on, R_el_t, R_el_f)
+        L[WRIST[k]] = jnp.eye(3, dtype=off.dtype)
+        gaps.append(jnp.where(on, gap, 0.0))
+    L[J["head"]] = gaze_rotation(
+        spine[3], R_neck, p_head, problem.gaze_point, s[P["gaze_weight"]]
+    )
+    local = jnp.stack(L)
+    Rw, Pw = fk_matrices(body, lb.root_position, local)
+    info = PoseInfo(
+        com=center_of_mass_matrices(body, Rw, Pw),
+        shoulders=jnp.stack(shoulders),
+        wrists=Pw[jnp.array(WRIST)],
+        reach_gaps=jnp.stack(gaps),
+        free_foot_gap=lb.free_foot_gap_m,
+    )
+    return lb.root_position, local, info
+
+
+def build_pose(
+    problem: StanceProblem, amplitudes: Float[Array, "6"], balance_xz: Float[Array, "2"]
+) -> tuple[StancePose, PoseInfo]:
+    """The pose for given torso amplitudes and dominant-ankle balance offsets (sec. 5).
+
+    Lower body by the analytic IK (`ik`), spine and collars from the shape classes
+    (`torso`), arms by the analytic arm IK or elbow angle and arm-out without a target
+    (`arms`), head by gaze (`gaze`).
+
+    Returns:
+        `(pose, info)`.
+    """
+    root, local, info = build_rotations(problem, amplitudes, balance_xz)
+    return StancePose(root, rotations.quat_from_matrix(local)), info
+
+
+def desired_balance_point(problem: StanceProblem) -> Float[Array, "2"]:
+    """The (X, Z) point where the COM must project (`balance.balance_point`)."""
+    s = problem.shape
+    return balance_point(problem.body, problem.feet, s[P["weight_shift"]], s[P["forward_shift"]])
+
+
+def _com_residual(problem: StanceProblem, amplitudes, balance_xz):
+    com = build_rotations(problem, amplitudes, balance_xz)[2].com
+    return jnp.stack([com[0], com[2]]) - desired_balance_point(problem)
+
+
+def _inverse_2x2(J):
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    ok = jnp.abs(det) > 1e-12
+    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
+    return inv_det * jnp.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]])
+
+
+@jax.custom_jvp
+def balance_offsets(problem: StanceProblem, amplitudes: Float[Array, "6"]) -> Float[Array, "2"]:
+    """Dominant-ankle X/Z offsets (rad) that put the COM projection on the desired point.
+
+    Sec. 4: for a static pose the paper searches for the offsets; we solve
+    `com_xz(offsets) = goal` by Broyden's method (`balance.broyden_2d`), starting from the
+    rigid-body Jacobian (tipping the leg by a about the ankle moves the COM by ~h a, h the
+    COM height). Derivatives come from the implicit function theorem (a custom JVP:
+    d offsets = -J_b^-1 dr, with the exact J_b), so no derivative runs through the
+    iterations, and reverse mode and higher orders work.
+    """
+    b0 = jnp.zeros(2, amplitudes.dtype)
+    # X ankle offset tips the leg backward (COM -Z), Z tips it toward +X (COM +X).
+    h = 0.5 * problem.body.height_m
+    inv_j0 = jnp.array([[0.0, -1.0], [1.0, 0.0]], amplitudes.dtype) / h
+    return broyden_2d(lambda b: _com_residual(problem, amplitudes, b), b0, inv_j0, 10)
+
+
+@balance_offsets.defjvp
+def _balance_offsets_jvp(primals, tangents):
+    problem, amplitudes = primals
+    b = balance_offsets(problem, amplitudes)
+    Jb = jax.jacfwd(lambda x: _com_residual(problem, amplitudes, x))(b)
+    _, dr = jax.jvp(lambda p, a: _com_residual(p, a, b), primals, tangents)
+    return b, -_inverse_2x2(Jb) @ dr
+
+
+def balanced_pose(
+    problem: StanceProblem, amplitudes: Float[Array, "6"]
+) -> tuple[StancePose, PoseInfo, Float[Array, "2"]]:
+    """`build_pose` with the balance offsets solved (`balance_offsets`).
+
+    Returns:
+        `(pose, info, balance_xz)`.
+    """
+    b = balance_offsets(problem, amplitudes)
+    pose, info = build_pose(problem, amplitudes, b)
+    return pose, info, b

@@ -1,0 +1,154 @@
+"""The body shape solver (Neff & Fiume 2004, sec. 5.2, eq. 5): gradient-based, batched, differentiable."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import optimistix as optx
+from jaxtyping import Array, Float, Int
+
+from fourierjax.stance.penalties import hermite_penalty
+from fourierjax.stance.problem import (
+    NUM_AMPLITUDES,
+    StanceProblem,
+    balanced_pose,
+    desired_balance_point,
+)
+from fourierjax.stance.skeleton48 import StancePose
+
+
+def amplitudes_from_unknowns(problem: StanceProblem, y: Float[Array, "6"]) -> Float[Array, "6"]:
+    """Torso amplitudes: desired values plus the solver's offsets where they are free."""
+    return problem.shape[:NUM_AMPLITUDES] + problem.free * y
+
+
+def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
+    """Eq. 5, obj = sum_i w_i f_i: amplitude penalties plus active reach penalties.
+
+    `y` are offsets of the six torso amplitudes from their desired points. Held amplitudes
+    (`free == 0`) get a unit quadratic on their (ignored) offset, which keeps the minimiser
+    and its Hessian well defined.
+    """
+    amps = amplitudes_from_unknowns(problem, y)
+    pen = hermite_penalty(problem.amplitude_penalty, problem.free * y)
+    total = jnp.sum(problem.amplitude_weights * problem.free * pen)
+    total = total + 0.5 * jnp.sum((1.0 - problem.free) * y * y)
+    _, info, _ = balanced_pose(problem, amps)
+    dist = jnp.sqrt(jnp.sum((info.shoulders - problem.targets) ** 2, axis=-1) + 1e-12)
+    reach = hermite_penalty(problem.reach, dist)
+    return total + jnp.sum(problem.target_active * problem.reach_weights * reach)
+
+
+class StanceSolution(eqx.Module):
+    """A solved stance (one problem; batched solutions have a leading batch axis).
+
+    - `amplitudes`: `[6]` sagittal, coronal, transverse, collar Y, collar Z, abdomen X.
+    - `pose`: the `StancePose`; `balance_xz`: `[2]` dominant-ankle X/Z offsets (rad).
+    - `objective`: eq. 5 at the solution; `iterations`: solver steps; `converged`: bool.
+    - `com_error_m`: distance of the COM ground projection from the desired point.
+    - `reach_error_m`: `[2]` wrist-to-target distance (0 for an inactive hand; see
+      `target_active`); `reach_gap_m`: `[2]` how far a target lies beyond the arm.
+    - `free_foot_gap_m`: > 0 if the free foot could not be planted.
+    """
+
+    amplitudes: Float[Array, "6"]
+    pose: StancePose
+    balance_xz: Float[Array, "2"]
+    objective: Float[Array, ""]
+    iterations: Int[Array, ""]
+    converged: Array
+    com_error_m: Float[Array, ""]
+    reach_error_m: Float[Array, "2"]
+    reach_gap_m: Float[Array, "2"]
+    target_active: Float[Array, "2"]
+    free_foot_gap_m: Float[Array, ""]
+
+
+def _finish(problem: StanceProblem, y, obj, steps, ok) -> StanceSolution:
+    amps = amplitudes_from_unknowns(problem, y)
+    pose, info, b = balanced_pose(problem, amps)
+    goal = desired_balance_point(problem)
+    com_err = jnp.sqrt((info.com[0] - goal[0]) ** 2 + (info.com[2] - goal[1]) ** 2)
+    reach_err = problem.target_active * jnp.sqrt(
+        jnp.sum((info.wrists - problem.targets) ** 2, axis=-1) + 1e-24
+    )
+    return StanceSolution(
+        amplitudes=amps,
+        pose=pose,
+        balance_xz=b,
+        objective=obj,
+        iterations=steps,
+        converged=ok,
+        com_error_m=com_err,
+        reach_error_m=reach_err,
+        reach_gap_m=info.reach_gaps,
+        target_active=problem.target_active,
+        free_foot_gap_m=info.free_foot_gap,
+    )
+
+
+def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
+    # BFGS keeps an inverse-Hessian estimate, so a step needs no linear solve (no LAPACK in
+    # the batched path). The implicit adjoint solves with the Hessian at the optimum; BiCGStab
+    # keeps that LAPACK-free too (STYLE.md: batched LAPACK hangs on 2 cores).
+    solver = optx.BFGS(rtol=rtol, atol=atol)
+    adjoint = optx.ImplicitAdjoint(linear_solver=lx.BiCGStab(rtol=1e-8, atol=1e-10, max_steps=64))
+    y0 = jnp.zeros(NUM_AMPLITUDES, problem.shape.dtype)
+    sol = optx.minimise(
+        objective, solver, y0, args=problem, max_steps=max_steps, throw=False, adjoint=adjoint
+    )
+    ok = sol.result == optx.RESULTS.successful
+    obj = objective(sol.value, problem)
+    return _finish(problem, sol.value, obj, sol.stats["num_steps"], ok)
+
+
+@eqx.filter_jit
+def solve_stance(
+    problem: StanceProblem, rtol: float = 1e-6, atol: float = 1e-6, max_steps: int = 200
+) -> StanceSolution:
+    """Solve one stance: torso amplitudes minimising eq. 5 with balance and analytic IK inside.
+
+    Differentiable with respect to every array in `problem` (intensity, targets, feet, body)
+    through the optimum by implicit differentiation (optimistix `ImplicitAdjoint`).
+
+    Arguments:
+        problem: a `StanceProblem` (`make_problem` or a shape set's `problem`).
+        rtol, atol: BFGS tolerances on the step and gradient.
+        max_steps: iteration limit (`converged` is False if hit).
+
+    Returns:
+        A `StanceSolution`.
+    """
+    return _solve_one(problem, rtol, atol, max_steps)
+
+
+@eqx.filter_jit
+def solve_stances(
+    problems: StanceProblem,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    max_steps: int = 200,
+    batch_size: int | None = None,
+) -> StanceSolution:
+    """Solve a batch of stances (problems stacked along a leading axis) in one call.
+
+    vmapped; with `batch_size` the batch is processed in chunks of that size
+    (`jax.lax.map`), which bounds memory and, under vmap, the number of iterations a hard
+    problem imposes on easy ones.
+
+    Returns:
+        A `StanceSolution` whose leaves have a leading batch axis.
+    """
+    arrays, static = eqx.partition(problems, eqx.is_array)
+
+    def one(a):
+        return _solve_one(eqx.combine(a, static), rtol, atol, max_steps)
+
+    if batch_size is None:
+        return jax.vmap(one)(arrays)
+    return jax.lax.map(one, arrays, batch_size=batch_size)
+
+
+def stack_problems(problems: list[StanceProblem]) -> StanceProblem:
+    """Stack same-structure problems along a new leading axis (for `solve_stances`)."""
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *problems)
