@@ -488,14 +488,20 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     def points(f):
         return _pose_points(skeleton, rep, idx, groins, f)
 
-    foot_local, groin_local = jax.vmap(points)(feats)
-    # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule.
-    grid = jnp.linspace(0.0, 2 * jnp.pi, num_cycle_samples, endpoint=False, dtype=phase.dtype)
-    cyc_feet, cyc_groins = jax.vmap(points)(synthesize_phase(stepped, grid))
+    # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule; the sole
+    # clearances (if not given) from a cycle of the unstepped model (the foot's geometry must
+    # not change with the step length). One vmapped FK over all poses: one FK graph to compile.
+    K = num_cycle_samples
+    grid = jnp.linspace(0.0, 2 * jnp.pi, K, endpoint=False, dtype=phase.dtype)
+    poses = [feats, synthesize_phase(stepped, grid)]
     if clearance is None:
-        # From the unstepped model: the sole geometry must not change with the step length.
-        base_feet, _ = jax.vmap(points)(synthesize_phase(model, grid))
-        clearance = estimate_sole_clearance(base_feet, up_axis=up_axis)
+        poses.append(synthesize_phase(model, grid))
+    all_feet, all_groins = jax.vmap(points)(jnp.concatenate(poses, axis=0))
+    foot_local, groin_local = all_feet[:num_frames], all_groins[:num_frames]
+    cyc_feet = all_feet[num_frames : num_frames + K]
+    cyc_groins = all_groins[num_frames : num_frames + K]
+    if clearance is None:
+        clearance = estimate_sole_clearance(all_feet[num_frames + K :], up_axis=up_axis)
     soft = temperature if rule == "smooth" else None
     cyc_leg = leg_heights(cyc_groins, cyc_feet, clearance, up_axis=up_axis, temperature=soft)
     leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
