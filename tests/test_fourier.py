@@ -1,0 +1,241 @@
+"""Tests of fourierjax.fourier on synthetic signals (closed forms, finite differences, vmap)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import fourier as F
+
+
+def _model(rng, C=5, N=3, omega=2 * np.pi * 1.1, fundamental_scale=3.0, names=()):
+    """Random model whose fundamental dominates (like a gait), phases in (-pi, pi]."""
+    amp = rng.uniform(0.1, 1.0, size=(C, N))
+    amp[:, 0] *= fundamental_scale
+    return F.FourierModel(
+        jnp.asarray(rng.normal(size=C)), jnp.asarray(amp),
+        jnp.asarray(rng.uniform(-np.pi, np.pi, size=(C, N))), jnp.asarray(omega),
+        "euler", names,
+    )
+
+
+def _eq1(model, theta):
+    """Unuma 1995 eq. 1 written out term by term in numpy (the reference)."""
+    off, amp, ph = (np.asarray(x, np.float64) for x in (model.offset, model.amplitude,
+                                                        model.phase))
+    out = np.tile(off, (len(theta), 1))
+    for n in range(amp.shape[1]):
+        out += amp[:, n] * np.sin((n + 1) * theta[:, None] + ph[:, n])
+    return out
+
+
+def test_synthesize_matches_eq1_and_time_equals_phase(x64):
+    rng = np.random.default_rng(0)
+    m = _model(rng)
+    t = np.linspace(-1.0, 3.0, 97)
+    np.testing.assert_allclose(F.synthesize(m, t), _eq1(m, float(m.omega) * t), atol=1e-12)
+    np.testing.assert_allclose(F.synthesize_phase(m, float(m.omega) * t), F.synthesize(m, t),
+                               atol=1e-12)
+
+
+def test_cosine_convention_and_style_vector(x64):
+    rng = np.random.default_rng(1)
+    m = _model(rng, C=54, N=2)
+    off, amp, phc = m.to_cosine()
+    t = np.linspace(0, 2, 50)
+    w = float(m.omega)
+    # Tilmanne eq. 1: p0 + sum p_n cos(n w t + phi_n).
+    ref = np.asarray(off)[None] + sum(
+        np.asarray(amp)[:, n] * np.cos((n + 1) * w * t[:, None] + np.asarray(phc)[:, n])
+        for n in range(2)
+    )
+    np.testing.assert_allclose(F.synthesize(m, t), ref, atol=1e-12)
+    assert np.all(np.asarray(phc) > -np.pi) and np.all(np.asarray(phc) <= np.pi)
+    back = F.FourierModel.from_cosine(off, amp, phc, m.omega)
+    np.testing.assert_allclose(back.phase, m.phase, atol=1e-12)
+    v = m.style_vector()
+    assert v.shape == (271,)  # Tilmanne: 54 channels x 5 + omega
+    assert float(v[-1]) == float(m.omega) and float(v[0]) == float(m.offset[0])
+    for conv in ("sine", "cosine"):
+        r = F.FourierModel.from_style_vector(m.style_vector(conv), 54, 2, convention=conv)
+        np.testing.assert_allclose(r.amplitude, m.amplitude, atol=1e-12)
+        np.testing.assert_allclose(F.wrap_angle(r.phase - m.phase), 0, atol=1e-12)
+    with pytest.raises(ValueError, match="vector shape"):
+        F.FourierModel.from_style_vector(v[:-1], 54, 2)
+
+
+def test_model_validation():
+    z = jnp.zeros((3, 2))
+    with pytest.raises(ValueError, match="offset"):
+        F.FourierModel(jnp.zeros(4), z, z, jnp.asarray(1.0))
+    with pytest.raises(ValueError, match="amplitude"):
+        F.FourierModel(jnp.zeros(3), z, jnp.zeros((3, 3)), jnp.asarray(1.0))
+    with pytest.raises(ValueError, match="representation"):
+        F.FourierModel(jnp.zeros(3), z, z, jnp.asarray(1.0), "quaternion")
+    with pytest.raises(ValueError, match="channel_names"):
+        F.FourierModel(jnp.zeros(3), z, z, jnp.asarray(1.0), "euler", ("a", "b"))
+
+
+def test_vmap_over_characters_and_phase_shift(x64):
+    rng = np.random.default_rng(2)
+    models = [_model(rng) for _ in range(3)]
+    stacked = F.stack_models(models)
+    t = np.linspace(0, 1.5, 40)
+    out = jax.vmap(F.synthesize, in_axes=(0, None))(stacked, t)
+    for i, m in enumerate(models):
+        np.testing.assert_allclose(out[i], F.synthesize(m, t), atol=1e-12)
+    m = models[0]
+    theta = np.linspace(-3, 9, 61)
+    shifted = F.shift_phase(m, 0.7)
+    np.testing.assert_allclose(F.synthesize_phase(shifted, theta),
+                               F.synthesize_phase(m, theta + 0.7), atol=1e-12)
+    assert np.all(np.abs(np.asarray(shifted.phase)) <= np.pi)
+
+
+def test_fit_linear_inverts_synthesize_with_partial_cycles_and_mask(x64):
+    rng = np.random.default_rng(3)
+    m = _model(rng, C=6, N=4)
+    T = 173  # 1.6 cycles: not a whole number
+    t = np.arange(T) / 120.0
+    x = np.asarray(F.synthesize(m, t))
+    fitted = F.fit_linear(x, t, m.omega, 4)
+    np.testing.assert_allclose(fitted.offset, m.offset, atol=1e-6)
+    np.testing.assert_allclose(fitted.amplitude, m.amplitude, atol=1e-6)
+    np.testing.assert_allclose(F.wrap_angle(fitted.phase - m.phase), 0, atol=1e-6)
+    # Garbage in padded frames is ignored under the mask.
+    xp = np.concatenate([x, rng.normal(size=(40, 6)) * 100])
+    tp = np.arange(T + 40) / 120.0
+    mask = np.arange(T + 40) < T
+    fp = F.fit_linear(xp, tp, m.omega, 4, mask=mask)
+    np.testing.assert_allclose(fp.amplitude, m.amplitude, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def batch_problem():
+    """64 band-limited clips of different lengths and fundamentals, padded to one length."""
+    rng = np.random.default_rng(4)
+    B, T, C, N = 64, 320, 4, 2
+    models, feats, mask = [], np.zeros((B, T, C)), np.zeros((B, T), bool)
+    lengths = rng.integers(200, T + 1, size=B)
+    omegas = 2 * np.pi * rng.uniform(0.8, 1.6, size=B)
+    for b in range(B):
+        m = _model(rng, C=C, N=N, omega=omegas[b])
+        models.append(m)
+        feats[b] = _eq1(m, float(m.omega) * np.arange(T) / 120.0)
+        feats[b, lengths[b]:] = 0.0  # padding
+        mask[b, : lengths[b]] = True
+    return models, feats, mask, lengths, N
+
+
+@pytest.mark.timeout(240)
+def test_batched_variable_projection_fit_recovers_models(batch_problem, x64):
+    """fit ∘ synthesize is the identity (to 1e-6, x64) at >= 64 problems in one call; this
+    also guards against the batched-linalg hang (pytest timeout)."""
+    models, feats, mask, lengths, N = batch_problem
+    res = F.fit_batch(jnp.asarray(feats), jnp.full((len(models),), 1 / 120.0), N,
+                      mask=jnp.asarray(mask), channel_weights=jnp.ones(feats.shape[2]))
+    om = np.array([float(m.omega) for m in models])
+    np.testing.assert_allclose(res.omega_fit, om, rtol=1e-8)
+    for b, m in enumerate(models):
+        np.testing.assert_allclose(res.model.amplitude[b], m.amplitude, atol=1e-6)
+        np.testing.assert_allclose(F.wrap_angle(res.model.phase[b] - m.phase), 0, atol=1e-6)
+        np.testing.assert_allclose(res.model.offset[b], m.offset, atol=1e-6)
+    assert np.all(np.asarray(res.rms_deg) < 1e-4)
+    assert np.all(np.asarray(res.variance_explained_angles) > 1 - 1e-10)
+    np.testing.assert_array_equal(res.num_frames, lengths)
+    # The spectral peak is the fundamental or, where the 2nd harmonic dominates, twice it;
+    # the guard and variable projection do the rest.
+    ratio = np.asarray(res.omega_spectral) / om
+    assert np.all((np.abs(ratio - 1) < 0.1) | (np.abs(ratio - 2) < 0.2))
+
+
+def test_subharmonic_guard(x64):
+    """A gait whose spectrum peaks at the step frequency (2nd harmonic) still gets the cycle
+    frequency: by odd-harmonic energy, or by step events when given."""
+    rng = np.random.default_rng(5)
+    m = _model(rng, C=4, N=3, omega=2 * np.pi * 0.9, fundamental_scale=1.0)
+    amp = np.asarray(m.amplitude).copy()
+    amp[:, 1] = 3.0  # step frequency dominates the spectrum
+    amp[:, 0] = 1.2
+    m = F.FourierModel(m.offset, jnp.asarray(amp), m.phase, m.omega)
+    x = F.synthesize(m, np.arange(600) / 120.0)
+    r = F.fit(x, 1 / 120.0, 3, channel_weights=jnp.ones(4))
+    assert abs(float(r.omega_spectral) / float(m.omega) - 2) < 0.05  # the peak is 2 omega
+    np.testing.assert_allclose(float(r.omega_fit), float(m.omega), rtol=1e-7)
+    # A pure step-frequency signal: the guard keeps the spectral peak without step events,
+    # but step events (one cycle = two steps) give the cycle frequency.
+    x2 = np.asarray(F.synthesize(m, np.arange(600) / 120.0)) - np.asarray(
+        F.synthesize(F.FourierModel(m.offset * 0, jnp.asarray(amp * [1, 0, 1]), m.phase,
+                                    m.omega), np.arange(600) / 120.0))
+    r2 = F.fit(x2, 1 / 120.0, 3, channel_weights=jnp.ones(4))
+    np.testing.assert_allclose(float(r2.omega_fit), 2 * float(m.omega), rtol=1e-6)
+    r3 = F.fit(x2, 1 / 120.0, 3, channel_weights=jnp.ones(4), omega_steps=float(m.omega) * 1.03)
+    np.testing.assert_allclose(float(r3.omega_guess), float(r2.omega_spectral) / 2, rtol=1e-9)
+
+
+def test_synthesis_loss_gradients_match_finite_differences(x64):
+    rng = np.random.default_rng(6)
+    m = _model(rng, C=3, N=2)
+    t = np.linspace(0, 2, 50)
+    target = rng.normal(size=(50, 3))
+
+    @jax.jit
+    def loss(model):
+        return jnp.sum((F.synthesize(model, t) - target) ** 2)
+
+    g = jax.jit(jax.grad(loss))(m)
+    leaves, _ = jax.tree.flatten(g)
+    assert all(np.all(np.isfinite(np.asarray(leaf))) for leaf in leaves)
+    eps = 1e-6
+    for field in ("offset", "amplitude", "phase", "omega"):
+        val = np.asarray(getattr(m, field))
+        grad = np.asarray(getattr(g, field))
+        for idx in list(np.ndindex(val.shape))[:4]:
+            def with_delta(d, idx=idx, field=field, val=val):
+                v = val.copy()
+                v[idx] += d
+                return float(loss(eqx_replace(m, field, jnp.asarray(v))))
+
+            fd = (with_delta(eps) - with_delta(-eps)) / (2 * eps)
+            np.testing.assert_allclose(grad[idx], fd, rtol=1e-5, atol=1e-6)
+    # Gradients through the fit (variable projection) are finite too, also at zero amplitude.
+    z = F.FourierModel.from_sin_cos(jnp.zeros(3), jnp.zeros((3, 2)), jnp.zeros((3, 2)), 6.0)
+    gz = jax.grad(lambda a: loss(F.FourierModel.from_sin_cos(z.offset, a, a, z.omega)))(
+        jnp.zeros((3, 2)))
+    assert np.all(np.isfinite(np.asarray(gz)))
+    gw = jax.grad(F.projected_residual)(jnp.asarray(6.0), jnp.asarray(target), jnp.asarray(t), 2)
+    assert np.isfinite(float(gw))
+
+
+def eqx_replace(model, field, value):
+    import equinox as eqx
+
+    return eqx.tree_at(lambda m: getattr(m, field), model, value)
+
+
+def test_alignment_and_metrics(x64):
+    rng = np.random.default_rng(7)
+    m = _model(rng, C=3, N=2)
+    w = float(m.omega)
+    events = np.array([0.3, 0.3 + 2 * np.pi / w, 0.3 + 4 * np.pi / w])
+    aligned, delta = F.align_to_events(m, events)
+    np.testing.assert_allclose(float(delta), F.wrap_angle(w * 0.3), atol=1e-12)
+    np.testing.assert_allclose(F.synthesize_phase(aligned, np.zeros(1))[0],
+                               F.synthesize(m, np.array([0.3]))[0], atol=1e-12)
+    c = 1
+    d = F.channel_event_phase(m, c)
+    peak = F.shift_phase(m, d)
+    assert abs(float(F.wrap_angle(peak.phase[c, 0] - np.pi / 2))) < 1e-12
+    t = np.arange(240) / 120.0
+    x = np.asarray(F.synthesize(m, t))
+    np.testing.assert_allclose(F.rms_error(m, x, t), 0, atol=1e-12)
+    noisy = x + 0.1 * np.sin(37 * t)[:, None]
+    np.testing.assert_allclose(F.rms_error(m, noisy, t), 0.1 / np.sqrt(2), rtol=0.02)
+    assert float(F.variance_explained(x, x)) == 1.0
+    np.testing.assert_allclose(F.energy_per_harmonic(m), 0.5 * np.asarray(m.amplitude) ** 2)
+    # Amplitude spectrum: a sinusoid on a bin shows its amplitude (Tilmanne Fig. 1).
+    T = 240
+    s = 2.5 * np.sin(2 * np.pi * 6 * np.arange(T) / T)[:, None]
+    freqs, amp = F.amplitude_spectrum(s, 1 / 120.0)
+    np.testing.assert_allclose(float(amp[6, 0]), 2.5, rtol=1e-9)
+    np.testing.assert_allclose(float(freqs[6]), 3.0)

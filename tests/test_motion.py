@@ -1,0 +1,203 @@
+"""Tests of fourierjax.motion on the bundled CMU clips: features, segments, the issue-3 acceptance."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from fourierjax import data, fourier
+from fourierjax import motion as M
+from fourierjax.kinematics import fk_frames
+
+CMU_MB = ("02_01", "02_03", "07_01", "07_04", "07_12", "09_01", "09_02")
+ALL = CMU_MB + ("142_02", "142_08")
+
+
+@pytest.fixture(scope="module")
+def motions():
+    # data.load drops the T-pose (and 07_12's zero frame): motion from frame 1 (07_12: 2).
+    return {n: data.load(n) for n in ALL}
+
+
+@pytest.fixture(scope="module")
+def fits(motions):
+    """One batched fit per harmonics count, all clips in one call each (float32)."""
+    clips = [motions[n] for n in ALL]
+    return {N: dict(zip(ALL, M.fit_motions(clips, N, "euler"), strict=True)) for N in (2, 3, 7)}
+
+
+def _basis(theta, N):
+    n = np.arange(1, N + 1)
+    return np.concatenate([np.ones((len(theta), 1)), np.sin(theta[:, None] * n),
+                           np.cos(theta[:, None] * n)], axis=1)
+
+
+def _exhaustive_omega(x, dt, weights, frame_weights=None, f_lo=0.4, f_hi=3.0, step_hz=0.001,
+                      N=3):
+    """Reference: the omega minimising the N-harmonic least-squares residual on a fine grid of
+    frequencies (plain numpy normal equations for all grid points at once, float64; independent
+    of fourierjax.fourier)."""
+    T = len(x)
+    fw = np.ones(T) if frame_weights is None else np.asarray(frame_weights, float)
+    t = np.arange(T) * dt
+    xc = x - (fw @ x) / fw.sum()
+    freqs = np.arange(f_lo, f_hi, step_hz)
+    n = np.arange(1, N + 1)
+    th = 2 * np.pi * freqs[:, None, None] * t[None, :, None] * n  # [K, T, N]
+    B = np.concatenate([np.ones((len(freqs), T, 1)), np.sin(th), np.cos(th)], axis=2)
+    Bw = B * fw[None, :, None]
+    G = np.einsum("ktp,ktq->kpq", Bw, B)
+    rhs = np.einsum("ktp,tc->kpc", Bw, xc)
+    coef = np.linalg.solve(G, rhs)
+    # Weighted residual: sum_c w_c (|x_c|^2 - rhs_c . coef_c) (the projection identity).
+    sse = (fw @ (xc**2)) @ weights - np.einsum("kpc,kpc,c->k", rhs, coef, weights)
+    return 2 * np.pi * freqs[np.argmin(sse)]
+
+
+def test_make_euler_continuous_repairs_gimbal_flips():
+    # A smooth rotation path through pitch = 90 degrees: scipy's ZYX Euler angles flip there.
+    t = np.linspace(0, 1, 200)
+    rot = Rotation.from_euler("ZYX", np.stack([0.3 * t, -0.3 + 2.2 * t, 0.5 - 0.4 * t], 1))
+    raw = rot.as_euler("ZYX")
+    assert np.max(np.abs(np.diff(raw, axis=0))) > 1.0  # the flip is there
+    fixed = M.make_euler_continuous(raw, "ZYX")
+    assert np.max(np.abs(np.diff(fixed, axis=0))) < 0.05
+    np.testing.assert_allclose(Rotation.from_euler("ZYX", fixed).as_matrix(), rot.as_matrix(),
+                               atol=1e-9)
+    # Proper Euler orders have their own twin: (a + pi, -b, c + pi).
+    a = np.array([[0.3, 0.4, -0.2]])
+    twin = np.array([[0.3 + np.pi, -0.4, -0.2 + np.pi]])
+    np.testing.assert_allclose(Rotation.from_euler("ZXZ", twin).as_matrix(),
+                               Rotation.from_euler("ZXZ", a).as_matrix(), atol=1e-12)
+    np.testing.assert_allclose(M.make_euler_continuous(np.concatenate([a, twin]), "ZXZ")[1],
+                               a[0], atol=1e-12)
+
+
+@pytest.mark.parametrize("representation", ["euler", "expmap"])
+def test_features_round_trip(motions, representation):
+    """motion -> features -> motion keeps every joint where it was (FK, root-relative) and
+    the root path to within 0.05 units (1 unit ~ 5.6 cm)."""
+    m = motions["142_08"][1000:1128]  # a walk away from +Z, so the heading frame matters
+    x, names = M.features_from_motion(m, representation)
+    assert names == M.channel_names_for(m.topology, representation)
+    assert names[:3] == fourier.ROOT_CHANNELS
+    psi = M.heading_of(m)
+    back = M.motion_from_features(m, x, names, m.frame_time_s, heading_rad=psi,
+                                  start_xz=(m.channels[0, 0], m.channels[0, 2]))
+    p0 = np.asarray(fk_frames(m.skeleton(), jnp.asarray(m.channels)).positions)
+    p1 = np.asarray(fk_frames(m.skeleton(), jnp.asarray(back.channels)).positions)
+    np.testing.assert_allclose(p1[:, 0], p0[:, 0], atol=0.05)
+    np.testing.assert_allclose(p1 - p1[:, :1], p0 - p0[:, :1], atol=2e-3)
+    # Root velocity in the heading frame points forward (+z) for a walk.
+    assert np.mean(x[:, 1]) > 5 * abs(np.mean(x[:, 0]))
+    assert np.max(np.abs(np.diff(x[:, 3:], axis=0))) < 0.2  # continuous rotations
+
+
+def test_steady_segment(motions):
+    for n in CMU_MB:
+        a, b = M.steady_segment(motions[n])
+        assert (b - a) >= 0.9 * motions[n].num_frames, n
+    for n in ("142_02", "142_08"):
+        m = motions[n]
+        a, b = M.steady_segment(m)
+        assert (b - a) * m.frame_time_s > 1.5, n
+        pos = m.channels[a:b, [0, 2]]
+        v = np.diff(pos[:: 30], axis=0)
+        heading = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+        assert np.ptp(heading) < np.radians(30), n  # straight
+    # The left-arm glitch of 142_02 (frame 1140) is found, and masked out of fits.
+    g = M.glitch_frames(motions["142_02"])
+    assert g[1140] and 0 < g.sum() < 60
+
+
+def test_fundamental_matches_exhaustive_search(fits, motions):
+    """Acceptance: omega of every walk and run within 2% of the exhaustive N = 3 residual search.
+
+    142_02 ("clumsy") is left out of this check: on its steady stretch the N = 3 residual
+    decreases all the way down to the lower band edge (its non-periodic content is fitted by a
+    subharmonic whose 3rd harmonic is the gait), so that search is no reference there; its ω is
+    checked against the heel strikes instead.
+    """
+    for n in CMU_MB + ("142_08",):
+        f = fits[3][n]
+        sub = motions[n][f.frame_start:f.frame_stop]
+        keep = ~M.glitch_frames(sub)
+        x, names = M.features_from_motion(sub, "euler", valid=keep)
+        w = np.asarray(fourier.angle_channel_mask(names), float)
+        ref = _exhaustive_omega(x, sub.frame_time_s, w, keep)
+        assert abs(f.omega_fit / ref - 1) < 0.02, (n, f.omega_fit, ref)
+        if np.isfinite(f.omega_steps):  # (b) agrees with (c) too
+            assert abs(f.omega_steps / f.omega_fit - 1) < 0.06, (n, f.omega_steps)
+        assert abs(f.omega_spectral / f.omega_fit - 1) < 0.25, (n, f.omega_spectral)
+    clumsy = fits[3]["142_02"]
+    assert abs(clumsy.omega_fit / clumsy.omega_steps - 1) < 0.25
+
+
+def test_fit_quality_acceptance(fits):
+    for n in CMU_MB:
+        assert fits[2][n].variance_explained_positions >= 0.97, (n, fits[2][n].summary())
+        assert fits[7][n].rms_deg <= 2.5, (n, fits[7][n].summary())
+        # More harmonics never fit worse.
+        assert fits[2][n].rms_deg >= fits[3][n].rms_deg >= fits[7][n].rms_deg - 1e-4, n
+    for N in (2, 3, 7):
+        for n in ALL:
+            assert fits[N][n].alignment == "left_heel_strike", (N, n)
+            assert len(fits[N][n].left_heel_strikes) >= 1
+
+
+def test_batched_fit_equals_single_fits(fits, motions):
+    """The batched call (padding + masks) gives each clip's own fit."""
+    rows = []
+    for n in ALL:
+        f = fits[3][n]
+        sub = motions[n][f.frame_start:f.frame_stop]
+        keep = ~M.glitch_frames(sub)
+        rows.append((M.features_from_motion(sub, "euler", valid=keep), sub.frame_time_s,
+                     f.omega_steps, keep))
+    T = M._bucket(max(len(x) for (x, _), _, _, _ in rows))
+    names = rows[0][0][1]
+    for n, ((x, _), dt, om_steps, keep) in zip(ALL, rows, strict=True):
+        pad = np.concatenate([x, np.zeros((T - len(x), x.shape[1]))])
+        mask = np.concatenate([keep, np.zeros(T - len(x), bool)])
+        single = fourier.fit(jnp.asarray(pad, jnp.float32), dt, 3, mask=mask,
+                             omega_steps=om_steps if np.isfinite(om_steps) else None,
+                             channel_names=names)
+        np.testing.assert_allclose(float(single.omega_fit), fits[3][n].omega_fit, rtol=1e-4)
+        np.testing.assert_allclose(single.model.amplitude, fits[3][n].raw_model.amplitude,
+                                   atol=2e-3)
+
+
+def test_alignment_is_independent_of_the_start_frame(motions):
+    """The same clip cut at two start frames gives the same aligned model."""
+    m = motions["02_01"]
+    a, b = M.fit_motions([m[0:300], m[41:341]], 3, "euler", segment=False)
+    assert a.alignment == b.alignment == "left_heel_strike"
+    assert abs(a.raw_model.phase[10, 0] - b.raw_model.phase[10, 0]) > 0.3  # raw phases differ
+    np.testing.assert_allclose(a.omega_fit, b.omega_fit, rtol=0.01)
+    # The shifts differ by the 41 frames of cycle phase between the two cuts.
+    expected = a.phase_shift - b.omega_fit * 41 * m.frame_time_s
+    assert abs(float(fourier.wrap_angle(b.phase_shift - expected))) < 0.1
+    theta = jnp.linspace(0, 2 * np.pi, 60)
+
+    def curve_rms_deg(ma, mb):
+        ya = np.asarray(fourier.synthesize_phase(ma, theta))[:, 3:]
+        yb = np.asarray(fourier.synthesize_phase(mb, theta))[:, 3:]
+        return np.degrees(np.sqrt(np.mean((ya - yb) ** 2)))
+
+    # Aligned: the same cycle (measured: 0.6 deg); raw phases: a different one (10 deg).
+    assert curve_rms_deg(a.model, b.model) < 1.0
+    assert curve_rms_deg(a.raw_model, b.raw_model) > 5.0
+
+
+def test_positions_metric_uses_fk(motions):
+    m = motions["07_01"][:120]
+    x, names = M.features_from_motion(m, "expmap")
+    sk = m.skeleton()
+    p = M.root_relative_positions(sk, jnp.asarray(x), "expmap")
+    ref = np.asarray(fk_frames(sk, jnp.asarray(m.channels)).positions)
+    ref = ref - ref[:, :1]
+    # Same up to the heading rotation (small for 07_01, which walks along +Z).
+    psi = M.heading_of(m)
+    c, s = np.cos(psi), np.sin(psi)
+    rot = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
+    np.testing.assert_allclose(np.asarray(p), ref @ rot.T, atol=2e-3)
