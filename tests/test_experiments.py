@@ -1,0 +1,89 @@
+"""Every experiment runs at its small setting (subprocess) and writes its tables and figures;
+experiment configs are validated with messages that name the key."""
+
+import json
+import pathlib
+import subprocess
+import sys
+
+import pytest
+
+from fourierjax.config import ConfigError, load_experiment_config
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+CONFIGS = sorted((ROOT / "configs" / "experiments").glob("*.toml"))
+
+OUTPUTS = {
+    "fit_quality": ["fit_quality.csv", "fit_quality.md", "troje_comparison.md",
+                    "variance_vs_harmonics.png"],
+    "style": ["interpolation.csv", "superposition.md", "checks.json", "style_metrics.png",
+              "interpolation_strip.png"],
+    "hip_rule": ["hip_rule_sweep.csv", "step_sweep.md", "hip_rule_sweep.png"],
+    "stance": ["stance.csv", "solver_summary.json", "posture_range_posture.png"],
+}
+
+
+@pytest.mark.parametrize("name", list(OUTPUTS))
+def test_experiment_runs_small(name, tmp_path):
+    r = subprocess.run([sys.executable, "-m", f"experiments.{name}", "--small", "--out",
+                        str(tmp_path)], cwd=ROOT, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    for f in OUTPUTS[name]:
+        assert (tmp_path / name / f).stat().st_size > 0, f
+    if name == "fit_quality":
+        rows = json.loads((tmp_path / name / "fit_quality.json").read_text())
+        for clip in ("07_01", "09_01"):
+            ve = {r["harmonics"]: r["variance_explained_positions"] for r in rows
+                  if r["clip"] == clip}
+            assert ve[1] < ve[2] < ve[3] and ve[2] > 0.97  # more harmonics, better fit
+    if name == "style":
+        checks = json.loads((tmp_path / name / "checks.json").read_text())
+        assert checks["interpolate_s0_equals_normal_max_abs"] < 1e-5
+        assert checks["brisk_walk_as_normal_plus_w_tired"] < 0  # brisk = extrapolated s < 0
+    if name == "stance":
+        s = json.loads((tmp_path / name / "solver_summary.json").read_text())
+        assert s["all_converged"]
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda p: p.stem)
+def test_shipped_configs_are_valid(path):
+    for small in (False, True):
+        cfg = load_experiment_config(path, small=small)
+        assert cfg["experiment"] == path.stem and cfg["small"] is small
+
+
+@pytest.mark.parametrize("text, message", [
+    ('experiment = "fit_quality"\nclips = ["07_01"]\nharmonics = [1]\nbogus = 1\n',
+     "unknown key 'bogus'"),
+    ('experiment = "fit_quality"\nclips = ["07_01"]\nharmonics = ["a"]\n', "key 'harmonics'"),
+    ('experiment = "fit_quality"\nclips = ["99_99"]\nharmonics = [1]\n',
+     "key 'clips': unknown clip '99_99'"),
+    ('experiment = "fit_quality"\nharmonics = [1]\n', "missing required key 'clips'"),
+    ('experiment = "nope"\n', "key 'experiment'"),
+    ('experiment = "style"\nnormal = "07_01"\ntired = "07_04"\nbrisk = "07_12"\nrun = "09_01"\n'
+     's_values = [0.0]\nweights = [1.0]\nseconds = -1\n', "key 'seconds'"),
+    ('experiment = "fit_quality"\nclips = ["07_01"]\nharmonics = [1]\n[small]\nharmonic = [1]\n',
+     "[small]: unknown key 'harmonic'"),
+    ('experiment = "fit_quality"\nclips = ["07_01"]\nharmonics = [1]\n[small]\nharmonics = [0]\n',
+     "[small]: key 'harmonics'"),
+    ("experiment = \n", "not valid TOML"),
+])
+def test_bad_configs_name_the_key(tmp_path, text, message):
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    with pytest.raises(ConfigError) as e:
+        load_experiment_config(p)
+    assert message in str(e.value) and str(p) in str(e.value)
+
+
+def test_bad_config_on_the_command_line_is_one_line(tmp_path):
+    p = tmp_path / "c.toml"
+    p.write_text('experiment = "fit_quality"\nclips = ["07_01"]\nharmonics = 2\n')
+    r = subprocess.run([sys.executable, "-m", "experiments.fit_quality", "--config", str(p),
+                        "--out", str(tmp_path)], cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "key 'harmonics'" in lines[0]
+    with pytest.raises(ConfigError, match="this script runs 'style'"):
+        load_experiment_config(CONFIGS[0], experiment="style")
