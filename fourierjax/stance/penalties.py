@@ -41,16 +41,18 @@ def quadratic_penalty(desired, scale, inner=1.0, outer=2.5) -> HermitePenalty:
     """
     desired = jnp.asarray(desired, float)
     scale = jnp.asarray(scale, float)
-    knots = jnp.array([inner, outer])
-    w = jnp.stack([knots[0], knots[1] - knots[0]])
-    side = lambda a: jnp.broadcast_to(a, (2, 2))  # noqa: E731
     batch = jnp.broadcast_shapes(desired.shape, scale.shape)
     sc = jnp.broadcast_to(scale, batch)[..., None, None]
+    knots = jnp.array([inner, outer])
+
+    def per_side(row):  # the same [2] knot row on both sides, broadcast to the batch
+        return jnp.broadcast_to(jnp.stack([row, row]), batch + (2, 2))
+
     return HermitePenalty(
         desired=jnp.broadcast_to(desired, batch),
-        widths=side(w) * sc,
-        values=jnp.broadcast_to(side(knots**2), batch + (2, 2)),
-        slopes=side(2.0 * knots) / sc,
+        widths=per_side(jnp.array([inner, outer - inner])) * sc,
+        values=per_side(knots**2),
+        slopes=per_side(2.0 * knots) / sc,
     )
 
 

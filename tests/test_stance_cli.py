@@ -1,0 +1,66 @@
+"""`fourierjax stance` as a user runs it: subprocesses, including user mistakes."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+ENV = {**os.environ, "JAX_PLATFORMS": "cpu"}
+
+
+def _run(*args, env=None):
+    return subprocess.run(
+        [sys.executable, "-m", "fourierjax", "stance", *args],
+        capture_output=True,
+        text=True,
+        timeout=1200,
+        env=env or ENV,
+    )
+
+
+def test_list_names_first_one_per_line():
+    r = _run("--list")
+    assert r.returncode == 0, r.stderr
+    names = [line.split("\t")[0] for line in r.stdout.strip().splitlines()]
+    assert {"posture", "strong_recoil", "weak_recoil", "interest", "beauty_line"} <= set(names)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--shape-set", "nope", "--out", "x.bvh"], "unknown shape set 'nope'"),
+        (["--shape-set", "posture", "--target", "1,2", "--out", "x.bvh"], "three coordinates"),
+        (["--shape-set", "posture", "--intensity", "nan", "--out", "x.bvh"], "must be finite"),
+        (["--shape-set", "posture", "--target", "a,b,c", "--out", "x.bvh"], "expected a number"),
+        (["--shape-set", "strong_recoil", "--out", "x.bvh"], "needs --object"),
+        (["--shape-set", "posture"], "--out"),
+        (["--shape-set", "posture", "--out", "/no/such/dir/x.bvh"], "does not exist"),
+        (["--shape-set", "missing.toml", "--out", "x.bvh"], "missing.toml"),
+    ],
+)
+def test_user_mistakes_give_one_line_and_exit_2(args, message, tmp_path):
+    r = _run(*args)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fourierjax: error:")
+    assert message in lines[0]
+
+
+@pytest.mark.slow
+def test_solve_writes_bvh_and_json(tmp_path):
+    out = tmp_path / "pose.bvh"
+    env = {**ENV, "FOURIERJAX_CACHE_DIR": str(tmp_path / "cache")}
+    r = _run("--shape-set", "strong_recoil", "--intensity", "0.8", "--object", "0.3,1.2,0.6",
+             "--target=-0.3,1.1,0.45", "--out", str(out), "--json", env=env)  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    result = json.loads(r.stdout)
+    for key in ("converged", "iterations", "objective", "reach_error_m", "com_error_m"):
+        assert key in result
+    assert result["converged"] and result["reach_error_m"] < 1e-3 and result["com_error_m"] < 1e-3
+    from fourierjax.io.bvh import read_bvh
+
+    m = read_bvh(out)
+    assert m.num_frames == 1 and m.topology.names[0] == "pelvis"
