@@ -1,7 +1,5 @@
 """Test configuration: strict rank promotion, x64 on demand, bundled-data paths."""
 
-import os
-
 import jax
 import pytest
 
