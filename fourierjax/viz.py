@@ -411,7 +411,9 @@ def save_gif(sequences: Sequence, parents: Sequence[int], path: str | os.PathLik
     height = max(s[..., 1].max() for s in seqs) * scale - ground
     half = 0.5 * height
     n = len(seqs)
-    fig, axes = plt.subplots(1, n, figsize=(2.2 * n, 3.0), squeeze=False)
+    fig, axes = plt.subplots(1, n, figsize=(1.9 * n, 2.7), squeeze=False)
+    fig.subplots_adjust(left=0.03, right=0.97, bottom=0.08, top=0.84 if title else 0.9,
+                        wspace=0.08)
     axes = axes[0]
     colors = limb_colors(names) if names is not None else [_TRUNK] * len(parents)
     artists = []
