@@ -1,0 +1,167 @@
+"""Fit torso shape classes and amplitudes to a target pose by least squares (Neff & Fiume sec. 5.2)."""
+
+import itertools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float
+
+from fourierjax.stance import _util as u
+from fourierjax.stance.skeleton48 import SHOULDER, Body
+from fourierjax.stance.torso import COLLAR_STATES, SHAPE_CLASSES, class_weights, collar_quats, spine_quats
+
+#: Segments compared: abdomen, chest, neck, head (their +Y), right and left collar bones.
+SEGMENTS = ("abdomen", "chest", "neck", "head", "r_collar", "l_collar")
+#: Every (sagittal class, coronal class, collar Y state, collar Z state) combination.
+COMBINATIONS = tuple(itertools.product(SHAPE_CLASSES, SHAPE_CLASSES, tuple(COLLAR_STATES),
+                                       tuple(COLLAR_STATES)))  # fmt: skip
+_EY = jnp.array([0.0, 1.0, 0.0])
+
+
+def torso_directions(body: Body, amplitudes, sagittal_weights, coronal_weights, collar_signs):
+    """Unit directions `[6, 3]` of the `SEGMENTS` in the pelvis frame for torso amplitudes
+    (sagittal, coronal, transverse, collar_y, collar_z, abdomen_x; the solver's order)."""
+    a = amplitudes
+    spine = spine_quats(a[0], a[1], a[2], a[5], sagittal_weights, coronal_weights)
+    R = [spine[0]]
+    for k in range(1, 4):
+        R.append(u.mm(R[-1], spine[k]))
+    collars = collar_quats(a[3], a[4], collar_signs)
+    dirs = [u.mv(r, _EY) for r in R]
+    for k in range(2):
+        off = body.offsets[SHOULDER[k]]
+        dirs.append(u.mv(u.mm(R[1], collars[k]), off / u.safe_norm(off)))
+    return jnp.stack(dirs)
+
+
+def _combo_arrays():
+    sag = jnp.stack([class_weights("sagittal", c[0]) for c in COMBINATIONS])
+    cor = jnp.stack([class_weights("coronal", c[1]) for c in COMBINATIONS])
+    sig = jnp.array([[COLLAR_STATES[c[2]], COLLAR_STATES[c[3]]] for c in COMBINATIONS])
+    return sag, cor, sig
+
+
+class TorsoFit(eqx.Module):
+    """Result of `fit_torso`: the best combination and the residual of every one."""
+
+    amplitudes: Float[Array, "6"]  # sagittal, coronal, transverse, collar_y, collar_z, abdomen_x
+    best: int
+    residuals: Float[Array, " combos"]
+
+    def describe(self) -> dict:
+        c = COMBINATIONS[int(self.best)]
+        names = ("sagittal", "coronal", "transverse", "collar_y", "collar_z", "abdomen_x")
+        return {
+            "sagittal_class": c[0], "coronal_class": c[1], "collar_y": c[2], "collar_z": c[3],
+            "amplitudes": dict(zip(names, np.asarray(self.amplitudes).tolist())),
+            "rms_direction_error": float(self.residuals[int(self.best)]),
+        }  # fmt: skip
+
+
+@eqx.filter_jit
+def fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
+    """Which spine classes, collar states and amplitudes explain a target torso best.
+
+    For every combination in `COMBINATIONS` the six torso amplitudes are fitted by
+    Levenberg-Marquardt to the target segment directions (pelvis frame, `SEGMENTS` order);
+    the combinations run one after another (`lax.map`, no batched LAPACK; STYLE.md).
+
+    Arguments:
+        body: the character.
+        target_dirs: `[6, 3]` unit directions of the segments in the pelvis frame.
+
+    Returns:
+        `TorsoFit` (`describe()` names the winning classes).
+    """
+    sag, cor, sig = _combo_arrays()
+
+    def residual(y, args):
+        s, c, g = args
+        d = torso_directions(body, y, s, c, g)
+        return (d - target_dirs).reshape(-1)
+
+    def one(args):
+        sol = optx.least_squares(
+            residual, optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8), jnp.zeros(6), args,
+            max_steps=200, throw=False,
+        )  # fmt: skip
+        r = residual(sol.value, args)
+        return sol.value, jnp.sqrt(jnp.mean(r * r))
+
+    ys, res = jax.lax.map(one, (sag, cor, sig))
+    # Prefer the simplest explanation among near-ties (straight classes come last in the
+    # table, so break ties toward fewer nonzero amplitudes via a tiny penalty).
+    best = jnp.argmin(res + 1e-6 * jnp.sum(jnp.abs(ys), axis=-1))
+    return TorsoFit(amplitudes=ys[best], best=best, residuals=res)
+
+
+def target_directions_from_positions(positions: dict[str, np.ndarray]) -> np.ndarray:
+    """Segment directions `[6, 3]` in the pelvis frame from world joint positions.
+
+    `positions` maps: "r_hip", "l_hip", "abdomen", "chest", "neck", "head", "head_top",
+    "r_collar", "r_shoulder", "l_collar", "l_shoulder" to `[3]` points. The pelvis frame:
+    X from the right to the left hip, Y the part of pelvis->chest perpendicular to it.
+    """
+    p = {k: np.asarray(v, np.float64) for k, v in positions.items()}
+    ex = p["l_hip"] - p["r_hip"]
+    ex /= np.linalg.norm(ex)
+    up = p["chest"] - 0.5 * (p["l_hip"] + p["r_hip"])
+    ey = up - (up @ ex) * ex
+    ey /= np.linalg.norm(ey)
+    R = np.stack([ex, ey, np.cross(ex, ey)], axis=1)
+    segs = [("abdomen", "chest"), ("chest", "neck"), ("neck", "head"), ("head", "head_top"),
+            ("r_collar", "r_shoulder"), ("l_collar", "l_shoulder")]  # fmt: skip
+    out = []
+    for a, b in segs:
+        d = R.T @ (p[b] - p[a])
+        out.append(d / np.linalg.norm(d))
+    return np.stack(out)
+
+
+def cmu_torso_directions(body: Body, motion, frame: int, rest_frame: int = 0) -> np.ndarray:
+    """Target directions for `fit_torso` from a CMU clip frame (joint-direction mapping).
+
+    Each CMU segment's rotation away from the clip's rest frame (the smallest rotation taking
+    its rest direction to its direction at `frame`, in the pelvis frame) is applied to our
+    skeleton's rest direction of the same segment: abdomen = LowerBack->Spine,
+    chest = Spine1->Neck, neck = Neck->Neck1, head = Neck1->Head, collars =
+    Left/RightShoulder->Left/RightArm. So differences of skeleton proportions and rest
+    curvature do not bias the fit.
+    """
+    import jax.numpy as jnp
+
+    from fourierjax.kinematics import fk_from_channels
+
+    sk = motion.skeleton()
+    names = motion.topology.names
+
+    def frame_dirs(f):
+        pos = np.asarray(fk_from_channels(sk, jnp.asarray(motion.channels[f])).positions)
+        q = {n: pos[names.index(n)] for n in names}
+        return target_directions_from_positions({
+            "r_hip": q["RightUpLeg"], "l_hip": q["LeftUpLeg"], "abdomen": q["LowerBack"],
+            "chest": q["Spine"], "neck": q["Neck"], "head": q["Neck1"], "head_top": q["Head"],
+            "r_collar": q["RightShoulder"], "r_shoulder": q["RightArm"],
+            "l_collar": q["LeftShoulder"], "l_shoulder": q["LeftArm"],
+        })  # fmt: skip
+
+    d0, d1 = frame_dirs(rest_frame), frame_dirs(frame)
+    # Our rest directions: the spine straight up, the collars along their bones.
+    ours = np.asarray(torso_directions(body, jnp.zeros(6), jnp.zeros(4), jnp.zeros(4),
+                                       jnp.ones(2)), np.float64)  # fmt: skip
+    out = []
+    for a, b, o in zip(d0, d1, ours):
+        v = np.cross(a, b)
+        s, c = np.linalg.norm(v), a @ b
+        if s < 1e-12:
+            out.append(o)
+            continue
+        k = v / s
+        ang = np.arctan2(s, c)
+        o_rot = o * np.cos(ang) + np.cross(k, o) * np.sin(ang) + k * (k @ o) * (1 - np.cos(ang))
+        out.append(o_rot)
+    return np.stack(out)
+
