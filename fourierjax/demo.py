@@ -555,14 +555,66 @@ def _gifs(st: _State) -> None:
 # ------------------------------------------------------------------------------------- stance
 
 
+#: The stance gallery: (shape set, intensities, object position in metres or None).
+STANCE_GALLERY = (
+    ("posture", (-1.0, -0.5, 0.0, 0.5, 1.0), None),
+    ("strong_recoil", (0.25, 0.5, 0.75, 1.0), (0.4, 1.2, 0.7)),
+    ("beauty_line", (-1.0, 1.0), None),
+)
+
+
 def _stance(st: _State) -> None:
     if not st.cfg.stance:
         raise _Skip("stance switched off")
+    import jax
+    import jax.numpy as jnp
+
     _import("fourierjax.stance")
     shape_sets = _import("fourierjax.stance.shape_sets")
-    if not hasattr(shape_sets, "solve_shape_set"):
-        raise _Skip("fourierjax.stance.shape_sets has no solve_shape_set yet")
-    raise _Skip("stance gallery not wired yet")
+    from fourierjax import viz
+    from fourierjax.stance.bvh_export import pose_to_motion, write_stance_bvh
+    from fourierjax.stance.skeleton48 import make_body
+    from fourierjax.stance.solver import solve_stances, stack_problems
+
+    body = make_body(1.75)
+    problems, labels = [], []
+    for name, intensities, obj in STANCE_GALLERY:
+        ss = shape_sets.get_shape_set(name)
+        o = None if obj is None else jnp.asarray(obj)
+        for i in intensities:
+            problems.append(ss.problem(body, i, o))
+            labels.append((name, i))
+    # Batched solves in chunks of 3 problems (the last padded by repetition): one compilation
+    # serves the gallery, the stance notebook and the stance experiment's small setting
+    # (through the persistent compilation cache).
+    chunks = []
+    for a in range(0, len(problems), 3):
+        part = problems[a:a + 3]
+        part = part + [part[-1]] * (3 - len(part))
+        chunks.append(solve_stances(stack_problems(part)))
+    sol = jax.tree.map(lambda *xs: jnp.concatenate(xs)[: len(problems)], *chunks)
+    info = []
+    for k, (name, i) in enumerate(labels):
+        pose = type(sol.pose)(*(np.asarray(leaf[k]) for leaf in (sol.pose.root_position,
+                                                                   sol.pose.quats)))
+        write_stance_bvh(st.path("stance", f"{name}_{i:+.2f}.bvh"), body, pose)
+        info.append({"shape_set": name, "intensity": i, "converged": bool(sol.converged[k]),
+                     "iterations": int(sol.iterations[k]),
+                     "objective": float(sol.objective[k]),
+                     "com_error_m": float(sol.com_error_m[k])})
+    st.extra["stance"] = info
+    motion = pose_to_motion(body, sol.pose)
+    pos = _positions(motion)
+    topo = motion.topology
+    for name, intensities, _ in STANCE_GALLERY:
+        idx = [k for k, (n, _) in enumerate(labels) if n == name]
+        az = 0.0 if name == "beauty_line" else 90.0  # coronal curves from the front
+        fig = viz.plot_posture_range([pos[k] for k in idx], topo.parents, list(intensities),
+                                     names=topo.names, azimuth_deg=az,
+                                     title=f"Shape set '{name}' (Neff & Fiume 2004"
+                                     f"{' Fig. 5' if name == 'posture' else ''}), intensity "
+                                     "under each figure")
+        viz.save_figure(fig, st.path("plots", f"stance_{name}.png"))
 
 
 # ---------------------------------------------------------------------------------- pipeline
@@ -584,6 +636,22 @@ STEPS: tuple[tuple[str, Callable[[_State], None]], ...] = (
 )
 
 
+def _enable_compile_cache() -> None:
+    """Persist XLA compilations across runs (the stance solver takes long to compile); the
+    folder is ``$FOURIERJAX_CACHE_DIR`` or ``~/.cache/fourierjax/jax`` (as `fourierjax stance`)."""
+    import os
+
+    import jax
+
+    path = os.environ.get("FOURIERJAX_CACHE_DIR") or os.path.join(
+        os.path.expanduser("~"), ".cache", "fourierjax", "jax")
+    try:
+        os.makedirs(path, exist_ok=True)
+        jax.config.update("jax_compilation_cache_dir", path)
+    except OSError:
+        pass
+
+
 def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True,
              log: Callable[[str], None] | None = None) -> dict:
     """Run the whole demo and write its outputs under ``out_dir`` (see the module docstring).
@@ -598,6 +666,7 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
     from tqdm import tqdm
 
     cfg = config or DemoConfig()
+    _enable_compile_cache()
     if cfg.harmonics < 1 or cfg.harmonics > 16:
         raise UserError(f"--harmonics: must be between 1 and 16, got {cfg.harmonics}")
     if not (np.isfinite(cfg.seconds) and 0.5 <= cfg.seconds <= 60):

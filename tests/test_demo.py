@@ -18,6 +18,8 @@ BVH = ["walk_normal", "walk_brisk_extrapolated", "walk_tired", "run_brisk_superp
        "walk_shivering"]
 PLOTS = ["spectrum_07_01", "decomposition_07_01_left_knee", "interpolation_strip",
          "style_space_pca", "hip_rule_variants"]
+STANCE = ["posture_-1.00", "posture_-0.50", "posture_+0.00", "posture_+0.50", "posture_+1.00",
+          "strong_recoil_+0.25", "strong_recoil_+1.00", "beauty_line_-1.00", "beauty_line_+1.00"]
 GIFS = ["walk_styles", "run_brisk_superposed", "walk_to_run", "run_flight", "walk_shivering"]
 
 
@@ -47,6 +49,12 @@ def test_demo_writes_every_part(demo_run):
     for name in PLOTS:
         with Image.open(out / "plots" / f"{name}.png") as im:
             assert im.format == "PNG" and min(im.size) > 200, name
+    for name in STANCE:
+        m = read_bvh(out / "stance" / f"{name}.bvh")
+        assert m.num_frames == 1 and np.all(np.isfinite(m.channels)), name
+    for name in ("stance_posture", "stance_strong_recoil", "stance_beauty_line"):
+        with Image.open(out / "plots" / f"{name}.png") as im:
+            assert min(im.size) > 200, name
     for name in GIFS:
         path = out / "gifs" / f"{name}.gif"
         with Image.open(path) as im:
@@ -68,7 +76,9 @@ def test_demo_summary_has_fit_metrics(demo_run):
         < s["fits"]["07_12"]["fundamental_hz"] < s["fits"]["09_01"]["fundamental_hz"]
     assert s["synthesis"]["walk_normal"]["flight_fraction"] == 0.0
     assert s["synthesis"]["run_flight"]["flight_fraction"] > 0.05
-    assert {p["part"] for p in s["skipped"]} <= {"stance gallery"}
+    assert s["skipped"] == []
+    assert len(s["stance"]) == 11 and all(x["converged"] for x in s["stance"])
+    assert max(x["com_error_m"] for x in s["stance"]) < 1e-3  # balanced (issue 5)
     assert "07_01" in r.stdout and "summary.json" in r.stdout
 
 

@@ -1,0 +1,190 @@
+"""Write the three tutorial notebooks (outputs stripped) from the cells below: run
+``python notebooks/make_notebooks.py`` after editing, commit the .ipynb files without outputs."""
+
+from __future__ import annotations
+
+import pathlib
+
+import nbformat
+from nbformat.v4 import new_code_cell, new_markdown_cell, new_notebook
+
+HERE = pathlib.Path(__file__).resolve().parent
+
+GAIT = [
+    ("md", """# Gait fitting and style algebra (Unuma 1995; Tilmanne & Dutoit)
+
+Fit Fourier gait models to bundled CMU clips, look at their spectrum and decomposition, then
+play with Unuma's style algebra: inter/extrapolation (eq. 3), a Fourier characteristic and its
+superposition onto a run (eq. 7-8), a walk → run transition, noise, and a style-space PCA."""),
+    ("code", """import numpy as np
+import jax.numpy as jnp
+import matplotlib.pyplot as plt
+from fourierjax import data, fourier, style, viz
+from fourierjax.motion import fit_motions
+
+clips = ["07_01", "07_04", "07_12", "09_01"]   # normal, slow ('tired'), brisk walk; a run
+# Cut to 256 frames each: equal shapes share compiled functions (faster on a small CPU).
+motions = [data.load(c)[:256] for c in clips]
+fits = dict(zip(clips, fit_motions(motions, num_harmonics=3, segment=False)))
+for c, f in fits.items():
+    print(f"{c}: f0 = {f.fundamental_hz:.3f} Hz, RMS {f.rms_deg:.2f} deg, "
+          f"variance explained {100 * f.variance_explained_positions:.1f}% (positions)")"""),
+    ("md", "The fitted 3-harmonic model of the left knee against the data (Tilmanne Fig. 3 style):"),
+    ("code", """from fourierjax.motion import features_from_motion
+f = fits["07_01"]
+x, names = features_from_motion(motions[0][f.frame_start:f.frame_stop], "euler")
+idx = [names.index(n) for n in ("LeftLeg.Xrotation", "LeftUpLeg.Xrotation")]
+m = f.raw_model
+t = np.arange(len(x)) * f.frame_time_s
+fig = viz.plot_decomposition(t, x[:, idx], np.asarray(m.offset)[idx], np.asarray(m.amplitude)[idx],
+                             np.asarray(m.phase)[idx], float(m.omega),
+                             channel_labels=["knee X", "hip X"], title="07_01 left knee and hip")
+assert fig.axes[-1].get_xlabel() == "time (s)"
+fig"""),
+    ("md", "Unuma eq. 3: `s < 0` brisk, `0 < s < 1` a little tired, `s > 1` very tired."),
+    ("code", """normal, tired = fits["07_01"].model, fits["07_04"].model
+for s in (-0.6, 0.0, 0.5, 1.0, 1.5):
+    xi = style.interpolate(normal, tired, s)
+    print(f"s = {s:+.1f}: cadence {float(xi.fundamental_hz):.2f} Hz")
+np.testing.assert_allclose(style.style_vector(style.interpolate(normal, tired, 0.0)),
+                           style.style_vector(normal), atol=1e-5)"""),
+    ("md", "A brisk run: run + 1.37 (brisk walk − normal walk) (Unuma eq. 8)."),
+    ("code", """brisk = style.characteristic(fits["07_12"].model, normal)
+run = fits["09_01"].model
+brisk_run = style.superpose(run, [brisk], [1.37])
+print(f"run {float(run.fundamental_hz):.2f} Hz -> brisk run {float(brisk_run.fundamental_hz):.2f} Hz")
+w = style.fit_style_weights(normal, [style.characteristic(tired, normal)], fits["07_12"].model)
+print(f"the brisk walk = normal + {float(w[0]):.2f} x (tired - normal): an extrapolation")"""),
+    ("md", "A walk → run transition with the phase integrated over time (no jumps)."),
+    ("code", """t = jnp.arange(480) / 120.0
+y, s, theta = style.transition(normal, run, t, 1.0, 1.5, return_schedule=True)
+plt.figure(figsize=(6, 2.5))
+plt.plot(t, np.degrees(y[:, names.index("LeftLeg.Xrotation")]))
+plt.xlabel("time (s)"); plt.ylabel("left knee X (deg)"); plt.title("walk -> run")
+assert np.all(np.diff(np.asarray(theta)) > 0)"""),
+    ("md", "Style space: PCA over the phasor style vectors of the fitted clips."),
+    ("code", """models = [fits[c].model for c in clips]
+M = style.style_matrix(models)[:, 3 * 7:]   # joint angles and log(omega); root channels left out
+pca = style.style_pca(M, num_components=2)
+coords = np.asarray(style.pca_project(pca, M))
+viz.plot_style_scatter(coords, clips, explained=np.asarray(pca.explained_variance_ratio),
+                       groups=["walk", "walk", "walk", "run"])"""),
+]
+
+HIP = [
+    ("md", """# Step constraints and the hip-height rule (Unuma 1995 §3.1)
+
+Synthesize a walk and a run with Unuma's step parameters (step, speed, gait, jump): the root
+height comes from the hip-height rule (eq. 4-5) and the root's advance from the stance foot."""),
+    ("code", """import numpy as np
+import jax.numpy as jnp
+from fourierjax import contacts, data, gait, viz
+from fourierjax.kinematics import fk_frames
+from fourierjax.motion import fit_motions
+
+clips = ["07_01", "09_01"]
+motions = {c: data.load(c)[:128] for c in clips}
+fits = dict(zip(clips, fit_motions([motions[c] for c in clips], 3, segment=False)))
+
+def ground(m):
+    pts = contacts.foot_points(m.topology)
+    fk = fk_frames(m.skeleton(), jnp.asarray(m.channels))
+    feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions, pts))
+    g = contacts.estimate_ground(feet, m.frame_time_s)
+    return pts, gait.groin_joints(m.topology), contacts.sole_clearance(g)
+
+def synth(clip, **kw):
+    m = motions[clip]
+    pts, groins, clear = ground(m)
+    return gait.synthesize_gait(fits[clip].model, m.skeleton(), 240, m.frame_time_s, feet=pts,
+                                groins=groins, clearance=clear, **kw)"""),
+    ("code", """walk = synth("07_01")
+lowest = np.asarray(walk.lowest).min(axis=1)
+print("walk: max |lowest foot point| =", float(np.abs(lowest).max()), "units (on the ground)")
+assert np.abs(lowest).max() < 1e-3"""),
+    ("code", """for g, j in ((1.0, 0.0), (0.06, 1.0), (0.03, 2.5)):
+    r = synth("09_01", gait=g, jump=j)
+    frac = float(np.mean(np.asarray(r.lowest).min(axis=1) > 1e-3))
+    print(f"run gait={g} jump={j}: flight fraction {frac:.2f}")"""),
+    ("md", "The three rules side by side: the faithful rule jumps at the threshold N = gait."),
+    ("code", """import jax
+from fourierjax import fourier
+from fourierjax.kinematics import forward_kinematics
+from fourierjax.motion import local_pose_from_features
+
+m = motions["09_01"]; run = fits["09_01"].model
+pts, groins, clear = ground(m)
+phase = jnp.linspace(0, 2 * np.pi, 200)
+feats = fourier.synthesize_phase(run, phase)
+sk = m.skeleton()
+fk = jax.jit(jax.vmap(lambda f: forward_kinematics(sk, *local_pose_from_features(sk, f, "euler"))))(feats)
+foot = contacts.gather_foot_positions(fk.positions, fk.end_site_positions, pts)
+leg = gait.leg_heights(fk.positions[:, jnp.asarray(groins)], foot, jnp.asarray(clear))
+curves = gait.hip_rule_curves(leg, 0.06, 1.0)
+viz.plot_hip_rule(np.asarray(phase), {k: np.asarray(v) for k, v in curves.items()}, gait=0.06, jump=1.0)"""),
+    ("md", "Step scales the amplitudes: longer strides, same ground contact."),
+    ("code", """for s in (0.7, 1.0, 1.3):
+    r = synth("07_01", step=s)
+    d = float(r.root_position[-1, 2] - r.root_position[0, 2])
+    print(f"step {s}: {d * 0.0564:.2f} m in 2 s")"""),
+]
+
+STANCE = [
+    ("md", """# Expressive stance and shape sets (Neff & Fiume 2004)
+
+Solve balanced poses from shape sets (one intensity knob), in one batched call, and look at
+the posture range (their Fig. 5)."""),
+    ("code", """import os
+import numpy as np
+import jax
+import jax.numpy as jnp
+# The solver takes a while to compile: keep compilations across sessions (as `fourierjax stance`).
+jax.config.update("jax_compilation_cache_dir", os.environ.get(
+    "FOURIERJAX_CACHE_DIR", os.path.expanduser("~/.cache/fourierjax/jax")))
+from fourierjax import viz
+from fourierjax.demo import _positions
+from fourierjax.stance.bvh_export import pose_to_motion
+from fourierjax.stance.shape_sets import builtin_shape_sets, get_shape_set
+from fourierjax.stance.skeleton48 import make_body
+from fourierjax.stance.solver import solve_stances, stack_problems
+
+for name, s in builtin_shape_sets().items():
+    print(f"{name:14s} {s.description}")"""),
+    ("code", """body = make_body(1.75)
+posture = get_shape_set("posture")
+intensities = [-1.0, 0.0, 1.0]
+sol = solve_stances(stack_problems([posture.problem(body, i) for i in intensities]))
+print("converged", np.asarray(sol.converged), "iterations", np.asarray(sol.iterations))
+print("COM error (mm)", 1000 * np.asarray(sol.com_error_m))
+assert np.all(np.asarray(sol.converged))"""),
+    ("code", """motion = pose_to_motion(body, sol.pose)
+pos = _positions(motion)
+viz.plot_posture_range(list(pos), motion.topology.parents, intensities, names=motion.topology.names,
+                       title="Alberts' posture scale: over-erect (-1), neutral, hunched (+1)")"""),
+    ("md", "Recoil from an object 0.7 m ahead and 0.4 m to the left: the same solver, another shape set."),
+    ("code", """recoil = get_shape_set("strong_recoil")
+obj = jnp.array([0.4, 1.2, 0.7])
+sol2 = solve_stances(stack_problems([recoil.problem(body, i, obj) for i in (0.0, 0.5, 1.0)]))
+print("amplitudes (rad):\\n", np.round(np.asarray(sol2.amplitudes), 3))"""),
+]
+
+
+def build(cells) -> nbformat.NotebookNode:
+    nb = new_notebook()
+    nb.cells = [new_markdown_cell(src) if kind == "md" else new_code_cell(src) for kind, src in cells]
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    nb.metadata["language_info"] = {"name": "python"}
+    return nb
+
+
+NOTEBOOKS = {"01_gait_fitting_and_style.ipynb": GAIT, "02_step_constraints_and_hip_rule.ipynb": HIP,
+             "03_expressive_stance.ipynb": STANCE}
+
+
+def main() -> None:
+    for name, cells in NOTEBOOKS.items():
+        nbformat.write(build(cells), HERE / name)
+
+
+if __name__ == "__main__":
+    main()
