@@ -76,9 +76,13 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.stance.shape_sets import builtin_shape_sets, get_shape_set
 
     if args.list:
-        for name, s in builtin_shape_sets().items():
-            obj = {"none": "", "optional": " [--object optional]", "required": " [needs --object]"}
-            print(f"{name}\t{s.description}{obj[s.object_mode]}")
+        obj = {"none": "", "optional": " [--object optional]", "required": " [needs --object]"}
+        lines = [f"{n}\t{s.description}{obj[s.object_mode]}" for n, s in builtin_shape_sets().items()]
+        try:
+            print("\n".join(lines))
+            sys.stdout.flush()
+        except BrokenPipeError:  # `fourierjax stance --list | head -1`
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     if not args.shape_set:
         raise UserError("--shape-set is required (see `fourierjax stance --list`)")

@@ -1,1 +1,54 @@
 """Expressive stance (Neff & Fiume 2004): 48-DOF skeleton, lower-body IK, balance, shape solver."""
+
+from fourierjax.stance.bvh_export import animate, ease_in_out, pose_to_motion, write_stance_bvh
+from fourierjax.stance.fit import TorsoFit, cmu_torso_directions, fit_torso, torso_directions
+from fourierjax.stance.ik import Feet, LowerBody, lower_body_ik, make_feet
+from fourierjax.stance.penalties import HermitePenalty, hermite_penalty, quadratic_penalty, reach_penalty
+from fourierjax.stance.problem import (
+    AMPLITUDES,
+    SHAPE_PARAMS,
+    StanceProblem,
+    balance_offsets,
+    balanced_pose,
+    build_pose,
+    make_problem,
+)
+from fourierjax.stance.shape_sets import (
+    ShapeSet,
+    anticipation,
+    builtin_shape_sets,
+    get_shape_set,
+    load_shape_set,
+    parse_shape_set,
+    perturb,
+)
+from fourierjax.stance.skeleton48 import (
+    DOF_NAMES,
+    DOFS,
+    TOPOLOGY,
+    Body,
+    StancePose,
+    center_of_mass,
+    dof_vector,
+    make_body,
+    pose_fk,
+    rest_pose,
+)
+from fourierjax.stance.solver import (
+    StanceSolution,
+    objective,
+    solve_stance,
+    solve_stances,
+    stack_problems,
+)
+
+__all__ = [
+    "AMPLITUDES", "DOFS", "DOF_NAMES", "SHAPE_PARAMS", "TOPOLOGY", "Body", "Feet",
+    "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem", "StanceSolution",
+    "TorsoFit", "animate", "anticipation", "balance_offsets", "balanced_pose", "build_pose",
+    "builtin_shape_sets", "center_of_mass", "cmu_torso_directions", "dof_vector",
+    "ease_in_out", "fit_torso", "get_shape_set", "hermite_penalty", "load_shape_set",
+    "lower_body_ik", "make_body", "make_feet", "make_problem", "objective", "parse_shape_set",
+    "perturb", "pose_fk", "pose_to_motion", "quadratic_penalty", "reach_penalty", "rest_pose",
+    "solve_stance", "solve_stances", "stack_problems", "torso_directions", "write_stance_bvh",
+]  # fmt: skip
