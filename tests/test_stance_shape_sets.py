@@ -156,3 +156,22 @@ def test_bvh_roundtrip_and_eased_animation(tmp_path):
     fk = pose_fk(BODY, b)
     np.testing.assert_allclose(m.offsets, BODY.offsets, atol=1e-6)
     assert np.isfinite(np.asarray(fk.positions)).all()
+
+
+def test_feedback_balance_converges_for_animation():
+    # The paper's animation-time balance: feed the COM error back into the dominant ankle.
+    from fourierjax.stance.balance import feedback_update
+    from fourierjax.stance.problem import build_rotations, desired_balance_point, make_problem
+
+    prob = make_problem(BODY, {"sagittal": 0.4, "weight_shift": 0.3, "knee_left": 0.2},
+                        sagittal_class="large_c")  # fmt: skip
+    goal = desired_balance_point(prob)
+    b = jnp.zeros(2)
+    errors = []
+    for _ in range(12):  # eager: no compile for a handful of steps
+        com = build_rotations(prob, prob.shape[:6], b)[2].com
+        err = jnp.stack([com[0], com[2]]) - goal
+        errors.append(float(jnp.linalg.norm(err)))
+        b = feedback_update(b, err, BODY.offsets[0, 1])
+    assert errors[0] > 0.01 and errors[-1] < 1e-3
+    assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:]))
