@@ -86,7 +86,7 @@ def body(argv=None) -> None:
         idx = [k for k, (n, _) in enumerate(labels) if n == name]
         fig = viz.plot_posture_range([pos[k] for k in idx], topo.parents,
                                      [labels[k][1] for k in idx], names=topo.names,
-                                     azimuth_deg=0.0 if name == "beauty_line" else 90.0,
+                                     azimuth_deg=90.0 if name == "beauty_line" else 15.0,
                                      title=f"Shape set '{name}': intensity under each figure")
         viz.save_figure(fig, out / f"posture_range_{name}.png")
 

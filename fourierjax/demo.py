@@ -608,7 +608,7 @@ def _stance(st: _State) -> None:
     topo = motion.topology
     for name, intensities, _ in STANCE_GALLERY:
         idx = [k for k, (n, _) in enumerate(labels) if n == name]
-        az = 0.0 if name == "beauty_line" else 90.0  # coronal curves from the front
+        az = 90.0 if name == "beauty_line" else 15.0  # coronal curves from the front
         fig = viz.plot_posture_range([pos[k] for k in idx], topo.parents, list(intensities),
                                      names=topo.names, azimuth_deg=az,
                                      title=f"Shape set '{name}' (Neff & Fiume 2004"

@@ -362,12 +362,13 @@ def plot_hip_rule(phase, curves: dict, *, gait: float, jump: float, unit: str = 
 
 def plot_posture_range(poses: Sequence, parents: Sequence[int], intensities: Sequence[float], *,
                        names: Sequence[str] | None = None, title: str | None = None,
-                       scale: float = 1.0, unit: str = "m", azimuth_deg: float = 90.0):
+                       scale: float = 1.0, unit: str = "m", azimuth_deg: float = 15.0):
     """A continuous range of postures side by side (Neff & Fiume 2004 Fig. 5).
 
     Arguments:
         poses: ``[J, 3]`` joint positions per intensity (stance skeleton: metres, Y up, facing
-            +Z; the default azimuth 90 shows the figure from its side, sagittal curves visible);
+            +Z); azimuth_deg: 0 is the side view (sagittal curves: posture scale), 90 the front
+            view (coronal curves: beauty line); the default 15 is a slightly turned side view;
         intensities: the shape-set intensity of each pose (captions).
     Returns:
         Figure.
