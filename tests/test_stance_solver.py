@@ -1,0 +1,122 @@
+"""The stance solver: balance and reach accuracy on batched sweeps, the direction-set reference,
+implicit gradients (Neff & Fiume 2004, secs. 4-6)."""
+
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax.stance.balance import inside_polygon_margin, monitor_points_world, support_polygon
+from fourierjax.stance.problem import desired_balance_point
+from fourierjax.stance.reference import solve_reference
+from fourierjax.stance.shape_sets import get_shape_set
+from fourierjax.stance.skeleton48 import ANKLE, DOF_NAMES, dof_vector, make_body, pose_fk
+from fourierjax.stance.solver import solve_stances, stack_problems
+
+BODY = make_body(1.75)
+OBJECT = jnp.array([0.35, 1.3, 0.55])  # in front, to the character's left
+POSTURE = jnp.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+RECOIL = [0.25, 0.5, 0.75, 1.0]
+REACHABLE = jnp.array([-0.35, 1.05, 0.55])  # right hand, in front: needs some lean
+UNREACHABLE = jnp.array([-0.4, 1.2, 2.5])
+
+
+def _problems():
+    posture = get_shape_set("posture")
+    # The posture sweep is one vmap over the intensity knob.
+    sweep = jax.vmap(lambda i: posture.problem(BODY, i))(POSTURE)
+    recoil = get_shape_set("strong_recoil")
+    rec = [recoil.problem(BODY, i, OBJECT) for i in RECOIL]
+    reach = [posture.problem(BODY, 0.3, target_right=t) for t in (REACHABLE, UNREACHABLE)]
+    rest = stack_problems(rec + reach)
+    return jax.tree.map(lambda a, b: jnp.concatenate([a, b]), sweep, rest)
+
+
+@pytest.fixture(scope="module")
+def solved():
+    problems = _problems()
+    sol = solve_stances(problems)  # one batched call for all 11 problems
+    return problems, sol
+
+
+def _row(tree, i):
+    return jax.tree.map(lambda a: a[i], tree)
+
+
+def test_all_converge_and_balance_within_1mm(solved):
+    _, sol = solved
+    assert np.all(np.asarray(sol.converged))
+    assert float(np.max(sol.com_error_m)) < 1e-3, np.asarray(sol.com_error_m)
+
+
+def test_balance_point_inside_support_polygon_and_feet_planted(solved):
+    problems, sol = solved
+    for i in range(len(sol.objective)):
+        prob, pose = _row(problems, i), _row(sol.pose, i)
+        fk = pose_fk(BODY, pose)
+        np.testing.assert_allclose(fk.positions[jnp.array(ANKLE)], prob.feet.positions, atol=1e-4)
+        mon = np.asarray(monitor_points_world(BODY, prob.feet))[..., [0, 2]].reshape(-1, 2)
+        goal = np.asarray(desired_balance_point(prob))
+        assert inside_polygon_margin(support_polygon(mon), goal) > 0.0
+
+
+def test_reach_met_and_unreachable_reported(solved):
+    _, sol = solved
+    reach_err, gap = np.asarray(sol.reach_error_m), np.asarray(sol.reach_gap_m)
+    assert reach_err[9, 0] < 1e-3 and gap[9, 0] == 0.0
+    assert gap[10, 0] > 0.5 and np.isfinite(reach_err[10, 0])
+    pose = _row(sol.pose, 10)
+    fk = pose_fk(BODY, pose)
+    sh, wr = np.asarray(fk.positions[6]), np.asarray(fk.positions[8])
+    d, c = wr - sh, np.asarray(UNREACHABLE) - sh
+    assert d @ c / np.linalg.norm(d) / np.linalg.norm(c) > 0.999  # the arm points at it
+    assert np.all(np.isfinite(np.asarray(sol.pose.quats)))
+
+
+def test_posture_scale_shape(solved):
+    _, sol = solved
+    dofs = np.asarray(jax.vmap(dof_vector)(_row(sol.pose, slice(0, 5))))
+    knee = dofs[:, DOF_NAMES.index("r_knee.Xrotation")]
+    np.testing.assert_allclose(knee[:4], 0.0, atol=1e-6)  # straight legs until near the end
+    assert knee[4] > 0.3
+    chest = dofs[:, DOF_NAMES.index("chest.Xrotation")]
+    assert chest[4] > 0.1 and chest[0] > 0.0  # hunched Large C; over-erect Small S (chest +)
+    ab = dofs[:, DOF_NAMES.index("abdomen.Xrotation")]
+    assert ab[0] < -0.1 and ab[4] > 0.1  # the sagittal class switches as the amplitude passes 0
+    # Intensity 0 is the neutral pose: upper body at rest (the legs lean only to balance).
+    upper = [k for k, n in enumerate(DOF_NAMES) if not n.startswith(("pelvis", "r_hip", "l_hip",
+                                                                       "r_ankle", "l_ankle"))]
+    np.testing.assert_allclose(dofs[2, upper], 0.0, atol=1e-5)
+
+
+def test_recoil_leans_away_from_the_object(solved):
+    _, sol = solved
+    com_goal_x = []
+    for i in range(5, 9):
+        com_goal_x.append(float(sol.amplitudes[i, 1]))  # coronal amplitude
+    # Object on the left (+X): lean right (positive coronal), growing with the intensity.
+    assert np.all(np.diff(com_goal_x) > 0) and com_goal_x[0] > 0
+
+
+def test_gradient_solver_no_worse_than_direction_set(solved):
+    problems, sol = solved
+    rows, ref_seconds = [], 0.0
+    for i in range(len(sol.objective)):
+        ref = solve_reference(_row(problems, i))
+        ours = float(sol.objective[i])
+        ref_seconds += ref["seconds"]
+        rows.append((ours, ref["objective"], int(sol.iterations[i]), ref["iterations"],
+                     ref["evaluations"]))  # fmt: skip
+        assert ours <= ref["objective"] + 1e-5 * (1.0 + abs(ref["objective"])), (i, ours, ref)
+    # Throughput, for the report only (tests never assert times).
+    t0 = time.perf_counter()
+    jax.block_until_ready(solve_stances(problems))
+    ours_seconds = time.perf_counter() - t0
+    n = len(rows)
+    print(f"\nstance solver, {n} problems: ours {n / ours_seconds:.1f} solves/s (one batched "
+          f"call), direction-set reference {n / ref_seconds:.1f} solves/s")
+    print("  ours objective, reference objective, BFGS steps, direction-set sweeps, evaluations")
+    for r in rows:
+        print("  {:.6g}  {:.6g}  {}  {}  {}".format(*r))
