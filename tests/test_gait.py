@@ -545,3 +545,32 @@ def test_model_hip_curves_one_call_for_the_plot():
     np.testing.assert_allclose(out["L"], np.maximum(out["L_L"], out["L_R"]), rtol=1e-6)
     assert bool(jnp.all(out["unuma1995"] >= out["continuous"] - 1e-6))
     assert bool(jnp.all(out["continuous"] >= out["L"] - 1e-6))
+
+
+def test_synth_command_with_step_constraints(tmp_path, capsys):
+    from fourierjax import model_io
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import read_bvh
+
+    template = _toy_template()
+    model = toy_model(5)
+    model_io.save_model(tmp_path / "toy.npz", model, motion=template)
+    out = tmp_path / "run.bvh"
+    code = main(["synth", str(tmp_path / "toy.npz"), "--seconds", "0.4", "--fps", "30",
+                 "--step", "1.1", "--gait", "0.02", "--jump", "1", "--hip-rule", "continuous",
+                 "--out", str(out)])
+    assert code == 0
+    assert "step constraints: hip rule continuous" in capsys.readouterr().out
+    m = read_bvh(out)
+    assert m.num_frames == 12
+    assert np.ptp(m.channels[:, 1]) > 0  # the root height follows the hip rule
+    # --no-root-motion: the root height is the model's own root.y channel again.
+    code = main(["synth", str(tmp_path / "toy.npz"), "--seconds", "0.4", "--fps", "30",
+                 "--no-root-motion", "--out", str(out)])
+    assert code == 0
+    from fourierjax import fourier as F
+
+    plain = F.synthesize(model, jnp.arange(12) / 30.0)
+    np.testing.assert_allclose(read_bvh(out).channels[:, 1], plain[:, 2], atol=1e-4)
+    assert main(["synth", str(tmp_path / "toy.npz"), "--seconds", "0.4", "--gait", "2",
+                 "--out", str(out)]) == 2

@@ -25,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="number of noise harmonics above the model's N (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the noise (default 0)")
     parser.add_argument("--out", required=True, metavar="OUT.bvh", help="BVH file to write")
+    from fourierjax.cli._gait_args import add_gait_arguments  # step constraints (gait.py)
+
+    add_gait_arguments(parser)
 
 
 def _parse_add(text: str):
@@ -50,7 +53,6 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax import fourier, model_io
     from fourierjax.errors import UserError
     from fourierjax.io.bvh import write_bvh
-    from fourierjax.motion import motion_from_features
 
     out = pathlib.Path(args.out)
     if out.suffix.lower() != ".bvh":
@@ -93,9 +95,11 @@ def run(args: argparse.Namespace) -> int:
                                 harmonics=args.noise_harmonics)
     dt = 1.0 / args.fps if args.fps else (mf.frame_time_s or 1 / 120)
     num = max(2, int(round(args.seconds / dt)))
-    t = jnp.arange(num) * dt
-    features = np.asarray(fourier.synthesize(model, t), np.float64)
-    write_bvh(motion_from_features(template, features, model.channel_names, dt), out)
+    from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
+
+    motion, gait_summary = apply_gait(args, model, template, num, dt)
+    write_bvh(motion, out)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
+    print(gait_summary)
     return 0
