@@ -276,7 +276,34 @@ def _fk_batch(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     if not jnp.issubdtype(channels.dtype, jnp.floating):
         channels = channels.astype(skeleton.offsets.dtype)
     batch = channels.shape[:-1]
-    x = channels.reshape(-1, topology.num_channels).T  # [C, M]: frames contiguous
+    flat = channels.reshape(-1, topology.num_channels)
+    m = flat.shape[0]
+    if m <= 2 * _FK_CHUNK:
+        quats, positions, ends = _fk_flat(skeleton, flat)
+    else:
+        # Chunks of frames keep the working set ([J, 7, chunk]) in cache: one pass over a
+        # [J, 7, M] buffer per joint is memory-bound once M is large (4x slower per joint at
+        # 1024 x 240 frames than at 1000).
+        n = -(-m // _FK_CHUNK)
+        pad = n * _FK_CHUNK - m
+        if pad:
+            flat = jnp.concatenate([flat, jnp.zeros((pad, flat.shape[1]), flat.dtype)])
+        out = jax.lax.map(lambda c: _fk_flat(skeleton, c), flat.reshape(n, _FK_CHUNK, -1))
+        quats, positions, ends = (a.reshape(n * _FK_CHUNK, *a.shape[2:])[:m] for a in out)
+
+    def back(a):  # [M, K, D] -> [..., K, D]
+        return a.reshape(*batch, *a.shape[1:])
+
+    return FKResult(rotations=back(quats), positions=back(positions), end_site_positions=back(ends))
+
+
+_FK_CHUNK = 4096
+
+
+def _fk_flat(skeleton: Skeleton, flat: Float[Array, "M channels"]):
+    """`(rotations [M, J, 4], positions [M, J, 3], end sites [M, E, 3])` of M frames."""
+    topology = skeleton.topology
+    x = flat.T  # [C, M]: frames contiguous
     quats, translations = _local_pose_soa(skeleton, x)
     parents = np.asarray(topology.parents)
     children = np.nonzero(parents >= 0)[0]
@@ -306,10 +333,8 @@ def _fk_batch(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     else:
         ends = jnp.zeros((0, 3, x.shape[1]), x.dtype)
 
-    def back(a):  # [K, D, M] -> [..., K, D]
-        return jnp.transpose(a, (2, 0, 1)).reshape(*batch, *a.shape[:2])
+    return tuple(jnp.transpose(a, (2, 0, 1)) for a in (quats, translations, ends))
 
-    return FKResult(rotations=back(quats), positions=back(translations), end_site_positions=back(ends))
 
 
 @jax.jit

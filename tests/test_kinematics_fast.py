@@ -46,3 +46,17 @@ def test_fk_frames_rejects_wrong_channel_count():
     skel = Skeleton(topo, np.zeros((topo.num_joints, 3)))
     with pytest.raises(ValueError, match="channels"):
         kinematics.fk_frames(skel, jnp.zeros((3, topo.num_channels + 1)))
+
+
+def test_fk_frames_chunked_path_matches():
+    # More than two chunks of frames (and not a multiple of the chunk): the lax.map path.
+    rng = np.random.default_rng(7)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)), rng.normal(size=(topo.num_end_sites, 3)))
+    m = 2 * kinematics._FK_CHUNK + 123
+    ch = jnp.asarray(rng.uniform(-180, 180, size=(m, topo.num_channels)), jnp.float32)
+    fast = kinematics.fk_frames(skel, ch.reshape(1, m, -1))
+    sel = np.array([0, 1, kinematics._FK_CHUNK, m - 1])
+    ref = jax.vmap(lambda c: kinematics.fk_from_channels(skel, c))(ch[sel])
+    for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(ref)):
+        np.testing.assert_allclose(np.asarray(a)[0, sel], b, atol=5e-4, rtol=1e-5)
