@@ -13,7 +13,8 @@ import pytest
 from fourierjax import contacts as C
 from fourierjax.errors import UserError
 
-SHARED = Path(__file__).resolve().parents[2] / "shared" / "data" / "mocap" / "cmu_mb"
+# The bundled copies of the CMU clips (CI and users have no ../shared).
+SHARED = Path(__file__).resolve().parents[1] / "fourierjax" / "data" / "cmu_mb"
 
 
 # -- an independent numpy BVH reader and FK (oracle; also used until fourierjax.data lands) --
