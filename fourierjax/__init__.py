@@ -1,3 +1,36 @@
 """Differentiable JAX library for stylized human motion."""
 
+from fourierjax import anthropometry, contacts, fourier, gait, kinematics, motion, rotations, skeleton, style
+from fourierjax.errors import FourierJaxError, UserError
+from fourierjax.fourier import FourierModel, synthesize, synthesize_phase
+from fourierjax.io.bvh import BVHError, Motion, read_bvh, write_bvh
+from fourierjax.kinematics import FKResult, forward_kinematics, joint_positions
+from fourierjax.skeleton import Skeleton, Topology
+
 __version__ = "0.1.0"
+
+__all__ = [
+    "BVHError",
+    "FKResult",
+    "FourierJaxError",
+    "FourierModel",
+    "Motion",
+    "Skeleton",
+    "Topology",
+    "UserError",
+    "anthropometry",
+    "contacts",
+    "forward_kinematics",
+    "fourier",
+    "gait",
+    "joint_positions",
+    "kinematics",
+    "motion",
+    "read_bvh",
+    "rotations",
+    "skeleton",
+    "style",
+    "synthesize",
+    "synthesize_phase",
+    "write_bvh",
+]
