@@ -3,8 +3,10 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
-# JAX on CPU: keep XLA from oversubscribing a 2-core machine when pytest runs workers.
 export PYTHONUNBUFFERED := 1
+# Two pytest workers (CI has 2 cores); a whole test file stays on one worker so that its
+# module-scoped fits are computed once.
+PYTEST_ARGS ?= -n 2 --dist loadfile
 
 .PHONY: all venv test lint demo bench experiments clean
 
@@ -22,7 +24,7 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff check fourierjax tests experiments
 
 test: lint
-	$(PY) -m pytest
+	$(PY) -m pytest $(PYTEST_ARGS)
 
 demo: $(STAMP)
 	$(VENV)/bin/fourierjax demo --out out/demo
