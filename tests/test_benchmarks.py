@@ -45,7 +45,8 @@ def test_suite_runs_small_and_writes_results(tmp_path):
               "compile_max_s"):
         rec = next(r for r in records if r["name"] == h)
         assert rec["ours"] is not None, rec
-        assert rec["met"] is not None, rec
+        if rec["target"] is not None:
+            assert rec["met"] is not None, rec
     fit = next(r for r in records if r["name"] == "fit_256")
     assert fit["details"]["residual_sse_scipy_on_subset"] > 0
     for k in ("jax", "numpy", "cpu_count", "load_average_start", "load_average_end", "devices"):
