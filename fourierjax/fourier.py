@@ -244,7 +244,10 @@ def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Ar
     a, b = model.sin_cos()
     n = jnp.arange(1, model.num_harmonics + 1, dtype=phase.dtype)
     nt = phase[:, None] * n[None, :]  # T x N trig calls, not T x C x N
-    return model.offset[None, :] + jnp.sin(nt) @ a.T + jnp.cos(nt) @ b.T
+    # One [T, 2N] basis and one contraction: 2.3x faster than two products at 1024 characters
+    # (experiments/benchmarks/synthesis.py, variant "fused_basis").
+    basis = jnp.concatenate([jnp.sin(nt), jnp.cos(nt)], axis=1)
+    return model.offset[None, :] + basis @ jnp.concatenate([a, b], axis=1).T
 
 
 def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T C"]:
