@@ -636,22 +636,6 @@ STEPS: tuple[tuple[str, Callable[[_State], None]], ...] = (
 )
 
 
-def _enable_compile_cache() -> None:
-    """Persist XLA compilations across runs (the stance solver takes long to compile); the
-    folder is ``$FOURIERJAX_CACHE_DIR`` or ``~/.cache/fourierjax/jax`` (as `fourierjax stance`)."""
-    import os
-
-    import jax
-
-    path = os.environ.get("FOURIERJAX_CACHE_DIR") or os.path.join(
-        os.path.expanduser("~"), ".cache", "fourierjax", "jax")
-    try:
-        os.makedirs(path, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-    except OSError:
-        pass
-
-
 def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True,
              log: Callable[[str], None] | None = None) -> dict:
     """Run the whole demo and write its outputs under ``out_dir`` (see the module docstring).
@@ -666,7 +650,9 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
     from tqdm import tqdm
 
     cfg = config or DemoConfig()
-    _enable_compile_cache()
+    from fourierjax._compile_cache import enable_compile_cache
+
+    enable_compile_cache()
     if cfg.harmonics < 1 or cfg.harmonics > 16:
         raise UserError(f"--harmonics: must be between 1 and 16, got {cfg.harmonics}")
     if not (np.isfinite(cfg.seconds) and 0.5 <= cfg.seconds <= 60):

@@ -57,20 +57,6 @@ def _point(text: str | None, what: str):
     return [_number(p.strip(), what) for p in parts]
 
 
-def _enable_compile_cache() -> None:
-    # The solver takes a while to compile; cache it across invocations (edge-only setting).
-    import jax
-
-    path = os.environ.get("FOURIERJAX_CACHE_DIR") or os.path.join(
-        os.path.expanduser("~"), ".cache", "fourierjax", "jax"
-    )
-    try:
-        os.makedirs(path, exist_ok=True)
-        jax.config.update("jax_compilation_cache_dir", path)
-    except OSError:
-        pass
-
-
 def run(args: argparse.Namespace) -> int:
     from fourierjax.errors import UserError
     from fourierjax.stance.shape_sets import builtin_shape_sets, get_shape_set
@@ -99,7 +85,9 @@ def run(args: argparse.Namespace) -> int:
     if not os.path.isdir(out_dir):
         raise UserError(f"--out: directory {out_dir} does not exist")
 
-    _enable_compile_cache()
+    from fourierjax._compile_cache import enable_compile_cache
+
+    enable_compile_cache()
     import numpy as np
 
     from fourierjax.stance.bvh_export import write_stance_bvh
