@@ -383,28 +383,43 @@ def step_intervals(contacts) -> np.ndarray:
     return np.diff(frames)[alt]
 
 
-def mean_step_period_s(contacts, frame_time_s: float) -> float:
-    """Mean step duration, heel strike to the other foot's heel strike (Tilmanne §2.2).
+STEP_STATISTICS = ("mean", "median")
 
-    The gait cycle is two steps: `omega = 2π / (2 · mean_step_period_s)`. When each foot has
-    at least two strikes the cycle is measured foot by foot (robust to left/right asymmetry)
-    and halved; otherwise the alternating strike intervals are averaged.
 
-    **Arguments:** `contacts`: `bool [T, F]`; `frame_time_s`: seconds per frame.
+def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> float:
+    """Step duration, heel strike to the other foot's heel strike (Tilmanne §2.2).
 
-    **Returns:** seconds. Raises `UserError` when the clip holds fewer than two heel strikes.
+    The gait cycle is two steps: `omega = 2π / (2 · step_period_s)`. When each foot has at
+    least two strikes the cycle is measured foot by foot (strike to strike of the same foot,
+    robust to left/right asymmetry) and halved; otherwise the alternating strike intervals
+    (`step_intervals`) are used. `statistic="median"` resists a spurious extra strike (a
+    stumble, CMU 142_02), which would pull the mean down.
+
+    **Arguments:** `contacts`: `bool [T, F]`; `frame_time_s`: seconds per frame;
+    `statistic`: `"mean"` or `"median"` of the intervals.
+
+    **Returns:** seconds. Raises `UserError` when the clip holds fewer than two alternating
+    heel strikes, or for an unknown `statistic`.
     """
+    if statistic not in STEP_STATISTICS:
+        raise UserError(f"statistic: {statistic!r} is not one of {STEP_STATISTICS}")
+    reduce = np.mean if statistic == "mean" else np.median
     ev = step_events(contacts)
     cycles = [np.diff(e) for e in ev if len(e) >= 2]
     if len(ev) >= 2 and len(cycles) == len(ev):
-        return float(np.mean(np.concatenate(cycles))) * frame_time_s / 2.0
+        return float(reduce(np.concatenate(cycles))) * frame_time_s / 2.0
     steps = step_intervals(contacts)
     if len(steps) == 0:
         raise UserError(
-            "mean_step_period_s: fewer than two alternating heel strikes in the clip; cannot "
+            "step_period_s: fewer than two alternating heel strikes in the clip; cannot "
             "measure a step"
         )
-    return float(np.mean(steps)) * frame_time_s
+    return float(reduce(steps)) * frame_time_s
+
+
+def mean_step_period_s(contacts, frame_time_s: float) -> float:
+    """`step_period_s(contacts, frame_time_s, statistic="mean")`: mean step duration (s)."""
+    return step_period_s(contacts, frame_time_s, statistic="mean")
 
 
 def flight_fraction(contacts) -> float:

@@ -520,22 +520,20 @@ def foot_contacts_of(motion) -> np.ndarray | None:
 def _steps(contacts_lr, frame_time_s):
     """(left strikes, right strikes, omega from steps or NaN): Tilmanne §2.2, cycle = 2 steps.
 
-    The cycle is the MEDIAN of the strike-to-strike intervals of each foot (one full cycle
-    each), so that a spurious extra strike (stumbling, CMU 142_02) does not halve it; with fewer
-    than two strikes per foot, twice the median alternating step (``fourierjax.contacts``).
+    The step period is the MEDIAN interval (``contacts.step_period_s``), so that a spurious
+    extra strike (stumbling, CMU 142_02) does not halve the cycle.
     """
     from fourierjax import contacts
 
     if contacts_lr is None:
         return np.zeros(0, int), np.zeros(0, int), float("nan")
     left, right = contacts.step_events(contacts_lr)
-    cycles = np.concatenate([np.diff(left), np.diff(right)])
-    if len(cycles):
-        period = float(np.median(cycles)) * frame_time_s
-    else:
-        steps = contacts.step_intervals(contacts_lr)
-        period = 2 * float(np.median(steps)) * frame_time_s if len(steps) else float("nan")
-    return left, right, float(2 * np.pi / period) if np.isfinite(period) else float("nan")
+    try:
+        step = contacts.step_period_s(contacts_lr, frame_time_s, statistic="median")
+    except UserError:  # fewer than two alternating heel strikes
+        return left, right, float("nan")
+    # Both feet striking together (two-footed hops) can give a zero median: no step frequency.
+    return left, right, float(2 * np.pi / (2 * step)) if step > 0 else float("nan")
 
 
 def _position_ve(skeleton, representation, x, xhat, mask):

@@ -283,3 +283,31 @@ def test_point_speeds_match_numpy_gradient():
     np.testing.assert_allclose(C.point_speeds(p, 0.1), ref, rtol=1e-5)
     ref_h = np.linalg.norm(np.gradient(p[..., [0, 2]], 0.1, axis=0), axis=-1)
     np.testing.assert_allclose(C.point_speeds(p, 0.1, up_axis=1), ref_h, rtol=1e-5)
+
+
+def _contacts_from_intervals(T, left, right):
+    c = np.zeros((T, 2), bool)
+    for f, runs in enumerate((left, right)):
+        for a, b in runs:
+            c[a:b, f] = True
+    return c
+
+
+def test_step_period_median_resists_a_spurious_strike():
+    # Left strikes at 10, 130, 135 (the contact breaks for 3 frames: a stumble), 250;
+    # right strikes at 70, 190. Cycles (same foot): 120, 5, 115 and 120 frames.
+    c = _contacts_from_intervals(300, [(10, 60), (130, 132), (135, 180), (250, 290)],
+                                 [(70, 120), (190, 240)])
+    assert [e.tolist() for e in C.step_events(c)] == [[10, 130, 135, 250], [70, 190]]
+    ft = 0.01
+    assert C.step_period_s(c, ft) == pytest.approx((120 + 5 + 115 + 120) / 4 / 2 * ft)
+    assert C.step_period_s(c, ft, statistic="median") == pytest.approx(117.5 / 2 * ft)
+    assert C.mean_step_period_s(c, ft) == C.step_period_s(c, ft, statistic="mean")
+    # One strike per foot: the alternating interval (70 - 10 frames) is the step.
+    one = _contacts_from_intervals(100, [(10, 60)], [(70, 95)])
+    for stat in C.STEP_STATISTICS:
+        assert C.step_period_s(one, ft, statistic=stat) == pytest.approx(60 * ft)
+    with pytest.raises(UserError, match="statistic"):
+        C.step_period_s(c, ft, statistic="mode")
+    with pytest.raises(UserError, match="fewer than two"):
+        C.step_period_s(np.zeros((10, 2), bool), ft, statistic="median")
