@@ -17,6 +17,15 @@ Format ``fourierjax.fourier_model``, version 1. An uncompressed NumPy ``.npz`` a
 * if the header has a skeleton: ``skeleton_offsets [J, 3]``, ``skeleton_end_site_offsets [E, 3]``
   (file units), so that ``fourierjax synth`` can write a BVH without the source clip.
 
+Characteristic files (Unuma 1995 eq. 7, written by ``fourierjax characteristic``) use format
+``fourierjax.fourier_characteristic``, version 1: the same archive layout, whose header has the
+same first seven keys plus ``"a"``, ``"b"`` (the sources of A and B) and ``"alignment"``
+(no skeleton, no provenance), and the arrays of `fourierjax.style.Characteristic`:
+``offset [C]`` (A0_A − A0_B), ``amplitude [C, N]`` (A_A − A_B, may be negative),
+``phase [C, N]`` (φ_A − φ_B wrapped to (−π, π]), ``phasor [C, N, 2]`` (c_A − c_B with
+c = (A cos φ, A sin φ)), ``log_omega []`` (log ω_A/ω_B), float64. Apply one with
+`fourierjax.style.superpose(base, [characteristic], [weight])`.
+
 Files are read with ``allow_pickle=False``. A file that is not such an archive, has another format
 name, a newer version, or inconsistent shapes raises :class:`ModelFileError` naming the path.
 """
@@ -35,13 +44,19 @@ from fourierjax.errors import UserError
 
 FORMAT_NAME = "fourierjax.fourier_model"
 FORMAT_VERSION = 1
+CHARACTERISTIC_FORMAT_NAME = "fourierjax.fourier_characteristic"
+CHARACTERISTIC_FORMAT_VERSION = 1
 
-__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "ModelFileError", "ModelFile", "save_model",
-           "load_model"]
+__all__ = ["FORMAT_NAME", "FORMAT_VERSION", "CHARACTERISTIC_FORMAT_NAME",
+           "CHARACTERISTIC_FORMAT_VERSION", "ModelFileError", "ModelFile", "save_model",
+           "load_model", "save_characteristic", "load_characteristic"]
+
+_MODEL_ARRAYS = ("offset", "amplitude", "phase", "omega")
+_CHARACTERISTIC_ARRAYS = ("offset", "amplitude", "phase", "phasor", "log_omega")
 
 
 class ModelFileError(UserError):
-    """A model file that cannot be read: carries ``path`` and a message."""
+    """A model or characteristic file that cannot be read: carries ``path`` and a message."""
 
     def __init__(self, path, message: str):
         self.path = str(path)
@@ -84,6 +99,84 @@ def _jsonable(x):
     return x
 
 
+def _header(format_name: str, format_version: int, obj, kind: str, **extra) -> dict:
+    """The header keys shared by model and characteristic files (``obj``: one, unstacked)."""
+    amp = np.asarray(obj.amplitude, np.float64)
+    if amp.ndim != 2:
+        raise UserError(f"save_{kind}: one {kind} expected, amplitude has shape {amp.shape}")
+    return {
+        "format": format_name,
+        "version": format_version,
+        "representation": obj.representation,
+        "channel_names": list(obj.channel_names),
+        "num_channels": int(amp.shape[0]),
+        "num_harmonics": int(amp.shape[1]),
+        "phase_convention": "sine",
+        **extra,
+    }
+
+
+def _write_archive(path, header: dict, arrays: dict) -> None:
+    """One uncompressed ``.npz``: the float64 arrays and the JSON header (written in one go)."""
+    arrays = {k: np.asarray(v, np.float64) for k, v in arrays.items()}
+    arrays["header"] = np.array(json.dumps(header))
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    with open(path, "wb") as f:
+        f.write(buf.getvalue())
+
+
+def _read_archive(path: str, format_name: str, format_version: int,
+                  kind: str) -> tuple[dict, dict]:
+    """(header, arrays) of an archive of ``format_name`` (no pickle); checks format and version."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as err:
+        raise ModelFileError(path, f"not a fourierjax {kind} file (.npz): {err}") from None
+    if "header" not in data:
+        raise ModelFileError(path, f"not a fourierjax {kind} file: no 'header' entry")
+    try:
+        header = json.loads(str(data.pop("header")))
+    except (json.JSONDecodeError, TypeError) as err:
+        raise ModelFileError(path, f"header is not valid JSON: {err}") from None
+    if not isinstance(header, dict) or header.get("format") != format_name:
+        got = header.get("format") if isinstance(header, dict) else None
+        raise ModelFileError(path, f"format is {got!r}, expected {format_name!r}")
+    version = header.get("version")
+    if not isinstance(version, int) or version < 1:
+        raise ModelFileError(path, f"bad format version {version!r}")
+    if version > format_version:
+        raise ModelFileError(
+            path, f"format version {version} is newer than this fourierjax reads "
+            f"({format_version}); upgrade fourierjax"
+        )
+    if header.get("phase_convention", "sine") != "sine":
+        raise ModelFileError(path, f"unknown phase convention {header['phase_convention']!r}")
+    return header, data
+
+
+def _check_arrays(path: str, header: dict, data: dict, trailing: dict) -> tuple[str, ...]:
+    """Check the Fourier arrays against the header's C and N; returns the channel names.
+
+    ``trailing``: array name -> its shape with ``"C"`` / ``"N"`` standing for the counts.
+    """
+    missing = [k for k in trailing if k not in data]
+    if missing:
+        raise ModelFileError(path, f"missing array(s) {missing}")
+    names = tuple(header.get("channel_names", ()))
+    counts = {"C": header.get("num_channels"), "N": header.get("num_harmonics")}
+    expected = {k: tuple(counts.get(d, d) for d in dims) for k, dims in trailing.items()}
+    shapes = {k: data[k].shape for k in trailing}
+    if shapes != expected or (names and len(names) != counts["C"]):
+        got = ", ".join(f"{k} {v}" for k, v in shapes.items())
+        raise ModelFileError(
+            path, f"inconsistent shapes: {got}, {len(names)} channel names, header says "
+            f"C={counts['C']}, N={counts['N']}"
+        )
+    return names
+
+
 def save_model(path, model, *, motion=None, provenance: dict | None = None,
                alignment: str = "none") -> None:
     """Write one FourierModel (no batch axis) to ``path`` (format above).
@@ -94,27 +187,9 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         so ``synth`` can write BVH), or None; provenance: JSON-able fit details; alignment: the
         phase-alignment event name.
     """
-    amp = np.asarray(model.amplitude, np.float64)
-    if amp.ndim != 2:
-        raise UserError(f"save_model: one model expected, amplitude has shape {amp.shape}")
-    header = {
-        "format": FORMAT_NAME,
-        "version": FORMAT_VERSION,
-        "representation": model.representation,
-        "channel_names": list(model.channel_names),
-        "num_channels": int(amp.shape[0]),
-        "num_harmonics": int(amp.shape[1]),
-        "phase_convention": "sine",
-        "skeleton": None,
-        "provenance": _jsonable(provenance or {}),
-        "alignment": alignment,
-    }
-    arrays = {
-        "offset": np.asarray(model.offset, np.float64),
-        "amplitude": amp,
-        "phase": np.asarray(model.phase, np.float64),
-        "omega": np.asarray(model.omega, np.float64),
-    }
+    header = _header(FORMAT_NAME, FORMAT_VERSION, model, "model", skeleton=None,
+                     provenance=_jsonable(provenance or {}), alignment=alignment)
+    arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
     if motion is not None:
         topo = motion.topology
         header["skeleton"] = {
@@ -124,14 +199,10 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
             "end_site_parents": list(topo.end_site_parents),
             "frame_time_s": float(motion.frame_time_s),
         }
-        arrays["skeleton_offsets"] = np.asarray(motion.offsets, np.float64)
+        arrays["skeleton_offsets"] = motion.offsets
         arrays["skeleton_end_site_offsets"] = np.asarray(motion.end_site_offsets,
                                                          np.float64).reshape(-1, 3)
-    arrays["header"] = np.array(json.dumps(header))
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    with open(path, "wb") as f:
-        f.write(buf.getvalue())
+    _write_archive(path, header, arrays)
 
 
 def load_model(path) -> ModelFile:
@@ -146,45 +217,11 @@ def load_model(path) -> ModelFile:
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(2, "No such file", path)
+    header, data = _read_archive(path, FORMAT_NAME, FORMAT_VERSION, "model")
+    names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
+                                                "phase": ("C", "N"), "omega": ()})
     try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as err:
-        raise ModelFileError(path, f"not a fourierjax model file (.npz): {err}") from None
-    if "header" not in data:
-        raise ModelFileError(path, "not a fourierjax model file: no 'header' entry")
-    try:
-        header = json.loads(str(data["header"]))
-    except (json.JSONDecodeError, TypeError) as err:
-        raise ModelFileError(path, f"header is not valid JSON: {err}") from None
-    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
-        got = header.get("format") if isinstance(header, dict) else None
-        raise ModelFileError(path, f"format is {got!r}, expected {FORMAT_NAME!r}")
-    version = header.get("version")
-    if not isinstance(version, int) or version < 1:
-        raise ModelFileError(path, f"bad format version {version!r}")
-    if version > FORMAT_VERSION:
-        raise ModelFileError(
-            path, f"format version {version} is newer than this fourierjax reads "
-            f"({FORMAT_VERSION}); upgrade fourierjax"
-        )
-    for key in ("offset", "amplitude", "phase", "omega"):
-        if key not in data:
-            raise ModelFileError(path, f"missing array {key!r}")
-    names = tuple(header.get("channel_names", ()))
-    C, N = header.get("num_channels"), header.get("num_harmonics")
-    amp = data["amplitude"]
-    if (amp.shape != (C, N) or data["phase"].shape != (C, N) or data["offset"].shape != (C,)
-            or data["omega"].shape != () or (names and len(names) != C)):
-        raise ModelFileError(
-            path, f"inconsistent shapes: amplitude {amp.shape}, phase {data['phase'].shape}, "
-            f"offset {data['offset'].shape}, omega {data['omega'].shape}, {len(names)} channel "
-            f"names, header says C={C}, N={N}"
-        )
-    if header.get("phase_convention", "sine") != "sine":
-        raise ModelFileError(path, f"unknown phase convention {header['phase_convention']!r}")
-    try:
-        model = FourierModel(data["offset"], amp, data["phase"], data["omega"],
+        model = FourierModel(*(data[k] for k in _MODEL_ARRAYS),
                              header.get("representation", ""), names)
     except (ValueError, TypeError) as err:
         raise ModelFileError(path, str(err)) from None
@@ -207,3 +244,41 @@ def load_model(path) -> ModelFile:
             raise ModelFileError(path, f"bad skeleton record: {err}") from None
     return ModelFile(model, topology, offsets, ends, frame_time,
                      header.get("provenance", {}), header.get("alignment", "none"))
+
+
+def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str = "none") -> None:
+    """Write one (unstacked) `fourierjax.style.Characteristic` to ``path`` (format above).
+
+    Arguments:
+        path: output file (conventionally ``*.npz``); char: ``style.characteristic(A, B)``
+        (Unuma 1995 eq. 7); a, b: where A and B came from (free text); alignment: the
+        phase-alignment event of the models.
+    """
+    header = _header(CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION, char,
+                     "characteristic", a=a, b=b, alignment=alignment)
+    _write_archive(path, header, {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS})
+
+
+def load_characteristic(path):
+    """Read a characteristic file written by :func:`save_characteristic`.
+
+    Returns:
+        ``(Characteristic, header dict)``; the leaves are float64 NumPy arrays.
+    Raises:
+        ModelFileError (a ``UserError``, one line naming the path): no such file, not an npz
+        archive, not this format, a newer version, bad shapes.
+    """
+    from fourierjax.style import Characteristic
+
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise ModelFileError(path, "no such file")
+    header, data = _read_archive(path, CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION,
+                                 "characteristic")
+    names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
+                                                "phase": ("C", "N"), "phasor": ("C", "N", 2),
+                                                "log_omega": ()})
+    char = Characteristic(**{k: data[k] for k in _CHARACTERISTIC_ARRAYS},
+                          representation=str(header.get("representation", "")),
+                          channel_names=names)
+    return char, header

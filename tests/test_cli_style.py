@@ -9,8 +9,6 @@ import pytest
 
 from fourierjax import data, model_io, style
 from fourierjax import motion as fmotion
-from fourierjax.cli.characteristic import load_characteristic, save_characteristic
-from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 from fourierjax.io.bvh import read_bvh
 
@@ -159,28 +157,10 @@ def test_characteristic_fits_bvh_clips_on_the_fly(tmp_path):
         cwd=tmp_path,
     )
     assert proc.returncode == 0, proc.stderr
-    char, header = load_characteristic(tmp_path / "runness.npz")
+    char, header = model_io.load_characteristic(tmp_path / "runness.npz")
     assert header["a"].endswith("02_03.bvh") and header["alignment"] == "left_heel_strike"
     assert char.amplitude.shape == (96, 3)
     # ω ratio 1.30 Hz / 0.907 Hz (the fitted fundamentals of the two clips)
     assert float(np.exp(char.log_omega)) == pytest.approx(1.300 / 0.907, rel=0.02)
     vz = char.channel_names.index("root.vz")
     assert 15.0 < float(char.offset[vz]) < 35.0  # ≈ 46 − 21 units/s
-
-
-def test_characteristic_file_roundtrip_and_errors(tmp_path):
-    names = ("a", "b")
-    ma = FourierModel(jnp.zeros(2), jnp.ones((2, 2)), jnp.zeros((2, 2)), jnp.asarray(6.0), "euler", names)
-    mb = FourierModel(jnp.ones(2), jnp.full((2, 2), 0.5), jnp.ones((2, 2)), jnp.asarray(7.0), "euler", names)
-    char = style.characteristic(ma, mb)
-    save_characteristic(tmp_path / "c.npz", char, a="A", b="B")
-    back, header = load_characteristic(tmp_path / "c.npz")
-    for k in ("offset", "amplitude", "phase", "phasor", "log_omega"):
-        np.testing.assert_allclose(getattr(back, k), getattr(char, k), atol=1e-7)
-    assert back.channel_names == names and header["b"] == "B"
-    model_io.save_model(tmp_path / "m.npz", ma)
-    with pytest.raises(UserError, match="m.npz: format is 'fourierjax.fourier_model'"):
-        load_characteristic(tmp_path / "m.npz")
-    (tmp_path / "junk.npz").write_text("not a zip")
-    with pytest.raises(UserError, match="junk.npz: not a fourierjax characteristic file"):
-        load_characteristic(tmp_path / "junk.npz")

@@ -2,6 +2,7 @@
 
 import io
 import json
+import pathlib
 
 import numpy as np
 import pytest
@@ -85,3 +86,103 @@ def test_bad_files_raise_typed_errors(tmp_path):
 
     with pytest.raises(FileNotFoundError):
         model_io.load_model(tmp_path / "missing.npz")
+
+
+# -- characteristic files (Unuma eq. 7) ------------------------------------------------------
+def _gait_pair():
+    import jax.numpy as jnp
+
+    names = ("root.vz", "LeftLeg.Xrotation")
+    ma = FourierModel(jnp.asarray([20.0, 0.3]), jnp.asarray([[1.0, 0.25], [0.5, 0.125]]),
+                      jnp.asarray([[0.5, -1.0], [2.0, 3.0]]), jnp.asarray(6.0), "euler", names)
+    mb = FourierModel(jnp.asarray([10.0, 0.1]), jnp.asarray([[0.5, 0.5], [0.25, 0.25]]),
+                      jnp.asarray([[-0.5, 1.0], [-2.0, 0.0]]), jnp.asarray(7.5), "euler", names)
+    return ma, mb
+
+
+_CHAR_FIELDS = ("offset", "amplitude", "phase", "phasor", "log_omega")
+
+
+def _archive(path):
+    with np.load(path, allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
+def test_characteristic_file_written_before_the_move_still_loads(tmp_path):
+    # tests/data/characteristic_v1.npz was written by fourierjax.cli.characteristic (the code
+    # before save/load moved to model_io) from characteristic(A, B) of _gait_pair().
+    from fourierjax import style
+
+    path = pathlib.Path(__file__).parent / "data" / "characteristic_v1.npz"
+    char, header = model_io.load_characteristic(path)
+    assert header == {"format": "fourierjax.fourier_characteristic", "version": 1,
+                      "representation": "euler",
+                      "channel_names": ["root.vz", "LeftLeg.Xrotation"],
+                      "num_channels": 2, "num_harmonics": 2, "phase_convention": "sine",
+                      "a": "brisk.bvh", "b": "walk.bvh", "alignment": "left_heel_strike"}
+    assert char.representation == "euler"
+    assert char.channel_names == ("root.vz", "LeftLeg.Xrotation")
+    # Closed forms of eq. 7 for the pair: A0_A - A0_B, A_A - A_B, log(6 / 7.5).
+    np.testing.assert_allclose(char.offset, [10.0, 0.2], atol=1e-6)
+    np.testing.assert_allclose(char.amplitude, [[0.5, -0.25], [0.25, -0.125]])
+    np.testing.assert_allclose(char.log_omega, np.log(6.0 / 7.5), rtol=1e-6)
+    ref = style.characteristic(*_gait_pair())
+    for k in _CHAR_FIELDS:
+        np.testing.assert_allclose(getattr(char, k), getattr(ref, k), atol=1e-6)
+    # The new writer writes the same archive: entries, dtypes, values and header.
+    new = tmp_path / "new.npz"
+    model_io.save_characteristic(new, ref, a="brisk.bvh", b="walk.bvh",
+                                 alignment="left_heel_strike")
+    old_z, new_z = _archive(path), _archive(new)
+    assert list(new_z) == list(old_z)
+    assert json.loads(str(new_z.pop("header"))) == json.loads(str(old_z.pop("header")))
+    for k, v in old_z.items():
+        assert new_z[k].dtype == v.dtype == np.float64
+        np.testing.assert_array_equal(new_z[k], v)
+
+
+def test_characteristic_round_trip_and_typed_errors(tmp_path):
+    from fourierjax import style
+    from fourierjax.errors import UserError
+
+    ma, mb = _gait_pair()
+    char = style.characteristic(ma, mb)
+    path = tmp_path / "c.npz"
+    model_io.save_characteristic(path, char, a="A", b="B")
+    back, header = model_io.load_characteristic(path)
+    for k in _CHAR_FIELDS:
+        np.testing.assert_array_equal(getattr(back, k), np.asarray(getattr(char, k), np.float64))
+    assert back.channel_names == char.channel_names and header["b"] == "B"
+    assert header["format"] == model_io.CHARACTERISTIC_FORMAT_NAME
+    # The CLI module still offers the same functions.
+    from fourierjax.cli import characteristic as cli_char
+
+    assert cli_char.load_characteristic is model_io.load_characteristic
+    assert cli_char.save_characteristic is model_io.save_characteristic
+
+    # A model file is not a characteristic file, and vice versa.
+    model_io.save_model(tmp_path / "m.npz", ma)
+    with pytest.raises(model_io.ModelFileError, match="m.npz: format is 'fourierjax.fourier_model'"):
+        model_io.load_characteristic(tmp_path / "m.npz")
+    with pytest.raises(model_io.ModelFileError,
+                       match="format is 'fourierjax.fourier_characteristic'"):
+        model_io.load_model(path)
+    (tmp_path / "junk.npz").write_text("not a zip")
+    with pytest.raises(UserError, match="junk.npz: not a fourierjax characteristic file"):
+        model_io.load_characteristic(tmp_path / "junk.npz")
+    with pytest.raises(UserError, match="nope.npz: no such file"):
+        model_io.load_characteristic(tmp_path / "nope.npz")
+    arrays = _archive(path)
+    hdr = json.loads(str(arrays.pop("header")))
+    bad = tmp_path / "bad.npz"
+    _write(bad, dict(hdr, version=2), **arrays)
+    with pytest.raises(model_io.ModelFileError, match="version 2 is newer"):
+        model_io.load_characteristic(bad)
+    _write(bad, dict(hdr, num_harmonics=3), **arrays)
+    with pytest.raises(model_io.ModelFileError, match="inconsistent shapes: .*phasor"):
+        model_io.load_characteristic(bad)
+    _write(bad, hdr, **{k: v for k, v in arrays.items() if k != "phasor"})
+    with pytest.raises(model_io.ModelFileError, match=r"missing array\(s\) \['phasor'\]"):
+        model_io.load_characteristic(bad)
+    with pytest.raises(UserError, match="one characteristic expected"):
+        model_io.save_characteristic(tmp_path / "x.npz", style.stack([char, char]))
