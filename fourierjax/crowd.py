@@ -1,0 +1,332 @@
+"""A crowd: many Fourier-animated characters of one skeleton, synthesized and posed per frame."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from fourierjax._jit import jit
+from fourierjax.errors import UserError
+from fourierjax.fourier import FourierModel
+from fourierjax.skeleton import Skeleton, Topology
+
+__all__ = ["Crowd", "make_crowd", "crowd_positions"]
+
+# Layout and why (measured on 2 CPU cores, 10,000 characters, CMU 07_01: 31 joints, 96
+# channels; see experiments/benchmarks/crowd.py):
+#
+# * Characters are the last (minor) axis of every array, so each step of synthesis and FK is one
+#   elementwise loop over characters (AVX lanes), with joints and channels unrolled over the
+#   static topology: no gathers, no scatters, no 3x3 dot_generals.
+# * Only the channels that move a joint are synthesized: rotations of joints with children and
+#   position channels (a leaf joint's rotation moves nothing but its End Site).
+# * Per character and frame: one sin/cos of the phase, harmonics by the angle-addition
+#   recurrence, one shared range reduction (in degrees) per Euler angle; rotations are built from
+#   the elementary matrices of each joint's own channel order and composed entry by entry.
+# * XLA fuses every cheap producer into each of its consumers, so an unrolled hierarchy gets
+#   recomputed from the root for every output entry (68 ms per frame instead of 5 ms), and the
+#   phase basis gets recomputed for every channel. `_keep` stops that: a division is "expensive"
+#   to XLA, which then never duplicates it into several consumers, so each kept value is
+#   computed once and stored. The divisor is a runtime 1 (`1 + 0 * t`: XLA does not fold
+#   `0 * t` for floats), so the division survives algebraic simplification.
+
+
+class Crowd(eqx.Module):
+    """Many characters of one skeleton, each a Fourier model, laid out for posing per frame.
+
+    Build it once with `make_crowd`; pose it every frame with `crowd_positions`. Arrays put the
+    character axis last (`B`). Only the channels that move joints are kept (`channel_index`).
+
+    - `coefficients`: `[2N + 1, K, B]` linear Fourier coefficients of the kept channels, in the
+      channels' units (degrees for rotations, file units for positions): row 0 the offset
+      `A0`, rows `1..N` the sine and rows `N+1..2N` the cosine coefficients
+      (`x = A0 + sum_n a_n sin(n theta) + b_n cos(n theta)`, Unuma 1995 eq. 1 in linear form).
+    - `omega`: `[B]` fundamental of each character (rad/s); `theta = omega * t`.
+    - `bone_offsets`: `[J, 3]` the skeleton's OFFSETs (file units).
+    - `topology`: the static `Topology`.
+    - `channel_index`: static; the model channel of each kept row (rotations of joints with
+      children, joint by joint, then every position channel).
+    """
+
+    coefficients: Float[Array, "P K B"]
+    omega: Float[Array, " B"]
+    bone_offsets: Float[Array, "J 3"]
+    topology: Topology = eqx.field(static=True)
+    channel_index: tuple[int, ...] = eqx.field(static=True)
+
+    @property
+    def num_characters(self) -> int:
+        return self.omega.shape[-1]
+
+    @property
+    def num_harmonics(self) -> int:
+        return (self.coefficients.shape[0] - 1) // 2
+
+    def __check_init__(self):
+        p, k = self.coefficients.shape[:2] if self.coefficients.ndim == 3 else (None, None)
+        if self.coefficients.ndim != 3 or p % 2 != 1 or k != len(self.channel_index):
+            raise UserError(
+                f"Crowd: `coefficients` has shape {self.coefficients.shape}, expected "
+                f"(2N + 1, {len(self.channel_index)}, B)"
+            )
+        if self.omega.shape != self.coefficients.shape[2:]:
+            raise UserError(
+                f"Crowd: `omega` has shape {self.omega.shape}, expected "
+                f"({self.coefficients.shape[2]},) (one per character)"
+            )
+        if self.bone_offsets.shape != (self.topology.num_joints, 3):
+            raise UserError(
+                f"Crowd: `bone_offsets` has shape {self.bone_offsets.shape}, expected "
+                f"({self.topology.num_joints}, 3)"
+            )
+
+
+def _kept_channels(topology: Topology) -> tuple[tuple[int, ...], int]:
+    """`(channel_index, num_rotation_rows)`: the channels that move joints, in crowd row order."""
+    has_child = _has_child(topology)
+    offsets = topology.channel_offsets
+    rot, pos = [], []
+    for j, chans in enumerate(topology.channels):
+        for k, name in enumerate(chans):
+            if name.endswith("position"):
+                pos.append(offsets[j] + k)
+            elif has_child[j]:
+                rot.append(offsets[j] + k)
+    return tuple(rot + pos), len(rot)
+
+
+def _has_child(topology: Topology) -> list[bool]:
+    out = [False] * topology.num_joints
+    for p in topology.parents:
+        if p >= 0:
+            out[p] = True
+    return out
+
+
+def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
+    """Lay out a batch of Fourier models of one skeleton's BVH channels as a `Crowd`.
+
+    Each model animates every BVH channel of `skeleton` in file order and units (degrees for
+    rotations, file units for positions), so that one frame of a character is
+    `fourier.synthesize(model, t[None])[0]`, a valid `kinematics.joint_positions` input. The
+    linear coefficients (`FourierModel.sin_cos`) are computed here once, not per frame.
+
+    **Arguments:**
+
+    - `skeleton`: the skeleton every character shares (unbatched offsets `[J, 3]`).
+    - `models`: a `FourierModel` with a leading character axis (`fourier.stack_models`):
+      offset `[B, C]`, amplitude and phase `[B, C, N]`, omega `[B]`, with `C` the skeleton's
+      channel count.
+
+    **Returns:** a `Crowd` of `B` characters (arrays in the models' floating dtype).
+
+    **Raises:** `UserError` naming `skeleton` or `models` when the shapes do not fit.
+    """
+    if not isinstance(skeleton, Skeleton):
+        raise UserError(f"make_crowd: `skeleton` must be a Skeleton, got {type(skeleton).__name__}")
+    if not isinstance(models, FourierModel):
+        raise UserError(f"make_crowd: `models` must be a FourierModel, got {type(models).__name__}")
+    topology = skeleton.topology
+    if skeleton.offsets.shape != (topology.num_joints, 3):
+        raise UserError(
+            f"make_crowd: `skeleton` offsets have shape {skeleton.offsets.shape}; the crowd shares "
+            f"one skeleton, expected ({topology.num_joints}, 3)"
+        )
+    if models.offset.ndim != 2:
+        raise UserError(
+            f"make_crowd: `models` need one leading character axis (fourier.stack_models); "
+            f"offset has shape {models.offset.shape}"
+        )
+    num_chars, num_channels = models.offset.shape
+    if num_channels != topology.num_channels:
+        raise UserError(
+            f"make_crowd: `models` have {num_channels} channels, the skeleton has "
+            f"{topology.num_channels} BVH channels ({topology.num_joints} joints)"
+        )
+    if models.channel_names and tuple(models.channel_names) != topology.flat_channel_names:
+        raise UserError(
+            "make_crowd: `models` channel_names are not the skeleton's BVH channels "
+            f"({topology.flat_channel_names[:3]}...); crowd models animate BVH channel values"
+        )
+    if num_chars == 0:
+        raise UserError("make_crowd: `models` hold no characters")
+    dtype = jnp.result_type(models.offset.dtype, jnp.float32)
+    index, _ = _kept_channels(topology)
+    a, b = models.sin_cos()  # [B, C, N]
+    rows = np.asarray(index, np.int32)
+    coef = jnp.concatenate([models.offset[:, None, :], jnp.swapaxes(a, 1, 2),
+                            jnp.swapaxes(b, 1, 2)], axis=1)  # [B, 2N + 1, C]
+    coef = jnp.transpose(coef[:, :, rows], (1, 2, 0)).astype(dtype)  # [2N + 1, K, B]
+    return Crowd(
+        coefficients=coef,
+        omega=jnp.asarray(models.omega, dtype),
+        bone_offsets=jnp.asarray(skeleton.offsets, dtype),
+        topology=topology,
+        channel_index=index,
+    )
+
+
+# Cephes sinf/cosf minimax polynomials on [-pi/4, pi/4].
+_SIN = (-1.6666654611e-1, 8.3321608736e-3, -1.9515295891e-4)
+_COS = (4.166664568298827e-2, -1.388731625493765e-3, 2.443315711809948e-5)
+
+
+def _sincos_degrees(x: Array) -> tuple[Array, Array]:
+    """`(sin, cos)` of angles in degrees sharing one range reduction.
+
+    float32: the reduction `x - 90 n` is exact, then a polynomial on [-45, 45] degrees (about
+    1 ulp). Other dtypes use `jnp.sin` / `jnp.cos`. The quadrant `n` is piecewise constant, so
+    gradients are those of the polynomial.
+    """
+    if x.dtype != jnp.float32:
+        r = jnp.deg2rad(x)
+        return jnp.sin(r), jnp.cos(r)
+    n = jnp.floor(x * np.float32(1 / 90) + 0.5)
+    r = (x - n * 90.0) * np.float32(np.pi / 180)
+    r2 = r * r
+    s = r + r * r2 * (_SIN[0] + r2 * (_SIN[1] + r2 * _SIN[2]))
+    c = 1.0 - 0.5 * r2 + r2 * r2 * (_COS[0] + r2 * (_COS[1] + r2 * _COS[2]))
+    q = n - 4.0 * jnp.floor(n * 0.25)  # quadrant 0..3, exact in floats (no int conversion)
+    swap = (q == 1.0) | (q == 3.0)
+    sin = jnp.where(swap, c, s)
+    cos = jnp.where(swap, s, c)
+    return jnp.where(q >= 2.0, -sin, sin), jnp.where((q == 1.0) | (q == 2.0), -cos, cos)
+
+
+# Symbolic 3x3 matrices: nested lists whose entries are arrays or the Python ints 0 and 1, so
+# that products with elementary rotations skip the known zeros and ones.
+_IDENTITY = ((1, 0, 0), (0, 1, 0), (0, 0, 1))
+
+
+def _elementary(axis: str, s, c):
+    """Rotation about `axis` ("X", "Y" or "Z") by the angle with sine `s`, cosine `c`."""
+    i = "XYZ".index(axis)
+    m = [list(r) for r in _IDENTITY]
+    u, v = (i + 1) % 3, (i + 2) % 3  # (u, v) cyclic after the axis: Rx acts on (y, z), ...
+    m[u][u], m[v][v] = c, c
+    m[u][v], m[v][u] = -s, s
+    return m
+
+
+def _matmul(a, b):
+    out = [[0] * 3 for _ in range(3)]
+    for i in range(3):
+        for k in range(3):
+            acc = 0
+            for j in range(3):
+                x, y = a[i][j], b[j][k]
+                if _is(x, 0) or _is(y, 0):
+                    continue
+                term = y if _is(x, 1) else x if _is(y, 1) else x * y
+                acc = term if _is(acc, 0) else acc + term
+            out[i][k] = acc
+    return out
+
+
+def _is(x, value: int) -> bool:
+    return isinstance(x, int) and x == value
+
+
+def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
+    """World joint positions `[J, 3, B]` (characters last) at time `t` (seconds)."""
+    topology = crowd.topology
+    coef = crowd.coefficients
+    dtype = coef.dtype
+    num_chars = crowd.num_characters
+    num_harmonics = crowd.num_harmonics
+    t = jnp.asarray(t, dtype)
+    # A runtime 1: dividing by it marks a value to compute once and store (see the notes above).
+    one = 1.0 + 0.0 * t
+
+    def keep(x):
+        return x / one
+
+    # Phase basis per character: one sin/cos, then the angle-addition recurrence.
+    theta = crowd.omega * t
+    s1, c1 = jnp.sin(theta), jnp.cos(theta)
+    sines, cosines = [keep(s1)], [keep(c1)]
+    for _ in range(1, num_harmonics):
+        s, c = sines[-1], cosines[-1]
+        sines.append(keep(s * c1 + c * s1))
+        cosines.append(keep(c * c1 - s * s1))
+    x = coef[0]
+    for n in range(num_harmonics):
+        x = x + coef[1 + n] * sines[n][None] + coef[1 + num_harmonics + n] * cosines[n][None]  # [K, B]
+
+    index, num_rot = _kept_channels(topology)
+    row_of = {c: r for r, c in enumerate(index)}
+    sin, cos = (keep(v) for v in _sincos_degrees(keep(x[:num_rot])))
+    has_child = _has_child(topology)
+    offsets = topology.channel_offsets
+    bone = crowd.bone_offsets
+
+    def vec(v):
+        return jnp.broadcast_to(v, (num_chars,))
+
+    world_r: list = [None] * topology.num_joints
+    world_p: list = [None] * topology.num_joints
+    positions = []
+    for j, chans in enumerate(topology.channels):
+        local_t = [bone[j, k] for k in range(3)]
+        local_r = _IDENTITY
+        for k, name in enumerate(chans):
+            row = row_of.get(offsets[j] + k)
+            if name.endswith("position"):
+                local_t["XYZ".index(name[0])] = x[row]  # replaces the OFFSET component
+            elif row is not None:
+                local_r = _matmul(local_r, _elementary(name[0], sin[row], cos[row]))
+        p = topology.parents[j]
+        if p < 0:
+            pos = [vec(v) for v in local_t]
+            rot = local_r
+        else:
+            pr, pp = world_r[p], world_p[p]
+            pos = [pp[i] + pr[i][0] * local_t[0] + pr[i][1] * local_t[1] + pr[i][2] * local_t[2]
+                   for i in range(3)]
+            rot = pr if local_r is _IDENTITY or not has_child[j] else _matmul(pr, local_r)
+        if has_child[j]:
+            pos = [keep(v) for v in pos]
+            if p < 0 or rot is not pr:
+                rot = [[e if isinstance(e, int) else keep(vec(e)) for e in r] for r in rot]
+            world_r[j], world_p[j] = rot, pos
+        positions.append(jnp.stack(pos))
+    return jnp.stack(positions)  # [J, 3, B]
+
+
+def crowd_positions(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "B J 3"]:
+    """World positions of every joint of every character at time `t` (jitted entry point).
+
+    Per character: the channels of Unuma 1995 eq. 1 at `theta = omega t` (linear form, harmonics
+    by recurrence from one sin/cos), then forward kinematics (BVH intrinsic Euler order per
+    joint, position channels replacing OFFSET components). Equal to
+    `kinematics.joint_positions(skeleton, jax.vmap(lambda m: fourier.synthesize(m, t[None])[0])(models))`
+    for the skeleton and models the crowd was made from. Differentiable in `t` and in the
+    crowd's arrays.
+
+    **Arguments:**
+
+    - `crowd`: from `make_crowd`.
+    - `t`: scalar time in seconds (traced: a new time does not recompile).
+
+    **Returns:** `[B, J, 3]` joint positions in file units, joints in file order.
+    """
+    if not isinstance(crowd, Crowd):
+        raise UserError(f"crowd_positions: `crowd` must be a Crowd (make_crowd), got {type(crowd).__name__}")
+    t = jnp.asarray(t, crowd.coefficients.dtype)
+    if t.shape != ():
+        raise UserError(f"crowd_positions: `t` must be a scalar time in seconds, got shape {t.shape}")
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves((crowd, t))):
+        # Under a user's jit/grad/vmap: compiler options are only allowed on a top-level jit.
+        return _positions_nested(crowd, t)
+    return _positions_top(crowd, t)
+
+
+def _positions(crowd: Crowd, t: Array) -> Array:
+    return jnp.transpose(_pose(crowd, t), (2, 0, 1))
+
+
+_positions_top = jit(_positions)
+_positions_nested = jax.jit(_positions)
