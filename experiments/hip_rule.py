@@ -22,8 +22,7 @@ def body(argv=None) -> None:
     import jax.numpy as jnp
 
     from fourierjax import contacts, data, gait, viz
-    from fourierjax.kinematics import fk_frames
-    from fourierjax.motion import _bucket, fit_motions
+    from fourierjax.motion import fit_motions, foot_positions_of
 
     cfg, out = parse("hip_rule", __doc__.splitlines()[0], argv)
     names = [cfg["walk"], cfg["run"]]
@@ -34,12 +33,7 @@ def body(argv=None) -> None:
     def ground(clip):
         m = motions[clip]
         pts = contacts.foot_points(m.topology)
-        F = m.num_frames
-        ch = np.concatenate([m.channels, np.repeat(m.channels[-1:], _bucket(F) - F, 0)])
-        fk = fk_frames(m.skeleton(), jnp.asarray(ch))
-        feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions,
-                                                         pts))[:F]
-        g = contacts.estimate_ground(feet, m.frame_time_s)
+        g = contacts.estimate_ground(foot_positions_of(m, pts), m.frame_time_s)
         return pts, gait.groin_joints(m.topology), contacts.sole_clearance(g), g.height_threshold
 
     def synth(clip, **kw):

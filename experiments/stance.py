@@ -26,7 +26,7 @@ def body(argv=None) -> None:
     import jax.numpy as jnp
 
     from fourierjax import viz
-    from fourierjax.demo import _positions
+    from fourierjax.motion import motion_joint_positions
     from fourierjax.stance.bvh_export import pose_to_motion
     from fourierjax.stance.shape_sets import get_shape_set
     from fourierjax.stance.skeleton48 import make_body
@@ -80,7 +80,7 @@ def body(argv=None) -> None:
     (out / "solver_summary.json").write_text(json.dumps(summary, indent=1))
     print(md, json.dumps(summary, indent=1), sep="\n\n")
     motion = pose_to_motion(body_, sol.pose)
-    pos = _positions(motion)
+    pos = motion_joint_positions(motion)
     topo = motion.topology
     for name in cfg["shape_sets"]:
         idx = [k for k, (n, _) in enumerate(labels) if n == name]

@@ -43,8 +43,7 @@ def body(argv=None) -> None:
     import jax.numpy as jnp
 
     from fourierjax import data, style, viz
-    from fourierjax.demo import _model_pose_positions
-    from fourierjax.motion import fit_motions
+    from fourierjax.motion import fit_motions, model_joint_positions
 
     cfg, out = parse("style", __doc__.splitlines()[0], argv)
     clips = [cfg["normal"], cfg["tired"], cfg["brisk"], cfg["run"]]
@@ -115,7 +114,7 @@ def body(argv=None) -> None:
 
     m = data.load(cfg["normal"])
     svals = [v for v in (-0.6, 0.0, 0.5, 1.0, 1.5)]
-    poses = [_model_pose_positions(style.interpolate(normal, tired, v), m.skeleton(),
+    poses = [model_joint_positions(style.interpolate(normal, tired, v), m.skeleton(),
                                    np.array([0.0]))[0] for v in svals]
     poses = [p - p[:, 1].min() * np.array([0.0, 1.0, 0.0]) for p in poses]
     fig = viz.plot_stick_strip(poses, m.topology.parents, [f"s = {v:+.1f}" for v in svals],

@@ -1,6 +1,6 @@
 """Differentiable JAX library for stylized human motion."""
 
-from fourierjax import anthropometry, contacts, fourier, gait, kinematics, motion, rotations, skeleton, style
+from fourierjax import anthropometry, contacts, fourier, gait, kinematics, motion, rotations, skeleton, spectrum, style
 from fourierjax.errors import FourierJaxError, UserError
 from fourierjax.fourier import FourierModel, synthesize, synthesize_phase
 from fourierjax.io.bvh import BVHError, Motion, read_bvh, write_bvh
@@ -29,6 +29,7 @@ __all__ = [
     "read_bvh",
     "rotations",
     "skeleton",
+    "spectrum",
     "style",
     "synthesize",
     "synthesize_phase",

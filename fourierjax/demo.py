@@ -145,19 +145,12 @@ def _ground_of(st: _State, clip: str):
     """(foot points, groin joints, sole clearance [2, P]) of a clip's skeleton."""
     if clip in st.ground:
         return st.ground[clip]
-    import jax.numpy as jnp
-
     from fourierjax import contacts, gait
-    from fourierjax.kinematics import fk_frames
-    from fourierjax.motion import _bucket
+    from fourierjax.motion import foot_positions_of
 
     m = st.motions[clip]
     pts = contacts.foot_points(m.topology)
-    F = m.num_frames
-    ch = np.concatenate([m.channels, np.repeat(m.channels[-1:], _bucket(F) - F, 0)])
-    fk = fk_frames(m.skeleton(), jnp.asarray(ch))
-    feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions, pts))[:F]
-    g = contacts.estimate_ground(feet, m.frame_time_s)
+    g = contacts.estimate_ground(foot_positions_of(m, pts), m.frame_time_s)
     st.ground[clip] = (pts, gait.groin_joints(m.topology), contacts.sole_clearance(g))
     return st.ground[clip]
 
@@ -287,63 +280,17 @@ def _synth_noise(st: _State) -> None:
 # -------------------------------------------------------------------------------------- plots
 
 
-def _positions(motion, frames=None) -> np.ndarray:
-    """World joint positions [F, J, 3] of a Motion (optionally of some frames)."""
-    import jax.numpy as jnp
-
-    from fourierjax.kinematics import joint_positions
-
-    ch = motion.channels if frames is None else motion.channels[np.asarray(frames)]
-    return np.asarray(joint_positions(motion.skeleton(), jnp.asarray(ch)))
-
-
-def _expmap_channels(motion) -> tuple[np.ndarray, list[str]]:
-    """Continuous exponential maps [F, 3 (J - 1)] of every non-root joint (Tilmanne §2.1)."""
-    topo = motion.topology
-    cols, names = [], []
-    for j in range(1, topo.num_joints):
-        chans = topo.channels[j]
-        idx = [topo.channel_offsets[j] + k for k, c in enumerate(chans) if c.endswith("rotation")]
-        order = topo.rotation_orders[j]
-        if len(idx) != 3 or order is None:
-            continue
-        cols.append((idx, order))
-        names += [f"{topo.names[j]}.expmap{k}" for k in range(3)]
-    out = []
-    for order in dict.fromkeys(o for _, o in cols):
-        sel = [i for i, (_, o) in enumerate(cols) if o == order]
-        e = np.radians(motion.channels[:, np.concatenate([cols[i][0] for i in sel])])
-        v = np.asarray(_jitted("expmap")(e.reshape(len(e), len(sel), 3).astype(np.float32),
-                                         order))
-        out.append((sel, v))
-    x = np.zeros((motion.num_frames, 3 * len(cols)))
-    for sel, v in out:
-        for k, i in enumerate(sel):
-            x[:, 3 * i : 3 * i + 3] = v[:, k]
-    return x, names
-
-
-def _spectrum(x: np.ndarray, frame_time_s: float, pad: int = 8):
-    """Hann-windowed, zero-padded single-sided amplitude spectrum [K, C] (a sinusoid of
-    amplitude A on a bin reads A; the mean reads at 0 Hz)."""
-    T = x.shape[0]
-    w = np.hanning(T)
-    centred = x - x.mean(axis=0)
-    c = np.fft.rfft(centred * w[:, None], n=pad * T, axis=0)
-    amp = 2 * np.abs(c) / w.sum()
-    amp[0] = np.abs(x.mean(axis=0))
-    return np.fft.rfftfreq(pad * T, d=frame_time_s), amp
-
-
 def _plot_spectrum(st: _State) -> None:
     from fourierjax import viz
+    from fourierjax.motion import joint_expmaps
+    from fourierjax.spectrum import windowed_amplitude_spectrum
 
     _need(st, "07_01")
     f = st.fits["07_01"]
     sub = st.motions["07_01"][f.frame_start:f.frame_stop]
-    x, names = _expmap_channels(sub)
+    x, names = joint_expmaps(sub)
     moving = np.ptp(x, axis=0) > 1e-4
-    freqs, amp = _spectrum(x[:, moving], sub.frame_time_s)
+    freqs, amp = windowed_amplitude_spectrum(x[:, moving], sub.frame_time_s)
     fig = viz.plot_spectrum(freqs, amp, fundamental_hz=f.fundamental_hz, max_hz=8.0,
                             title=f"CMU 07_01 walk: spectra of {int(moving.sum())} exponential-map "
                             "values (cf. Tilmanne & Dutoit Fig. 1)")
@@ -374,41 +321,9 @@ def _plot_decomposition(st: _State) -> None:
     viz.save_figure(fig, st.path("plots", "decomposition_07_01_left_knee.png"))
 
 
-_JITTED: dict = {}
-
-
-def _jitted(name: str):
-    """Jitted wrappers of library functions the demo calls eagerly otherwise (built once)."""
-    if name not in _JITTED:
-        import jax
-
-        from fourierjax import rotations
-        from fourierjax.motion import root_relative_positions
-
-        if name == "root_relative_positions":
-            _JITTED[name] = jax.jit(root_relative_positions, static_argnums=2)
-        elif name == "expmap":
-            def expmap(euler_rad, order):
-                q = rotations.quat_from_euler(euler_rad, order)
-                return rotations.make_expmap_continuous(rotations.expmap_from_quat(q))
-
-            _JITTED[name] = jax.jit(expmap, static_argnums=1)
-    return _JITTED[name]
-
-
-def _model_pose_positions(model, skeleton, phases) -> np.ndarray:
-    """Root-relative joint positions [K, J, 3] of a model at cycle phases (heading frame)."""
-    import jax.numpy as jnp
-
-    from fourierjax import fourier
-
-    feats = fourier.synthesize_phase(model, jnp.asarray(phases, jnp.float32))
-    p = np.asarray(_jitted("root_relative_positions")(skeleton, feats, model.representation))
-    return p + np.asarray(feats[:, 2])[:, None, None] * np.array([0.0, 1.0, 0.0])
-
-
 def _plot_strip(st: _State) -> None:
     from fourierjax import viz
+    from fourierjax.motion import model_joint_positions
 
     normal, tired, style = _style_models(st)
     m = st.motions["07_01"]
@@ -418,7 +333,7 @@ def _plot_strip(st: _State) -> None:
     phases = np.linspace(0.0, 0.5 * np.pi, 3)  # a faded trail over a quarter cycle
     poses = []
     for s in svals:
-        p = _model_pose_positions(style.interpolate(normal, tired, s), m.skeleton(), phases)
+        p = model_joint_positions(style.interpolate(normal, tired, s), m.skeleton(), phases)
         p = p - p[:, :, 1].min() * np.array([0.0, 1.0, 0.0])  # stand on the ground
         poses.append(p)
     labels = [f"s = {s:+.1f}\n{names[s]}" for s in svals]
@@ -511,13 +426,14 @@ def _gif_frames(st: _State, motion, seconds: float = 2.4) -> np.ndarray:
 def _gif(st: _State, name: str, clips: list[str], titles: list[str], title: str,
          seconds: float = 2.4) -> None:
     from fourierjax import viz
+    from fourierjax.motion import motion_joint_positions
 
     missing = [c for c in clips if c not in st.bvh_positions]
     if missing:
         raise _Skip(f"needs the synthesized motion(s) {missing}")
     mots = [st.bvh_positions[c] for c in clips]
     frames = _gif_frames(st, mots[0], seconds)
-    seqs = [_positions(m, frames) for m in mots]
+    seqs = [motion_joint_positions(m, frames) for m in mots]
     # Each panel on its own ground: the lowest point of the whole sequence at height 0.
     seqs = [s - s[..., 1].min() * np.array([0.0, 1.0, 0.0]) for s in seqs]
     dt = (frames[1] - frames[0]) * mots[0].frame_time_s if len(frames) > 1 else 0.1
@@ -572,6 +488,7 @@ def _stance(st: _State) -> None:
     _import("fourierjax.stance")
     shape_sets = _import("fourierjax.stance.shape_sets")
     from fourierjax import viz
+    from fourierjax.motion import motion_joint_positions
     from fourierjax.stance.bvh_export import pose_to_motion, write_stance_bvh
     from fourierjax.stance.skeleton48 import make_body
     from fourierjax.stance.solver import solve_stances, stack_problems
@@ -604,7 +521,7 @@ def _stance(st: _State) -> None:
                      "com_error_m": float(sol.com_error_m[k])})
     st.extra["stance"] = info
     motion = pose_to_motion(body, sol.pose)
-    pos = _positions(motion)
+    pos = motion_joint_positions(motion)
     topo = motion.topology
     for name, intensities, _ in STANCE_GALLERY:
         idx = [k for k, (n, _) in enumerate(labels) if n == name]

@@ -29,13 +29,21 @@ __all__ = [
     "make_euler_continuous",
     "local_pose_from_features",
     "root_relative_positions",
+    "joint_expmaps",
+    "motion_joint_positions",
+    "model_joint_positions",
+    "foot_positions_of",
+    "foot_contacts_of",
 ]
 
 _AXES = "XYZ"
 
 
-def _rotation_joints(topology) -> list[tuple[int, str, list[int]]]:
-    """(joint, order, rotation channel indices) for joints with 3 rotation channels."""
+def _rotation_joints(topology, *, strict: bool = True) -> list[tuple[int, str, list[int]]]:
+    """(joint, order, rotation channel indices) for joints with 3 rotation channels.
+
+    A joint with some but not 3 rotation channels raises (``strict``) or is left out.
+    """
     out = []
     for j, chans in enumerate(topology.channels):
         rot = [topology.channel_offsets[j] + k for k, c in enumerate(chans)
@@ -44,6 +52,8 @@ def _rotation_joints(topology) -> list[tuple[int, str, list[int]]]:
             continue
         order = topology.rotation_orders[j]
         if order is None or len(order) != 3 or len(rot) != 3:
+            if not strict:
+                continue
             raise UserError(
                 f"joint {topology.names[j]!r}: Fourier features need 3 rotation channels per "
                 f"joint, got {list(chans)}"
@@ -210,25 +220,57 @@ def features_from_motion(
     q_rel = _rot("quat_multiply", np.tile(_yaw_quat(-psi), (len(q_root), 1)), q_root)
     cols = [vx, vz, pos[:, 1]]
     joints = _rotation_joints(motion.topology)
+    blocks = _joint_rotations(motion, joints, representation, root_quat=q_rel, valid=valid)
+    for j, _, _ in joints:
+        cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
+    return np.stack(cols, axis=1), names
+
+
+def _joint_rotations(motion, joints, representation: str, *, root_quat=None,
+                     valid=None) -> dict[int, np.ndarray]:
+    """Rotation of each of ``joints`` (from :func:`_rotation_joints`) over the clip, ``{joint:
+    [F, 3]}`` radians: continuous Euler angles in the file's order, or continuous exponential
+    maps. ``root_quat [F, 4]`` replaces the root's (joint 0) rotation when given."""
     blocks: dict[int, np.ndarray] = {}
     # Joints sharing a rotation order are converted together: [F, J_g, 3].
     for order in dict.fromkeys(o for _, o, _ in joints):
         group = [(j, idx) for j, o, idx in joints if o == order]
         e = np.radians(motion.channels[:, np.array([idx for _, idx in group])])
-        if group[0][0] == 0:  # the root: its orientation relative to the heading frame
-            e[:, 0] = _rot("euler_from_quat", q_rel, order=order)
+        root = group[0][0] == 0 and root_quat is not None
+        if root:  # the root: e.g. its orientation relative to the heading frame
+            e[:, 0] = _rot("euler_from_quat", root_quat, order=order)
         if representation == "euler":
             ang = make_euler_continuous(e, order, valid)
         else:
             q = _rot("quat_from_euler", e, order=order)
-            if group[0][0] == 0:
-                q[:, 0] = q_rel
+            if root:
+                q[:, 0] = root_quat
             ang = _rot("make_expmap_continuous", _rot("expmap_from_quat", q))
         for k, (j, _) in enumerate(group):
             blocks[j] = ang[:, k]
-    for j, _, _ in joints:
-        cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
-    return np.stack(cols, axis=1), names
+    return blocks
+
+
+def joint_expmaps(motion) -> tuple[np.ndarray, tuple[str, ...]]:
+    """Continuous exponential maps of every non-root joint of a clip (Tilmanne & Dutoit §2.1).
+
+    The root is left out (its rotation includes the walking direction); so are joints without
+    three rotation channels. Each joint's map is made continuous over time
+    (``rotations.make_expmap_continuous``), so that spectra and fits see no 2π jumps.
+
+    Arguments:
+        motion: a ``fourierjax.io.bvh.Motion``.
+    Returns:
+        ``(x [F, 3K] float64 radians, names)`` with names ``"<joint>.expmap0..2"`` (the
+        expmap layout of :func:`channel_names_for`, without the root channels).
+    """
+    joints = [jt for jt in _rotation_joints(motion.topology, strict=False) if jt[0] != 0]
+    names = tuple(f"{motion.topology.names[j]}.expmap{k}" for j, _, _ in joints
+                  for k in range(3))
+    if not joints:
+        return np.zeros((motion.num_frames, 0)), names
+    blocks = _joint_rotations(motion, joints, "expmap")
+    return np.concatenate([blocks[j] for j, _, _ in joints], axis=1), names
 
 
 def _check_names(topology, channel_names, where: str) -> str:
@@ -352,6 +394,44 @@ def root_relative_positions(skeleton, features, representation: str):
                                                                       representation)).positions
 
     return jax.vmap(one)(jnp.asarray(features))
+
+
+def motion_joint_positions(motion, frames=None) -> np.ndarray:
+    """World joint positions of a clip through forward kinematics of its BVH channels.
+
+    Arguments:
+        motion: a Motion; frames: optional frame indices (default: every frame).
+    Returns:
+        ``[F, J, 3]`` file units (JAX's default float dtype), joints in file order.
+    """
+    from fourierjax.kinematics import joint_positions
+
+    ch = motion.channels if frames is None else motion.channels[np.asarray(frames)]
+    return np.asarray(joint_positions(motion.skeleton(), jnp.asarray(ch)))
+
+
+_root_relative_positions_jit = jax.jit(root_relative_positions, static_argnums=2)
+
+
+def model_joint_positions(model, skeleton, phases) -> np.ndarray:
+    """Joint positions of a Fourier gait model's pose at cycle phases (Unuma 1995 eq. 1).
+
+    The pose is ``fourier.synthesize_phase(model, phases)`` through forward kinematics; the
+    root stands above the origin of the heading frame (facing +Z) at the model's ``root.y``
+    height, so poses of different models line up for side-by-side plots.
+
+    Arguments:
+        model: a ``FourierModel`` with the gait channel layout (:func:`channel_names_for`);
+        skeleton: the Skeleton the model was fitted on; phases: ``[K]`` radians of the cycle.
+    Returns:
+        ``[K, J, 3]`` file units.
+    """
+    from fourierjax import fourier
+
+    feats = fourier.synthesize_phase(model, jnp.asarray(phases, float))
+    p = np.asarray(_root_relative_positions_jit(skeleton, feats, model.representation))
+    height = np.asarray(feats[:, ROOT_CHANNELS.index("root.y")])
+    return p + height[:, None, None] * np.array([0.0, 1.0, 0.0])
 
 
 def glitch_frames(motion, max_joint_speed_deg_s: float = 5000.0, pad_s: float = 0.1):
@@ -499,22 +579,40 @@ class ClipFit:
         }
 
 
+def foot_positions_of(motion, points=None) -> np.ndarray:
+    """World positions of the foot points of every frame of a clip, through FK.
+
+    Frames are padded to a few length buckets, so clips of similar lengths share one compiled
+    FK.
+
+    Arguments:
+        motion: a Motion; points: ``contacts.FootPoints`` (default:
+        ``contacts.foot_points(motion.topology)``, the CMU feet: ankle, toe, toe tip).
+    Returns:
+        ``[F, 2, P, 3]`` (left, right) file units, ready for ``contacts.foot_contacts`` and
+        ``contacts.estimate_ground``.
+    """
+    from fourierjax import contacts
+    from fourierjax.kinematics import fk_frames
+
+    points = contacts.foot_points(motion.topology) if points is None else points
+    F = motion.num_frames
+    ch = np.concatenate([motion.channels, np.repeat(motion.channels[-1:], _bucket(F) - F, 0)])
+    fk = fk_frames(motion.skeleton(), jnp.asarray(ch))
+    return np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions,
+                                                     points))[:F]
+
+
 def foot_contacts_of(motion) -> np.ndarray | None:
     """Foot contacts ``bool [F, 2]`` (left, right) of a clip: ``fourierjax.contacts`` on FK foot
     points (ankle, toe, toe tip). None when the skeleton has no CMU-named feet."""
     from fourierjax import contacts
-    from fourierjax.kinematics import fk_frames
 
     try:
         points = contacts.foot_points(motion.topology)
     except UserError:
         return None
-    F = motion.num_frames
-    ch = np.concatenate([motion.channels, np.repeat(motion.channels[-1:], _bucket(F) - F, 0)])
-    fk = fk_frames(motion.skeleton(), jnp.asarray(ch))
-    feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions,
-                                                     points))[:F]
-    return contacts.foot_contacts(feet, motion.frame_time_s)
+    return contacts.foot_contacts(foot_positions_of(motion, points), motion.frame_time_s)
 
 
 def _steps(contacts_lr, frame_time_s):

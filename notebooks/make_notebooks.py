@@ -79,8 +79,7 @@ height comes from the hip-height rule (eq. 4-5) and the root's advance from the 
     ("code", """import numpy as np
 import jax.numpy as jnp
 from fourierjax import contacts, data, gait, viz
-from fourierjax.kinematics import fk_frames
-from fourierjax.motion import fit_motions
+from fourierjax.motion import fit_motions, foot_positions_of
 
 clips = ["07_01", "09_01"]
 motions = {c: data.load(c)[:128] for c in clips}
@@ -88,9 +87,7 @@ fits = dict(zip(clips, fit_motions([motions[c] for c in clips], 3, segment=False
 
 def ground(m):
     pts = contacts.foot_points(m.topology)
-    fk = fk_frames(m.skeleton(), jnp.asarray(m.channels))
-    feet = np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions, pts))
-    g = contacts.estimate_ground(feet, m.frame_time_s)
+    g = contacts.estimate_ground(foot_positions_of(m, pts), m.frame_time_s)
     return pts, gait.groin_joints(m.topology), contacts.sole_clearance(g)
 
 def synth(clip, **kw):
@@ -142,7 +139,7 @@ import jax.numpy as jnp
 jax.config.update("jax_compilation_cache_dir", os.environ.get(
     "FOURIERJAX_CACHE_DIR", os.path.expanduser("~/.cache/fourierjax/jax")))
 from fourierjax import viz
-from fourierjax.demo import _positions
+from fourierjax.motion import motion_joint_positions
 from fourierjax.stance.bvh_export import pose_to_motion
 from fourierjax.stance.shape_sets import builtin_shape_sets, get_shape_set
 from fourierjax.stance.skeleton48 import make_body
@@ -158,7 +155,7 @@ print("converged", np.asarray(sol.converged), "iterations", np.asarray(sol.itera
 print("COM error (mm)", 1000 * np.asarray(sol.com_error_m))
 assert np.all(np.asarray(sol.converged))"""),
     ("code", """motion = pose_to_motion(body, sol.pose)
-pos = _positions(motion)
+pos = motion_joint_positions(motion)
 viz.plot_posture_range(list(pos), motion.topology.parents, intensities, names=motion.topology.names,
                        title="Alberts' posture scale: over-erect (-1), neutral, hunched (+1)")"""),
     ("md", "Recoil from an object 0.7 m ahead and 0.4 m to the left: the same solver, another shape set."),
@@ -172,6 +169,9 @@ print("amplitudes (rad):\\n", np.round(np.asarray(sol2.amplitudes), 3))"""),
 def build(cells) -> nbformat.NotebookNode:
     nb = new_notebook()
     nb.cells = [new_markdown_cell(src) if kind == "md" else new_code_cell(src) for kind, src in cells]
+    # Ids by position (nbformat draws random ones): regenerating changes only the edited cells.
+    for i, cell in enumerate(nb.cells):
+        cell.id = f"cell-{i:02d}"
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
     nb.metadata["language_info"] = {"name": "python"}
     return nb

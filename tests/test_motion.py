@@ -201,3 +201,105 @@ def test_positions_metric_uses_fk(motions):
     c, s = np.cos(psi), np.sin(psi)
     rot = np.array([[c, 0, -s], [0, 1, 0], [s, 0, c]])
     np.testing.assert_allclose(np.asarray(p), ref @ rot.T, atol=2e-3)
+
+
+# -- public helpers for plots, notebooks and experiments --------------------------------------
+def test_motion_joint_positions_match_reference_fk(motions):
+    from tests.helpers import reference_fk
+
+    m = motions["07_01"]
+    frames = [0, 57, 300]
+    p = M.motion_joint_positions(m, frames)
+    ref, _ = reference_fk(m.topology, m.offsets, m.end_site_offsets, m.channels[frames])
+    assert p.shape == (3, m.topology.num_joints, 3)
+    np.testing.assert_allclose(p, ref, atol=2e-3)  # float32 FK, positions ~10-40 units
+    assert M.motion_joint_positions(m[:4]).shape == (4, m.topology.num_joints, 3)
+
+
+def test_foot_positions_of_are_the_fk_foot_points(motions):
+    from fourierjax import contacts
+    from tests.helpers import reference_fk
+
+    m = motions["07_01"][:50]
+    pts = contacts.foot_points(m.topology)
+    feet = M.foot_positions_of(m)
+    assert feet.shape == (50, 2, len(pts.left), 3)
+    joints, ends = reference_fk(m.topology, m.offsets, m.end_site_offsets, m.channels)
+    allp = np.concatenate([joints, ends], axis=1)
+    np.testing.assert_allclose(feet[:, 0], allp[:, list(pts.left)], atol=2e-3)
+    np.testing.assert_allclose(feet[:, 1], allp[:, list(pts.right)], atol=2e-3)
+
+
+def test_model_joint_positions_match_a_written_motion(fits, motions):
+    # Independent path: synthesized features -> BVH channels (Euler degrees, root integrated
+    # from velocity, heading 0) -> FK of the clip, minus the root's horizontal position.
+    fit = fits[3]["07_01"]
+    m = motions["07_01"]
+    phases = np.linspace(0.0, 2 * np.pi, 5, endpoint=False)
+    p = M.model_joint_positions(fit.model, m.skeleton(), phases)
+    feats = np.asarray(fourier.synthesize_phase(fit.model, jnp.asarray(phases)), np.float64)
+    written = M.motion_from_features(m[:1], feats, fit.model.channel_names, 0.1)
+    ref = M.motion_joint_positions(written)
+    ref = ref - ref[:, :1] * np.array([1.0, 0.0, 1.0])
+    assert p.shape == (5, m.topology.num_joints, 3)
+    np.testing.assert_allclose(p, ref, atol=5e-3)
+    np.testing.assert_allclose(p[:, 0, 1], feats[:, 2], rtol=1e-6)  # root at root.y
+
+
+def test_joint_expmaps_are_the_joint_rotations_made_continuous(motions):
+    m = motions["142_02"][:400]  # fast arm motion: continuity matters
+    x, names = M.joint_expmaps(m)
+    topo = m.topology
+    joints = [j for j in range(1, topo.num_joints)
+              if sum(c.endswith("rotation") for c in topo.channels[j]) == 3]
+    assert names == tuple(f"{topo.names[j]}.expmap{k}" for j in joints for k in range(3))
+    assert x.shape == (400, 3 * len(joints)) and x.dtype == np.float64
+    for i, j in enumerate(joints):
+        idx = [topo.channel_offsets[j] + k for k, c in enumerate(topo.channels[j])
+               if c.endswith("rotation")]
+        want = Rotation.from_euler(topo.rotation_orders[j], m.channels[:, idx], degrees=True)
+        got = Rotation.from_rotvec(x[:, 3 * i : 3 * i + 3])
+        np.testing.assert_allclose((got.inv() * want).magnitude(), 0.0, atol=1e-5)
+    # Continuous: no 2 pi jumps or antipodal flips between frames.
+    assert np.abs(np.diff(x, axis=0)).max() < 0.5
+    # The expmap features of fitting hold the same maps after the root channels.
+    feats, fnames = M.features_from_motion(m, "expmap")
+    assert fnames[6:] == names
+    np.testing.assert_allclose(feats[:, 6:], x, atol=1e-6)
+
+
+def test_joint_expmaps_skip_joints_without_three_rotations():
+    from fourierjax.io.bvh import parse_bvh
+
+    text = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT Knee
+  {
+    OFFSET 0 -1 0
+    CHANNELS 1 Xrotation
+    JOINT Ankle
+    {
+      OFFSET 0 -1 0
+      CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site
+      {
+        OFFSET 0 0 1
+      }
+    }
+  }
+}
+MOTION
+Frames: 3
+Frame Time: 0.1
+0 1 0 0 0 0 10 20 30 0
+0 1 0 0 0 0 20 20 30 40
+0 1 0 0 0 0 30 20 30 80
+"""
+    m = parse_bvh(text)
+    x, names = M.joint_expmaps(m)
+    assert names == ("Ankle.expmap0", "Ankle.expmap1", "Ankle.expmap2")
+    want = Rotation.from_euler("ZXY", m.channels[:, 7:10], degrees=True).as_rotvec()
+    np.testing.assert_allclose(x, want, atol=1e-6)

@@ -131,19 +131,19 @@ def run(args: argparse.Namespace) -> int:
             k = _num(args.frame, "--frame", int)
             if not 0 <= k < obj.num_frames:
                 raise UserError(f"--frame: {k} is outside {args.input} (frames 0..{obj.num_frames - 1})")
-            from fourierjax.demo import _positions
+            from fourierjax.motion import motion_joint_positions
 
-            p = _positions(obj, [k])[0]
+            p = motion_joint_positions(obj, [k])[0]
             title = f"{pathlib.Path(args.input).name}, frame {k}"
             topo = obj.topology
         else:
-            from fourierjax.demo import _model_pose_positions
+            from fourierjax.motion import model_joint_positions
 
             ph = _num(args.phase, "--phase")
             template = obj.template_motion()
             if template is None:
                 raise UserError(f"{args.input}: the model file carries no skeleton to draw")
-            p = _model_pose_positions(obj.model, template.skeleton(), np.array([ph]))[0]
+            p = model_joint_positions(obj.model, template.skeleton(), np.array([ph]))[0]
             title = f"{pathlib.Path(args.input).name}, phase {ph:.2f} rad"
             topo = template.topology
         fig = viz.plot_stick_figure(p, topo.parents, names=topo.names, title=title)
@@ -152,11 +152,11 @@ def run(args: argparse.Namespace) -> int:
         seconds = _num(args.seconds, "--seconds", float, 0.1, 60)
         max_frames = _num(args.max_frames, "--max-frames", int, 2, 500)
         motion = obj if what == "bvh" else _model_motion(obj, seconds, args.input)
-        from fourierjax.demo import _positions
+        from fourierjax.motion import motion_joint_positions
 
         span = min(motion.num_frames - 1, int(round(seconds / motion.frame_time_s)))
         frames = np.unique(np.linspace(0, span, max_frames).round().astype(int))
-        seq = _positions(motion, frames)
+        seq = motion_joint_positions(motion, frames)
         seq = seq - seq[..., 1].min() * np.array([0.0, 1.0, 0.0])
         dt = (frames[1] - frames[0]) * motion.frame_time_s if len(frames) > 1 else 0.1
         viz.save_gif([seq], motion.topology.parents, out, frame_time_s=dt,
@@ -172,12 +172,12 @@ def _spectrum(what, obj, args, out) -> None:
     from fourierjax import viz
 
     if what == "bvh":
-        from fourierjax.demo import _expmap_channels
-        from fourierjax.demo import _spectrum as spec
+        from fourierjax.motion import joint_expmaps
+        from fourierjax.spectrum import windowed_amplitude_spectrum
 
-        x, _ = _expmap_channels(obj)
+        x, _ = joint_expmaps(obj)
         moving = np.ptp(x, axis=0) > 1e-4
-        freqs, amp = spec(x[:, moving], obj.frame_time_s)
+        freqs, amp = windowed_amplitude_spectrum(x[:, moving], obj.frame_time_s)
         fig = viz.plot_spectrum(freqs, amp, title=f"{pathlib.Path(args.input).name}: spectra of "
                                 f"{int(moving.sum())} exponential-map values")
     else:
