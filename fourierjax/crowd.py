@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -84,18 +86,54 @@ class Crowd(eqx.Module):
             )
 
 
-def _kept_channels(topology: Topology) -> tuple[tuple[int, ...], int]:
-    """`(channel_index, num_rotation_rows)`: the channels that move joints, in crowd row order."""
+class _Group(NamedTuple):
+    """Joints of one hierarchy level posed together (same rotation order and position axes)."""
+
+    joints: tuple[int, ...]
+    parents: tuple[int, ...]
+    order: str  # rotation order applied ("" when none is needed)
+    rot_row: int  # first row of slot 0; slot s of joint i is row rot_row + s * len(joints) + i
+    pos_rows: tuple[tuple[int, int], ...]  # (axis, first row): axis of joint i is row + i
+    has_child: bool
+
+
+def _layout(topology: Topology) -> tuple[tuple[_Group, ...], tuple[int, ...], int]:
+    """Static plan: `(groups, channel_index, num_rotation_rows)`, groups in level order.
+
+    Only channels that move a joint are kept: rotations of joints with children (a leaf's
+    rotation moves nothing but its End Site) and every position channel. Rows are ordered so
+    that each group's rotation slot and position axis is one contiguous block of rows.
+    """
     has_child = _has_child(topology)
     offsets = topology.channel_offsets
-    rot, pos = [], []
-    for j, chans in enumerate(topology.channels):
-        for k, name in enumerate(chans):
-            if name.endswith("position"):
-                pos.append(offsets[j] + k)
-            elif has_child[j]:
-                rot.append(offsets[j] + k)
-    return tuple(rot + pos), len(rot)
+    keyed = []  # (joints, order, rotation channels per joint, position channel per axis)
+    for level in topology.levels:
+        groups: dict = {}
+        for j in level:
+            chans = topology.channels[j]
+            rot = [offsets[j] + k for k, c in enumerate(chans) if c.endswith("rotation")]
+            order = (topology.rotation_orders[j] or "") if has_child[j] else ""
+            pos = {"XYZ".index(c[0]): offsets[j] + k for k, c in enumerate(chans) if c.endswith("position")}
+            key = (order, tuple(sorted(pos)), has_child[j])
+            groups.setdefault(key, []).append((j, rot if order else [], pos))
+        keyed.extend((key, items) for key, items in groups.items())
+    rows: list[int] = []
+    rot_start = []
+    for (order, _, _), items in keyed:
+        rot_start.append(len(rows))
+        for slot in range(len(order)):
+            rows.extend(rot[slot] for _, rot, _ in items)
+    num_rot = len(rows)
+    out = []
+    for ((order, axes, child), items), r0 in zip(keyed, rot_start):
+        pos_rows = []
+        for axis in axes:
+            pos_rows.append((axis, len(rows)))
+            rows.extend(pos[axis] for _, _, pos in items)
+        joints = tuple(j for j, _, _ in items)
+        out.append(_Group(joints, tuple(topology.parents[j] for j in joints), order, r0,
+                          tuple(pos_rows), child))
+    return tuple(out), tuple(rows), num_rot
 
 
 def _has_child(topology: Topology) -> list[bool]:
@@ -154,7 +192,7 @@ def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
     if num_chars == 0:
         raise UserError("make_crowd: `models` hold no characters")
     dtype = jnp.result_type(models.offset.dtype, jnp.float32)
-    index, _ = _kept_channels(topology)
+    _, index, _ = _layout(topology)
     a, b = models.sin_cos()  # [B, C, N]
     rows = np.asarray(index, np.int32)
     coef = jnp.concatenate([models.offset[:, None, :], jnp.swapaxes(a, 1, 2),
@@ -235,14 +273,13 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     topology = crowd.topology
     coef = crowd.coefficients
     dtype = coef.dtype
-    num_chars = crowd.num_characters
     num_harmonics = crowd.num_harmonics
     t = jnp.asarray(t, dtype)
     # A runtime 1: dividing by it marks a value to compute once and store (see the notes above).
     one = 1.0 + 0.0 * t
 
     def keep(x):
-        return x / one
+        return x if isinstance(x, int) else x / one
 
     # Phase basis per character: one sin/cos, then the angle-addition recurrence.
     theta = crowd.omega * t
@@ -256,44 +293,87 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     for n in range(num_harmonics):
         x = x + coef[1 + n] * sines[n][None] + coef[1 + num_harmonics + n] * cosines[n][None]  # [K, B]
 
-    index, num_rot = _kept_channels(topology)
-    row_of = {c: r for r, c in enumerate(index)}
+    groups, _, num_rot = _layout(topology)
     sin, cos = (keep(v) for v in _sincos_degrees(keep(x[:num_rot])))
-    has_child = _has_child(topology)
-    offsets = topology.channel_offsets
     bone = crowd.bone_offsets
-
-    def vec(v):
-        return jnp.broadcast_to(v, (num_chars,))
-
-    world_r: list = [None] * topology.num_joints
-    world_p: list = [None] * topology.num_joints
-    positions = []
-    for j, chans in enumerate(topology.channels):
-        local_t = [bone[j, k] for k in range(3)]
+    where: dict[int, tuple[int, int]] = {}  # joint -> (group, index in group)
+    world_r: list = []  # per group: 3x3 of [n, B] arrays (or 0/1)
+    world_p: list = []  # per group: 3 of [n, B] arrays
+    for g, grp in enumerate(groups):
+        n = len(grp.joints)
+        for i, j in enumerate(grp.joints):
+            where[j] = (g, i)
+        local_t: list = [bone[np.asarray(grp.joints), k][:, None] for k in range(3)]
+        for axis, row in grp.pos_rows:
+            local_t[axis] = x[row:row + n]  # position channels replace the OFFSET component
         local_r = _IDENTITY
-        for k, name in enumerate(chans):
-            row = row_of.get(offsets[j] + k)
-            if name.endswith("position"):
-                local_t["XYZ".index(name[0])] = x[row]  # replaces the OFFSET component
-            elif row is not None:
-                local_r = _matmul(local_r, _elementary(name[0], sin[row], cos[row]))
-        p = topology.parents[j]
-        if p < 0:
-            pos = [vec(v) for v in local_t]
+        for slot, axis in enumerate(grp.order):
+            r0 = grp.rot_row + slot * n
+            local_r = _matmul(local_r, _elementary(axis, sin[r0:r0 + n], cos[r0:r0 + n]))
+        if grp.parents[0] < 0:  # a level-0 group: roots
+            pos = local_t
             rot = local_r
         else:
-            pr, pp = world_r[p], world_p[p]
-            pos = [pp[i] + pr[i][0] * local_t[0] + pr[i][1] * local_t[1] + pr[i][2] * local_t[2]
-                   for i in range(3)]
-            rot = pr if local_r is _IDENTITY or not has_child[j] else _matmul(pr, local_r)
-        if has_child[j]:
+            pr = [[_rows(world_r, where, grp.parents, i, k) for k in range(3)] for i in range(3)]
+            pp = [_rows(world_p, where, grp.parents, i) for i in range(3)]
+            pos = [pp[i] + _dot(pr[i], local_t) for i in range(3)]
+            rot = pr if local_r is _IDENTITY else _matmul(pr, local_r)
+        if grp.has_child:
             pos = [keep(v) for v in pos]
-            if p < 0 or rot is not pr:
-                rot = [[e if isinstance(e, int) else keep(vec(e)) for e in r] for r in rot]
-            world_r[j], world_p[j] = rot, pos
-        positions.append(jnp.stack(pos))
-    return jnp.stack(positions)  # [J, 3, B]
+            rot = [[jnp.full((n, 1), float(e), dtype) if isinstance(e, int) else keep(e) for e in r]
+                   for r in rot]
+        world_r.append(rot if grp.has_child else None)
+        world_p.append(pos)
+    # Back to file order: one [J, 3, B] block (runs of consecutive joints are single slices).
+    num_chars = crowd.num_characters
+    per_group = [jnp.stack([jnp.broadcast_to(v, (len(grp.joints), num_chars)) for v in p], axis=1)
+                 for grp, p in zip(groups, world_p)]
+    pieces, run = [], None
+    for j in range(topology.num_joints):
+        g, i = where[j]
+        if run is not None and run[0] == g and run[2] == i:
+            run = (g, run[1], i + 1)
+            continue
+        if run is not None:
+            pieces.append(per_group[run[0]][run[1]:run[2]])
+        run = (g, i, i + 1)
+    pieces.append(per_group[run[0]][run[1]:run[2]])
+    return jnp.concatenate(pieces, axis=0) if len(pieces) > 1 else pieces[0]
+
+
+def _rows(world, where, parents, i, k=None):
+    """Entry `(i, k)` (or component `i`) of each parent's world transform, stacked `[n, B]`."""
+    src = [where[p] for p in parents]
+
+    def entry(g):
+        return world[g][i] if k is None else world[g][i][k]
+
+    if all(s == src[0] for s in src):  # one parent for the whole group: broadcast its row
+        g, idx = src[0]
+        e = entry(g)
+        return e if isinstance(e, int) else e[idx:idx + 1]
+    pieces, run = [], None
+    for g, idx in src:
+        if run is not None and run[0] == g and run[2] == idx:
+            run = (g, run[1], idx + 1)
+            continue
+        if run is not None:
+            pieces.append(run)
+        run = (g, idx, idx + 1)
+    pieces.append(run)
+    parts = [entry(g)[a:b] for g, a, b in pieces]
+    return jnp.concatenate(parts, axis=0) if len(parts) > 1 else parts[0]
+
+
+def _dot(row, vec):
+    """`sum_k row[k] * vec[k]` skipping the symbolic zeros and ones of `row`."""
+    acc = 0
+    for a, v in zip(row, vec):
+        if _is(a, 0):
+            continue
+        term = v if _is(a, 1) else a * v
+        acc = term if _is(acc, 0) else acc + term
+    return acc
 
 
 def crowd_positions(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "B J 3"]:

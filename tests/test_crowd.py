@@ -48,60 +48,62 @@ def test_equals_synthesize_then_fk_on_cmu_07_01():
     assert float(jnp.abs(crowd.crowd_positions(c, 0.1) - crowd.crowd_positions(c, 0.2)).max()) > 1.0
 
 
-@pytest.mark.parametrize("seed", range(3))
+def _numpy_channels(models, t):
+    """Unuma 1995 eq. 1 in float64 numpy: `[B, C]` channel values at time `t`."""
+    off, amp, ph, om = (np.asarray(v, np.float64) for v in (models.offset, models.amplitude,
+                                                              models.phase, models.omega))
+    n = np.arange(1, amp.shape[-1] + 1)
+    return off + (amp * np.sin(n * (om * t)[:, None, None] + ph)).sum(-1)
+
+
+@pytest.mark.parametrize("seed", range(2))
 def test_mixed_rotation_orders_match_scipy_fk(seed):
     # Random trees: all 6 Tait-Bryan orders, 1-2 rotation channels, rotation-free joints and
-    # position channels on inner joints, in any channel order.
+    # position channels on inner joints, in any channel order. Oracle: numpy synthesis and
+    # scipy-rotation FK in float64.
     rng = np.random.default_rng(seed)
-    topo = random_topology(rng)
+    topo = random_topology(rng, num_joints=10)
     skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)) * 10, rng.normal(size=(topo.num_end_sites, 3)))
     models = _models(rng, rng.uniform(-90, 90, size=topo.num_channels), num_chars=4, num_harmonics=2)
     c = crowd.make_crowd(skel, models)
-    t = 0.8
-    ours = np.asarray(crowd.crowd_positions(c, t))
-    ref, channels = _reference(skel, models, t)
-    np.testing.assert_allclose(ours, ref, atol=5e-4, rtol=1e-5)
-    oracle, _ = reference_fk(topo, np.asarray(skel.offsets), np.asarray(skel.end_site_offsets),
-                             np.asarray(channels, np.float64))
-    np.testing.assert_allclose(ours, oracle, atol=5e-4, rtol=1e-5)
+    orders = {o for o in topo.rotation_orders if o}
+    assert len(orders) > 2, orders
+    for t in (0.8, 31.7):
+        ours = np.asarray(crowd.crowd_positions(c, t))
+        oracle, _ = reference_fk(topo, np.asarray(skel.offsets), np.asarray(skel.end_site_offsets),
+                                 _numpy_channels(models, t))
+        np.testing.assert_allclose(ours, oracle, atol=1e-3, rtol=1e-5)
 
 
-def test_gradients_wrt_time_and_coefficients_are_finite_and_match_reference():
+def test_gradients_wrt_time_and_coefficients_are_finite_and_match_differences():
     rng = np.random.default_rng(3)
-    topo = random_topology(rng, num_joints=8)
+    topo = random_topology(rng, num_joints=6)
     skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)) * 10)
     models = _models(rng, rng.uniform(-60, 60, size=topo.num_channels), num_chars=3, num_harmonics=2)
     c = crowd.make_crowd(skel, models)
     w = jnp.asarray(rng.normal(size=(3, topo.num_joints, 3)), jnp.float32)
 
-    def ours(t):
-        return jnp.sum(w * crowd.crowd_positions(c, t))
+    def loss(cr, t):
+        return jnp.sum(w * crowd.crowd_positions(cr, t))
 
-    def ref(t):
-        return jnp.sum(w * _reference(skel, models, t)[0])
-
-    g = jax.grad(ours)(jnp.float32(0.6))
-    g_ref = jax.grad(ref)(jnp.float32(0.6))
-    assert np.isfinite(g)
-    np.testing.assert_allclose(g, g_ref, rtol=2e-3, atol=1e-2)
-    gc = jax.grad(lambda cr: jnp.sum(w * crowd.crowd_positions(cr, 0.6)))(c)
+    t0 = 0.6
+    gc, gt = jax.jit(jax.grad(loss, argnums=(0, 1)))(c, jnp.float32(t0))
+    assert np.isfinite(gt)
     for leaf in jax.tree.leaves(gc):
         assert np.all(np.isfinite(leaf))
-    assert float(jnp.abs(gc.coefficients).max()) > 0.0
-    # Gradient wrt the offsets row of one coefficient vs a central difference (float32, coarse).
-    k = c.channel_index.index(next(i for i in c.channel_index))
-    h = 1e-2
+    # Central differences of the (already compiled) forward pass, float32: coarse tolerances.
+    h = 1e-3
+    fd_t = (float(loss(c, t0 + h)) - float(loss(c, t0 - h))) / (2 * h)
+    np.testing.assert_allclose(float(gt), fd_t, rtol=2e-2, atol=0.5)
+    assert abs(float(gt)) > 1.0
+    k, b, d = c.num_harmonics + 1, 1, 0.5  # a cosine coefficient of the first kept row
 
-    def at(delta):
-        return ours_with(c, k, delta)
+    def shifted(delta):
+        coef = c.coefficients.at[k, 0, b].add(delta)
+        return float(loss(crowd.Crowd(coef, c.omega, c.bone_offsets, c.topology, c.channel_index), t0))
 
-    def ours_with(cr, row, delta):
-        coef = cr.coefficients.at[0, row, 0].add(delta)
-        return float(jnp.sum(w * crowd.crowd_positions(
-            crowd.Crowd(coef, cr.omega, cr.bone_offsets, cr.topology, cr.channel_index), 0.6)))
-
-    fd = (at(h) - at(-h)) / (2 * h)
-    np.testing.assert_allclose(float(gc.coefficients[0, k, 0]), fd, rtol=2e-2, atol=2e-2)
+    fd_c = (shifted(d) - shifted(-d)) / (2 * d)
+    np.testing.assert_allclose(float(gc.coefficients[k, 0, b]), fd_c, rtol=2e-2, atol=0.05)
 
 
 def test_bad_input_raises_user_error_naming_the_argument():
