@@ -305,7 +305,9 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     keep = _keeper(t)
     x, sin, cos = _channels(crowd, t, keep)
     groups = _layout(topology)[0]
-    bone = crowd.bone_offsets
+    # One gather of the bone offsets into group order, then a slice per group.
+    bone = crowd.bone_offsets[np.asarray([j for grp in groups for j in grp.joints])]
+    first = np.cumsum([0] + [len(grp.joints) for grp in groups])
     where: dict[int, tuple[int, int]] = {}  # joint -> (group, index in group)
     world_r: list = []  # per group: 3x3 of [n, B] arrays (or 0/1)
     world_p: list = []  # per group: 3 of [n, B] arrays
@@ -313,7 +315,7 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
         n = len(grp.joints)
         for i, j in enumerate(grp.joints):
             where[j] = (g, i)
-        local_t: list = [bone[np.asarray(grp.joints), k][:, None] for k in range(3)]
+        local_t: list = [bone[first[g]:first[g] + n, k:k + 1] for k in range(3)]
         for axis, row in grp.pos_rows:
             local_t[axis] = x[row:row + n]  # position channels replace the OFFSET component
         local_r = _IDENTITY
