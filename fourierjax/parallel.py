@@ -172,14 +172,46 @@ def synthesize_sharded(
 
 
 def crowd_positions_sharded(
-    skeleton: Skeleton, channels, *, mesh: Mesh | None = None, axis_name: str = DATA_AXIS
+    skeleton: Skeleton | eqx.Module, channels, *, mesh: Mesh | None = None, axis_name: str = DATA_AXIS
 ) -> jax.Array:
-    """World joint positions of a crowd pose `[B, C]` (BVH channel values) split over devices.
+    """World joint positions of a crowd with the character axis split over devices.
 
-    **Returns:** `[B, J, 3]` positions (`kinematics.joint_positions`), sharded along `B`.
+    Two forms:
+
+    - `crowd_positions_sharded(crowd, t)`: a `fourierjax.crowd.Crowd` synthesized and posed at
+      time `t` (seconds) by `crowd.crowd_positions`, each device posing its share of the
+      characters (the crowd's arrays keep characters last; they are split along that axis).
+    - `crowd_positions_sharded(skeleton, channels)`: FK of given BVH channel values `[B, C]`
+      (`kinematics.joint_positions`), split along `B`.
+
+    The batch is padded to a multiple of the device count by repeating the last character and
+    the padding is dropped again.
+
+    **Returns:** `[B, J, 3]` positions, sharded along `B`.
     """
+    from fourierjax.crowd import Crowd, crowd_positions
+
     mesh = data_mesh() if mesh is None else mesh
     n = _num_shards(mesh, axis_name)
+    if isinstance(skeleton, Crowd):
+        crowd, t = skeleton, channels
+        B = crowd.num_characters
+        size = -(-B // n) * n
+
+        def last_axis(x):  # pad (repeat the last character) and split the character axis
+            if size != B:
+                reps = jnp.broadcast_to(x[..., -1:], (*x.shape[:-1], size - B))
+                x = jnp.concatenate([x, reps], axis=-1)
+            spec = PartitionSpec(*([None] * (x.ndim - 1)), axis_name)
+            return jax.device_put(x, NamedSharding(mesh, spec))
+
+        crowd = eqx.tree_at(lambda c: (c.coefficients, c.omega), crowd,
+                            (last_axis(crowd.coefficients), last_axis(crowd.omega)))
+        crowd = eqx.tree_at(lambda c: c.bone_offsets, crowd,
+                            jax.device_put(crowd.bone_offsets, replicated(mesh)))
+        t = jax.device_put(jnp.asarray(t, crowd.coefficients.dtype), replicated(mesh))
+        out = crowd_positions(crowd, t)
+        return out if size == B else out[:B]
     channels = jnp.asarray(channels)
     B = channels.shape[0]
     size = -(-B // n) * n

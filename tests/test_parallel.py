@@ -56,6 +56,20 @@ _SCRIPT = textwrap.dedent(
     pos = parallel.crowd_positions_sharded(skel, ch, mesh=mesh)
     np.testing.assert_allclose(np.asarray(pos), np.asarray(kinematics.joint_positions(skel, ch)),
                                atol=1e-4)
+
+    # A Crowd (synthesis + FK per device): 10 characters padded to 12 over 4 devices.
+    from fourierjax import crowd
+    rngc = np.random.default_rng(1)
+    C = skel.topology.num_channels
+    off = np.broadcast_to(m.channels.mean(0), (10, C)).astype(np.float32)
+    amp = rngc.uniform(1.0, 10.0, size=(10, C, 2)).astype(np.float32)
+    ph = rngc.uniform(-3.0, 3.0, size=(10, C, 2)).astype(np.float32)
+    om = rngc.uniform(4.0, 8.0, size=10).astype(np.float32)
+    models = fourier.FourierModel(jnp.asarray(off), jnp.asarray(amp), jnp.asarray(ph), jnp.asarray(om))
+    cr = crowd.make_crowd(skel, models)
+    many = parallel.crowd_positions_sharded(cr, 0.7, mesh=mesh)
+    assert many.shape == (10, skel.topology.num_joints, 3)
+    np.testing.assert_allclose(np.asarray(many), np.asarray(crowd.crowd_positions(cr, 0.7)), atol=1e-3)
     print("OK")
     """
 )
