@@ -46,6 +46,11 @@ def test_equals_synthesize_then_fk_on_cmu_07_01():
         np.testing.assert_allclose(ours, ref, atol=2e-6 * scale + 2e-3)
     # Different times give different poses (the test can fail).
     assert float(jnp.abs(crowd.crowd_positions(c, 0.1) - crowd.crowd_positions(c, 0.2)).max()) > 1.0
+    # A new time (Python float, numpy or jax scalar) never recompiles.
+    before = crowd._positions_jit._cache_size()
+    for t in (0.5, np.float32(0.6), jnp.float32(0.7), jnp.asarray(0.8, jnp.float32)):
+        crowd.crowd_positions(c, t)
+    assert crowd._positions_jit._cache_size() == before
 
 
 def _numpy_channels(models, t):
@@ -73,6 +78,21 @@ def test_mixed_rotation_orders_match_scipy_fk(seed):
         oracle, _ = reference_fk(topo, np.asarray(skel.offsets), np.asarray(skel.end_site_offsets),
                                  _numpy_channels(models, t))
         np.testing.assert_allclose(ours, oracle, atol=1e-3, rtol=1e-5)
+
+
+def test_float64_path_matches_scipy_fk_tightly(x64):
+    rng = np.random.default_rng(5)
+    topo = random_topology(rng, num_joints=5, num_end_sites=1)
+    skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)) * 10, rng.normal(size=(1, 3)))
+    m32 = _models(rng, rng.uniform(-90, 90, size=topo.num_channels), num_chars=2, num_harmonics=2)
+    models = jax.tree.map(lambda v: jnp.asarray(v, jnp.float64), m32)
+    c = crowd.make_crowd(skel, models)
+    assert c.coefficients.dtype == jnp.float64
+    ours = crowd.crowd_positions(c, 1.3)
+    assert ours.dtype == jnp.float64
+    oracle, _ = reference_fk(topo, np.asarray(skel.offsets), np.asarray(skel.end_site_offsets),
+                             _numpy_channels(models, 1.3))
+    np.testing.assert_allclose(np.asarray(ours), oracle, atol=1e-9, rtol=1e-10)
 
 
 def test_gradients_wrt_time_and_coefficients_are_finite_and_match_differences():
