@@ -111,8 +111,19 @@ def run(size: str) -> list[Record]:
     def synthesis_only(c, t):
         return crowd_mod._channels(c, t, crowd_mod._keeper(t))
 
+    @jax.jit
+    def channels_only(c, t):  # without the sin/cos of the Euler angles
+        return crowd_mod._channels(c, t, crowd_mod._keeper(t))[0]
+
+    @jax.jit
+    def read_floor(c, t):  # one pass over the coefficients: the memory floor of synthesis
+        k = c.coefficients
+        return sum(k[i] for i in range(k.shape[0] - 1)) + k[-1] * t
+
     pose_soa = jax.jit(crowd_mod._pose)
     synth_t = timeit(lambda: synthesis_only(crowd, tick()), repeats=repeats, warmup=2)
+    chan_t = timeit(lambda: channels_only(crowd, tick()), repeats=repeats, warmup=2)
+    floor_t = timeit(lambda: read_floor(crowd, tick()), repeats=repeats, warmup=2)
     soa_t = timeit(lambda: pose_soa(crowd, tick()), repeats=repeats, warmup=2)
 
     # Earlier formulations, for the record: synthesize every channel per character (vmapped
@@ -150,6 +161,9 @@ def run(size: str) -> list[Record]:
                  "first_call_s": first_call_s,
                  "kept_channels": len(crowd.channel_index),
                  "synthesis_and_sincos_only_ms": 1e3 * synth_t["median"],
+                 "synthesis_channels_only_ms": 1e3 * chan_t["median"],
+                 "coefficient_read_floor_ms": 1e3 * floor_t["median"],
+                 "coefficient_megabytes_per_frame": crowd.coefficients.size * 4 / 1e6,
                  "fk_ms_estimate": 1e3 * (ours["median"] - synth_t["median"]),
                  "variant_characters_last_output_frames_per_s": 1.0 / soa_t["median"],
                  "variant_synthesize_then_joint_positions_frames_per_s": 1.0 / old_t["median"],
