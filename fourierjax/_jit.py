@@ -34,14 +34,18 @@ def jit(fun: Callable | None = None, **jit_kwargs) -> Callable:
 
 
 def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
-    jitted: dict[str, Callable] = {}
+    jitted: dict[tuple[str, bool], Callable] = {}
 
     def get() -> Callable:
         backend = jax.default_backend()
-        f = jitted.get(backend)
+        # JAX accepts compiler options on top-level calls only: inside a transformation
+        # (jit, vmap, grad of a caller) the function is staged into the caller's program,
+        # which is compiled with the caller's options.
+        top = _trace_state_clean()
+        f = jitted.get((backend, top))
         if f is None:
-            opts = {"compiler_options": dict(CPU_COMPILER_OPTIONS)} if backend == "cpu" else {}
-            f = jitted[backend] = make(fun, **opts, **jit_kwargs)
+            opts = {"compiler_options": dict(CPU_COMPILER_OPTIONS)} if backend == "cpu" and top else {}
+            f = jitted[(backend, top)] = make(fun, **opts, **jit_kwargs)
         return f
 
     @functools.wraps(fun)
@@ -50,3 +54,10 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
 
     wrapper.lower = lambda *args, **kwargs: get().lower(*args, **kwargs)  # type: ignore[attr-defined]
     return wrapper
+
+
+def _trace_state_clean() -> bool:
+    """True outside any JAX transformation (jax has no public API for this)."""
+    from jax._src import core
+
+    return core.trace_state_clean()
