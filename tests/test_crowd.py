@@ -124,6 +124,10 @@ def test_gradients_wrt_time_and_coefficients_are_finite_and_match_differences():
 
     fd_c = (shifted(d) - shifted(-d)) / (2 * d)
     np.testing.assert_allclose(float(gc.coefficients[k, 0, b]), fd_c, rtol=2e-2, atol=0.05)
+    # Batching over times: vmap equals a loop.
+    ts = jnp.asarray([0.1, 0.5, 2.0], jnp.float32)
+    batched = jax.vmap(lambda t: crowd.crowd_positions(c, t))(ts)
+    np.testing.assert_allclose(batched, jnp.stack([crowd.crowd_positions(c, t) for t in ts]), atol=1e-4)
 
 
 def test_bad_input_raises_user_error_naming_the_argument():
