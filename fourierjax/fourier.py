@@ -228,19 +228,29 @@ def stack_models(models) -> FourierModel:
 
 
 def harmonic_basis(theta: Float[Array, " T"], num_harmonics: int) -> Float[Array, "T P"]:
-    """Design matrix ``[1, sin(n th) (n=1..N), cos(n th) (n=1..N)]``, P = 2N + 1.
+    """Design matrix ``[1, sin(n th) (n=1..N), cos(n th) (n=1..N)]``, P = 2N + 1."""
+    return _basis_rows(theta, num_harmonics).T
 
-    Harmonics n >= 2 come from the angle-addition recurrence (two trig calls per sample instead
-    of 2N: XLA's CPU sin/cos dominate a fit's cost). As accurate as ``sin(n * th)`` in float32:
-    both carry the rounding of ``th`` times n.
+
+def _basis_rows(theta: Float[Array, " T"], num_harmonics: int) -> Float[Array, "P T"]:
+    """``harmonic_basis(theta, N).T``: one row per basis function (the fit's fast layout)."""
+    return _basis_rows_sc(jnp.sin(theta), jnp.cos(theta), num_harmonics)
+
+
+def _basis_rows_sc(s1, c1, num_harmonics: int):
+    """Basis rows ``[P, T]`` from ``sin(theta)``, ``cos(theta)`` by the angle-addition recurrence.
+
+    Two trig calls per sample instead of 2N (XLA's CPU sin/cos dominate a fit's cost); as
+    accurate as ``sin(n * theta)`` in float32 (both carry the rounding of theta times n). Pass
+    materialised ``s1``, ``c1`` (loop-carried in the fit): XLA fuses producers into the stack
+    and would recompute them for each of its 2N + 1 rows.
     """
-    s1, c1 = jnp.sin(theta), jnp.cos(theta)
     sin_n, cos_n = [s1], [c1]
     for _ in range(num_harmonics - 1):
         s, c = sin_n[-1], cos_n[-1]
         sin_n.append(s * c1 + c * s1)
         cos_n.append(c * c1 - s * s1)
-    return jnp.stack([jnp.ones_like(theta), *sin_n, *cos_n], axis=1)
+    return jnp.stack([jnp.ones_like(s1), *sin_n, *cos_n], axis=0)
 
 
 def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Array, "T C"]:
@@ -302,18 +312,23 @@ def _masked_mean(x: Float[Array, "T C"], w: Float[Array, " T"]) -> Float[Array, 
 
 
 def _solve_coefficients(features, w, theta, num_harmonics, harmonics_on=None):
-    """Least-squares coefficients [P, C] of centred data for the basis at phases theta.
+    """Least-squares coefficients ``[P, C]`` of centred data for the basis at phases theta.
 
-    ``harmonics_on`` (``[N]`` of 0/1, optional) switches harmonics off: their basis columns are
-    zeroed and their coefficients come out exactly 0, as if the basis had only the others
-    (one traced solve serves fits with different numbers of harmonics).
+    Returns ``(basis_rows [P, T], coef [P, C], rhs [P, C])`` (``rhs``: the normal equations'
+    right-hand side). ``harmonics_on`` (``[N]`` of 0/1, optional) switches harmonics off: their
+    basis rows are zeroed and their coefficients come out exactly 0, as if the basis had only
+    the others (one traced solve serves fits with different numbers of harmonics).
     """
-    B = harmonic_basis(theta, num_harmonics)
+    return _solve_basis(features, w, _basis_rows(theta, num_harmonics), harmonics_on)
+
+
+def _solve_basis(features, w, B, harmonics_on=None):
+    """:func:`_solve_coefficients` for given basis rows ``B [P, T]``."""
     if harmonics_on is not None:
         on = jnp.concatenate([jnp.ones((1,), B.dtype), harmonics_on, harmonics_on])
-        B = B * on[None, :]
-    Bw = B * w[:, None]
-    G = Bw.T @ B
+        B = B * on[:, None]
+    Bw = B * w[None, :]
+    G = Bw @ B.T
     # Relative jitter: keeps the factorisation defined when a column vanishes (omega -> 0).
     eye = jnp.eye(G.shape[0], dtype=G.dtype)
     num_on = G.shape[0] if harmonics_on is None else jnp.sum(on)
@@ -321,7 +336,7 @@ def _solve_coefficients(features, w, theta, num_harmonics, harmonics_on=None):
     G = G + (10 * jnp.finfo(G.dtype).eps * scale + jnp.finfo(G.dtype).tiny) * eye
     if harmonics_on is not None:
         G = G + eye * (1 - on)[None, :]  # unit pivots for the switched-off columns
-    rhs = Bw.T @ features
+    rhs = Bw @ features
     coef = _spd_solve(G, rhs)
     return B, coef, rhs
 
@@ -352,7 +367,7 @@ def projected_residual(
     cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
     x = features - _masked_mean(features, w)[None, :]
     B, coef, _ = _solve_coefficients(x, w, omega * t_s, num_harmonics)
-    r = x - B @ coef
+    r = x - B.T @ coef
     return jnp.sum(w[:, None] * cw[None, :] * r * r)
 
 
@@ -469,26 +484,48 @@ def _golden_start(lo, hi):
     return lo, hi, hi - _INVPHI * (hi - lo), lo + _INVPHI * (hi - lo), inf, inf
 
 
-def _golden_step(g, state, f_of):
-    """Golden-section step ``g``: steps 0 and 1 evaluate the interior points, later ones shrink
-    the bracket around the smaller of ``f(c)``, ``f(d)`` and evaluate one new point.
-
-    ``f_of(x) -> (f(x), aux)`` is called once; returns ``(new_state, aux)``.
-    """
+def _golden_shrunk(state):
+    """The bracket after one shrink: around the smaller of ``f(c)``, ``f(d)``."""
     a, b, c, d, fc, fd = state
     left = fc < fd  # minimum in [a, d]
     a2 = jnp.where(left, a, c)
     b2 = jnp.where(left, d, b)
-    # Reuse one interior point; evaluate the other.
+    # Reuse one interior point; the other is new.
     c2 = jnp.where(left, b2 - _INVPHI * (b2 - a2), d)
     d2 = jnp.where(left, c, a2 + _INVPHI * (b2 - a2))
-    x = jnp.where(g == 0, c, jnp.where(g == 1, d, jnp.where(left, c2, d2)))
-    fx, aux = f_of(x)
+    return left, (a2, b2, c2, d2)
+
+
+def _golden_point(g, state):
+    """Where golden-section step ``g`` evaluates: steps 0 and 1 the initial interior points,
+    later steps the new point of the shrunk bracket."""
+    _, _, c, d, _, _ = state
+    left, (_, _, c2, d2) = _golden_shrunk(state)
+    return jnp.where(g == 0, c, jnp.where(g == 1, d, jnp.where(left, c2, d2)))
+
+
+def _golden_update(g, state, fx):
+    """State after step ``g`` evaluated ``fx = f(_golden_point(g, state))``."""
+    a, b, c, d, fc, fd = state
+    left, shrunk = _golden_shrunk(state)
     shrink = g >= 2
     fc2 = jnp.where(shrink, jnp.where(left, fx, fd), jnp.where(g == 0, fx, fc))
     fd2 = jnp.where(shrink, jnp.where(left, fc, fx), jnp.where(g == 1, fx, fd))
-    new = tuple(jnp.where(shrink, n, o) for n, o in ((a2, a), (b2, b), (c2, c), (d2, d)))
-    return (*new, fc2, fd2), aux
+    new = tuple(jnp.where(shrink, n, o) for n, o in zip(shrunk, (a, b, c, d), strict=True))
+    return (*new, fc2, fd2)
+
+
+def _golden_iterations_needed(golden_iterations, search_halfwidth, grid_points, dtype):
+    """``golden_iterations``, capped where the bracket is already below the dtype's resolution.
+
+    The golden section starts on two grid cells, ``4 log1p(h) / (grid_points - 1)`` of ω, and
+    shrinks by 1/φ per step whatever the data: past ``eps`` of ω its points are neighbouring
+    floats and further steps only re-evaluate them (float32: 28 of the default 40 steps).
+    """
+    width = 4 * math.log1p(search_halfwidth) / max(grid_points - 1, 1)
+    eps = float(jnp.finfo(dtype).eps)
+    needed = math.ceil(math.log(max(width / eps, 1.0)) / math.log(1 / _INVPHI)) + 1
+    return max(0, min(golden_iterations, needed))
 
 
 def _golden_best(state):
@@ -557,25 +594,26 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
                                   G, dtype=dtype))
     # Loop steps: 0, 1 guard; 2 .. 2+G-1 grid; g0 .. g0+I+1 golden section; last: final fit.
     g0 = 2 + G
-    last = g0 + golden_iterations + 2
+    last = g0 + _golden_iterations_needed(golden_iterations, search_halfwidth, G, dtype) + 2
     zero = jnp.zeros((), dtype)
     P = 2 * nh + 1
 
     xwx = w @ (x * x)  # [C]
+    xt = x.T
 
-    def solve(k, om, guard):
+    def solve(k, sin_cos, guard):
         on = search_on
         if on is not None:
             on = jnp.where(guard, jnp.ones_like(on), on)
-        B, coef, rhs = _solve_coefficients(x, w, om * t_s, nh, on)
+        B, coef, rhs = _solve_basis(x, w, _basis_rows_sc(*sin_cos, nh), on)
 
         # The grid only ranks cells 2% apart: x'Wx - rhs'coef (cancels, to ~1e-6 of x'Wx in
         # float32) is enough and saves a [T, C] residual. The golden section and the final fit
         # need the exact residual near the minimum. `k` is not batched under vmap, so this is
         # a real branch (both sides are not computed).
         def residual_sse(_):
-            r = x - B @ coef
-            return w @ (r * r)
+            r = xt - coef.T @ B  # [C, T]: this layout's matmul is 3x faster than [T, P] @ [P, C]
+            return (r * r) @ w
 
         def projected_sse(_):
             return xwx - jnp.sum(rhs * coef, axis=0)
@@ -583,35 +621,42 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         sse_c = jax.lax.cond(k >= g0, residual_sse, projected_sse, None)  # [C]
         return sse_c @ cw, coef, sse_c
 
-    def body(k, state):
-        odd, values, golden, coef_fit, sse_fit = state
+    def next_omega(k, odd, values, golden):
+        """ω of step k (and the golden state, its bracket set when the golden phase starts)."""
         guess = _omega_guess(omega_spec, omega_steps, odd[0], odd[1], duration, odd_threshold)
         grid = guess * ratios
         j = jnp.argmin(values)
         start = _golden_start(grid[jnp.maximum(j - 1, 0)], grid[jnp.minimum(j + 1, G - 1)])
         golden = jax.tree.map(lambda s0, s: jnp.where(k == g0, s0, s), start, golden)
-        om_fit = _golden_best(golden)
-        guard = k < 2
-        grid_pt = grid[jnp.clip(k - 2, 0, G - 1)]
-        om_pre = jnp.where(guard, jnp.where(k == 0, omega_spec / 2, omega_spec),
-                           jnp.where(k == last, om_fit, grid_pt))
+        om = jnp.where(
+            k < 2, jnp.where(k == 0, omega_spec / 2, omega_spec),
+            jnp.where(k < g0, grid[jnp.clip(k - 2, 0, G - 1)],
+                      jnp.where(k < last, _golden_point(k - g0, golden), _golden_best(golden))))
+        return om, golden
+
+    def sin_cos_at(om):
+        theta = om * t_s
+        return jnp.sin(theta), jnp.cos(theta)
+
+    def body(k, state):
+        # The step's ω and sin/cos(ω t) come in the carry, computed at the end of the step
+        # before: a loop carry is materialised, so XLA cannot fuse the ω bookkeeping and the
+        # trig calls into every row of the basis (4x slower steps).
+        sin_cos, odd, values, golden, coef_fit, sse_fit = state
+        fx, coef, sse_c = solve(k, sin_cos, k < 2)
         in_golden = (k >= g0) & (k < last)
-
-        def f_of(om_golden):  # the golden point in the golden steps, om_pre in the others
-            fx, coef, sse_c = solve(k, jnp.where(in_golden, om_golden, om_pre), guard)
-            return fx, (fx, coef, sse_c)
-
-        golden_new, (fx, coef, sse_c) = _golden_step(k - g0, golden, f_of)
-        golden = jax.tree.map(lambda n, o: jnp.where(in_golden, n, o), golden_new, golden)
+        golden = jax.tree.map(lambda n, o: jnp.where(in_golden, n, o),
+                              _golden_update(k - g0, golden, fx), golden)
         odd = jnp.where(jnp.arange(2) == k, _odd_energy_fraction(coef, cw), odd)
         values = jnp.where(jnp.arange(G) == k - 2, fx, values)
         final = k == last
-        return (odd, values, golden, jnp.where(final, coef, coef_fit),
+        om_next, golden = next_omega(k + 1, odd, values, golden)
+        return (sin_cos_at(om_next), odd, values, golden, jnp.where(final, coef, coef_fit),
                 jnp.where(final, sse_c, sse_fit))
 
-    init = (jnp.zeros((2,), dtype), jnp.full((G,), jnp.inf, dtype), _golden_start(zero, zero),
-            jnp.zeros((P, C), dtype), jnp.zeros((C,), dtype))
-    odd, _, golden, coef, sse_c = jax.lax.fori_loop(0, last + 1, body, init)
+    init = (sin_cos_at(omega_spec / 2), jnp.zeros((2,), dtype), jnp.full((G,), jnp.inf, dtype),
+            _golden_start(zero, zero), jnp.zeros((P, C), dtype), jnp.zeros((C,), dtype))
+    _, odd, _, golden, coef, sse_c = jax.lax.fori_loop(0, last + 1, body, init)
     om = _golden_best(golden)
     omega_guess = _omega_guess(omega_spec, omega_steps, odd[0], odd[1], duration, odd_threshold)
     if nh != N:  # drop the switched-off harmonic (its coefficients are exactly 0)
