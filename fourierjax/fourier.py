@@ -643,6 +643,7 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         # before: a loop carry is materialised, so XLA cannot fuse the ω bookkeeping and the
         # trig calls into every row of the basis (4x slower steps).
         sin_cos, odd, values, golden, coef_fit, sse_fit = state
+        golden = tuple(golden)  # carried stacked: one small kernel instead of six
         fx, coef, sse_c = solve(k, sin_cos, k < 2)
         in_golden = (k >= g0) & (k < last)
         golden = jax.tree.map(lambda n, o: jnp.where(in_golden, n, o),
@@ -651,12 +652,14 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         values = jnp.where(jnp.arange(G) == k - 2, fx, values)
         final = k == last
         om_next, golden = next_omega(k + 1, odd, values, golden)
-        return (sin_cos_at(om_next), odd, values, golden, jnp.where(final, coef, coef_fit),
-                jnp.where(final, sse_c, sse_fit))
+        return (sin_cos_at(om_next), odd, values, jnp.stack(golden),
+                jnp.where(final, coef, coef_fit), jnp.where(final, sse_c, sse_fit))
 
     init = (sin_cos_at(omega_spec / 2), jnp.zeros((2,), dtype), jnp.full((G,), jnp.inf, dtype),
-            _golden_start(zero, zero), jnp.zeros((P, C), dtype), jnp.zeros((C,), dtype))
+            jnp.stack(_golden_start(zero, zero)), jnp.zeros((P, C), dtype),
+            jnp.zeros((C,), dtype))
     _, odd, _, golden, coef, sse_c = jax.lax.fori_loop(0, last + 1, body, init)
+    golden = tuple(golden)
     om = _golden_best(golden)
     omega_guess = _omega_guess(omega_spec, omega_steps, odd[0], odd[1], duration, odd_threshold)
     if nh != N:  # drop the switched-off harmonic (its coefficients are exactly 0)
