@@ -710,6 +710,12 @@ _fit_batched = _jit.jit(_fit_batched_impl, static_argnames=_FIT_STATIC)
 _fit_single = _jit.jit(_fit_single_impl, static_argnames=_FIT_STATIC)
 
 
+def _as_array(x):
+    # numpy for host data: jit transfers it itself, while an eager `jnp.asarray` compiles a
+    # small program of its own on a first call. JAX arrays (sharded ones too) pass through.
+    return x if isinstance(x, jax.Array) else np.asarray(x)
+
+
 def _default_channel_weights(channel_names, num_channels):
     # numpy, not jnp: a constant built eagerly by JAX would compile a program of its own.
     if not channel_names:
@@ -754,7 +760,7 @@ def fit_batch(
     Returns:
         FitResult with a leading batch axis on every leaf.
     """
-    features = jnp.asarray(features)
+    features = _as_array(features)
     if features.ndim != 3:
         raise ValueError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
     C = features.shape[2]
@@ -787,13 +793,20 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
                                          ("frame_time_s", frame_time_s, batch, False),
                                          ("omega_steps", omega_steps, batch, False),
                                          ("channel_weights", channel_weights, (C,), True)):
-        if value is not None and not isinstance(value, jax.Array):
-            value = np.asarray(value)
+        if value is not None:
+            value = _as_array(value)
         if value is not None and (np.shape(value) != expected if exact else
-                                  np.broadcast_shapes(np.shape(value), expected) != expected):
+                                  not _broadcasts_to(np.shape(value), expected)):
             raise ValueError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}")
         out.append(value)
     return tuple(out)
+
+
+def _broadcasts_to(shape, target) -> bool:
+    try:
+        return np.broadcast_shapes(shape, target) == tuple(target)
+    except ValueError:
+        return False
 
 
 def _fit_result(out, representation, channel_names) -> FitResult:
@@ -821,7 +834,7 @@ def fit(
     Returns:
         FitResult (no batch axis).
     """
-    features = jnp.asarray(features)
+    features = _as_array(features)
     if features.ndim != 2:
         raise ValueError(f"fit: features must be [T, C], got shape {features.shape}")
     return _fit_one(features, frame_time_s, num_harmonics, mask=mask, omega_steps=omega_steps,

@@ -239,3 +239,65 @@ def test_alignment_and_metrics(x64):
     freqs, amp = F.amplitude_spectrum(s, 1 / 120.0)
     np.testing.assert_allclose(float(amp[6, 0]), 2.5, rtol=1e-9)
     np.testing.assert_allclose(float(freqs[6]), 3.0)
+
+
+def test_spd_solve_matches_numpy(x64):
+    """The fit's LAPACK-free solve (Gauss-Jordan on [G | rhs]) against numpy, also under vmap."""
+    rng = np.random.default_rng(8)
+    for P in (3, 7, 15):
+        A = rng.normal(size=(4, P, P))
+        G = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(P)
+        rhs = rng.normal(size=(4, P, 5))
+        got = jax.vmap(F._spd_solve)(jnp.asarray(G), jnp.asarray(rhs))
+        np.testing.assert_allclose(got, np.linalg.solve(G, rhs), rtol=1e-9, atol=1e-11)
+
+
+def test_fit_one_harmonic_and_switched_off_harmonics(x64):
+    """N = 1 shares the guard's 2-harmonic solve with the 2nd harmonic switched off: it must
+    equal a plain 1-harmonic least-squares fit (exact sinusoids are recovered)."""
+    rng = np.random.default_rng(9)
+    m = _model(rng, C=3, N=1, omega=2 * np.pi * 1.3)
+    t = np.arange(400) / 120.0
+    x = np.asarray(F.synthesize(m, t))
+    r = F.fit(x, 1 / 120.0, 1, channel_weights=jnp.ones(3))
+    np.testing.assert_allclose(float(r.omega_fit), float(m.omega), rtol=1e-8)
+    np.testing.assert_allclose(r.model.amplitude, m.amplitude, atol=1e-7)
+    np.testing.assert_allclose(F.wrap_angle(r.model.phase - m.phase), 0, atol=1e-7)
+    # A 2nd harmonic the N = 1 model cannot hold: coefficients equal fit_linear's at that omega.
+    x2 = x + 0.3 * np.sin(2 * float(m.omega) * t + 0.4)[:, None]
+    r2 = F.fit(x2, 1 / 120.0, 1, channel_weights=jnp.ones(3))
+    ref = F.fit_linear(x2, t, r2.omega_fit, 1)
+    np.testing.assert_allclose(r2.model.amplitude, ref.amplitude, atol=1e-10)
+    np.testing.assert_allclose(r2.model.offset, ref.offset, atol=1e-10)
+    assert r2.model.amplitude.shape == (3, 1)
+
+
+def test_fit_compiles_one_program_per_call_signature():
+    """Defaults, broadcasts and casts happen inside the jitted program: a first call compiles
+    exactly one XLA program (eager ops each compiled their own, seconds of first-call time)."""
+    from jax import monitoring
+
+    compiled = []
+
+    def listener(event, duration_secs, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(duration_secs)
+
+    rng = np.random.default_rng(10)
+    x = rng.normal(size=(3, 131, 4)).astype(np.float32)  # shapes no other test uses
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        F.fit_batch(x, 1 / 60.0, 2, mask=np.ones((3, 131), bool), grid_points=5,
+                    golden_iterations=3)
+        assert len(compiled) == 1
+        F.fit(x[0], 1 / 60.0, 2, omega_steps=6.0, grid_points=5, golden_iterations=3)
+        assert len(compiled) == 2
+        F.fit_batch(x + 1, 1 / 60.0, 2, mask=np.ones((3, 131), bool), grid_points=5,
+                    golden_iterations=3)  # same signature: cached
+        assert len(compiled) == 2
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    with pytest.raises(ValueError, match="mask shape"):
+        F.fit_batch(x, 1 / 60.0, 2, mask=np.ones((3, 130), bool))
+    with pytest.raises(ValueError, match="omega_steps shape"):
+        F.fit_batch(x, 1 / 60.0, 2, omega_steps=np.ones(2))
