@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from fourierjax._sincos import sincos_degrees as _sincos_degrees
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 from fourierjax.skeleton import Skeleton, Topology
@@ -211,33 +212,6 @@ def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
         topology=topology,
         channel_index=index,
     )
-
-
-# Cephes sinf/cosf minimax polynomials on [-pi/4, pi/4].
-_SIN = (-1.6666654611e-1, 8.3321608736e-3, -1.9515295891e-4)
-_COS = (4.166664568298827e-2, -1.388731625493765e-3, 2.443315711809948e-5)
-
-
-def _sincos_degrees(x: Array) -> tuple[Array, Array]:
-    """`(sin, cos)` of angles in degrees sharing one range reduction.
-
-    float32: the reduction `x - 90 n` is exact, then a polynomial on [-45, 45] degrees (about
-    1 ulp). Other dtypes use `jnp.sin` / `jnp.cos`. The quadrant `n` is piecewise constant, so
-    gradients are those of the polynomial.
-    """
-    if x.dtype != jnp.float32:
-        r = jnp.deg2rad(x)
-        return jnp.sin(r), jnp.cos(r)
-    n = jnp.floor(x * np.float32(1 / 90) + 0.5)
-    r = (x - n * 90.0) * np.float32(np.pi / 180)
-    r2 = r * r
-    s = r + r * r2 * (_SIN[0] + r2 * (_SIN[1] + r2 * _SIN[2]))
-    c = 1.0 - 0.5 * r2 + r2 * r2 * (_COS[0] + r2 * (_COS[1] + r2 * _COS[2]))
-    q = n - 4.0 * jnp.floor(n * 0.25)  # quadrant 0..3, exact in floats (no int conversion)
-    swap = (q == 1.0) | (q == 3.0)
-    sin = jnp.where(swap, c, s)
-    cos = jnp.where(swap, s, c)
-    return jnp.where(q >= 2.0, -sin, sin), jnp.where((q == 1.0) | (q == 2.0), -cos, cos)
 
 
 # Symbolic 3x3 matrices: nested lists whose entries are arrays or the Python ints 0 and 1, so

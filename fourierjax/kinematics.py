@@ -9,6 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._sincos import sincos as _sincos
 from fourierjax.skeleton import Skeleton, Topology
 
 _AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
@@ -166,34 +167,6 @@ def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) ->
 # the number of joints; unrolled elementwise graphs took minutes to compile here), and sines
 # and cosines come from one shared range reduction (`_sincos`), because XLA's CPU `sin` is
 # several times slower than the rest of FK put together.
-
-# Cody-Waite split of pi/2 (float32) and Cephes sinf/cosf minimax coefficients on [-pi/4, pi/4].
-_PIO2 = (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8)
-_SIN = (-1.6666654611e-1, 8.3321608736e-3, -1.9515295891e-4)
-_COS = (4.166664568298827e-2, -1.388731625493765e-3, 2.443315711809948e-5)
-
-
-def _sincos(x: Array) -> tuple[Array, Array]:
-    """`(sin x, cos x)` sharing one range reduction; float32 to about 1 ulp for |x| < 1e4 rad.
-
-    Other dtypes use `jnp.sin` / `jnp.cos`. Gradients are those of the polynomial (accurate to
-    float32 rounding); the quadrant index is piecewise constant.
-    """
-    if x.dtype != jnp.float32:
-        return jnp.sin(x), jnp.cos(x)
-    n = jnp.round(x * (2.0 / np.pi))
-    r = ((x - n * _PIO2[0]) - n * _PIO2[1]) - n * _PIO2[2]
-    r2 = r * r
-    s = r + r * r2 * (_SIN[0] + r2 * (_SIN[1] + r2 * _SIN[2]))
-    c = 1.0 - 0.5 * r2 + r2 * r2 * (_COS[0] + r2 * (_COS[1] + r2 * _COS[2]))
-    quadrant = n.astype(jnp.int32) & 3
-    swap = (quadrant & 1) == 1
-    sin = jnp.where(swap, c, s)
-    cos = jnp.where(swap, s, c)
-    sin = jnp.where(quadrant >= 2, -sin, sin)
-    cos = jnp.where((quadrant == 1) | (quadrant == 2), -cos, cos)
-    return sin, cos
-
 
 def _qmul_sparse(a: list, b: list) -> list:
     """Hamilton product of component lists whose entries may be the Python int 0 (skipped)."""

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from fourierjax import kinematics
-from fourierjax.kinematics import _sincos
+from fourierjax._sincos import sincos as _sincos
+from fourierjax._sincos import sincos_degrees
 from fourierjax.skeleton import Skeleton
 from tests.helpers import random_topology
 
@@ -21,6 +22,16 @@ def test_sincos_float32_matches_float64_reference():
     # Gradients are the other function (to float32 rounding).
     ds = jax.vmap(jax.grad(lambda v: _sincos(v)[0]))(jnp.asarray(x[:1000]))
     np.testing.assert_allclose(ds, np.cos(ref[:1000]), atol=2e-6)
+
+
+def test_sincos_degrees_float32_matches_float64_reference():
+    x = np.concatenate([np.linspace(-3600, 3600, 200_001), np.arange(-40, 41) * 45.0,
+                        [0.0, -0.0, 1e-30]]).astype(np.float32)
+    s, c = jax.jit(sincos_degrees)(jnp.asarray(x))
+    ref = np.deg2rad(x.astype(np.float64))
+    assert np.abs(np.asarray(s, np.float64) - np.sin(ref)).max() < 2e-7
+    assert np.abs(np.asarray(c, np.float64) - np.cos(ref)).max() < 2e-7
+    assert float(s[np.flatnonzero(x == 90.0)[0]]) == 1.0  # exact reduction: no rounding at 90
 
 
 @pytest.mark.parametrize("seed", range(3))
