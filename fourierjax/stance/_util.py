@@ -2,6 +2,7 @@
 
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
@@ -73,18 +74,26 @@ def quat_from_columns(ex, ey, ez) -> Float[Array, "... 4"]:
 # a quaternion product, and compile time of the solver grows with the op count.
 
 
+_ROT_PARTS = {}  # axis -> (fixed, cos part, sin part) as numpy 3x3
+for _axis in range(3):
+    _i, _j = (_axis + 1) % 3, (_axis + 2) % 3
+    _fixed, _c, _s = (np.zeros((3, 3)) for _ in range(3))
+    _fixed[_axis, _axis] = 1.0
+    _c[_i, _i] = _c[_j, _j] = 1.0
+    _s[_j, _i], _s[_i, _j] = 1.0, -1.0
+    _ROT_PARTS[_axis] = (_fixed, _c, _s)
+
+
 def rot(axis: int, angle) -> Float[Array, "... 3 3"]:
-    """Rotation matrix by `angle` (rad) about world axis 0 (X), 1 (Y) or 2 (Z)."""
+    """Rotation matrix by `angle` (rad) about world axis 0 (X), 1 (Y) or 2 (Z).
+
+    Built as fixed + cos(angle) C + sin(angle) S with constant C, S: a handful of
+    element-wise ops that fuse, instead of stacking nine scalars.
+    """
     angle = jnp.asarray(angle)
-    c, s = jnp.cos(angle), jnp.sin(angle)
-    one, zero = jnp.ones_like(c), jnp.zeros_like(c)
-    if axis == 0:
-        rows = ((one, zero, zero), (zero, c, -s), (zero, s, c))
-    elif axis == 1:
-        rows = ((c, zero, s), (zero, one, zero), (-s, zero, c))
-    else:
-        rows = ((c, -s, zero), (s, c, zero), (zero, zero, one))
-    return jnp.stack([jnp.stack(r, axis=-1) for r in rows], axis=-2)
+    lead = (1,) * angle.ndim  # explicit ranks (the tests raise on rank promotion)
+    fixed, c, s = (jnp.asarray(m.reshape(lead + (3, 3)), angle.dtype) for m in _ROT_PARTS[axis])
+    return fixed + jnp.cos(angle)[..., None, None] * c + jnp.sin(angle)[..., None, None] * s
 
 
 def mm(a, b):

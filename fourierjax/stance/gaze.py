@@ -38,7 +38,6 @@ def gaze_rotation(
     side = u.safe_normalize(u.cross(_EY, fwd), jnp.array([1.0, 0.0, 0.0]))
     up = u.cross(fwd, side)
     R_look = u.mm(u.tr(R_parent_world), u.columns(side, up, fwd))
-    q = rotations.quat_slerp(
-        rotations.quat_from_matrix(R_head_local), rotations.quat_from_matrix(R_look), weight
-    )
+    q = rotations.quat_from_matrix(jnp.stack([R_head_local, R_look]))  # one conversion for both
+    q = rotations.quat_slerp(q[0], q[1], weight)
     return rotations.matrix_from_quat(q)

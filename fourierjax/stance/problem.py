@@ -4,6 +4,7 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
@@ -281,9 +282,37 @@ def desired_balance_point(problem: StanceProblem) -> Float[Array, "2"]:
     return balance_point(problem.body, problem.feet, s[P["weight_shift"]], s[P["forward_shift"]])
 
 
-def _com_residual(problem: StanceProblem, amplitudes, balance_xz):
-    com = build_rotations(problem, amplitudes, balance_xz)[2].com
-    return jnp.stack([com[0], com[2]]) - desired_balance_point(problem)
+class BalancedBuild(eqx.Module):
+    """A pose built with its balance solved (`balanced_rotations`), on rotation matrices.
+
+    - `balance_xz`: `[2]` dominant-ankle X/Z offsets (rad).
+    - `root_position`: `[3]`; `local`: `[J, 3, 3]` local rotations; `info`: `PoseInfo`.
+    """
+
+    balance_xz: Float[Array, "2"]
+    root_position: Float[Array, "3"]
+    local: Float[Array, "joints 3 3"]
+    info: PoseInfo
+
+    def pose(self) -> StancePose:
+        """The `StancePose` (quaternions)."""
+        return StancePose(self.root_position, rotations.quat_from_matrix(self.local))
+
+
+def _build_with_residual(problem: StanceProblem, amplitudes, balance_xz):
+    """`(com_xz - goal, (root, local, info))` for given amplitudes and balance offsets."""
+    root, local, info = build_rotations(problem, amplitudes, balance_xz)
+    r = jnp.stack([info.com[0], info.com[2]]) - desired_balance_point(problem)
+    return r, (root, local, info)
+
+
+def _solve_balance(problem: StanceProblem, amplitudes) -> Float[Array, "2"]:
+    b0 = jnp.zeros(2, amplitudes.dtype)
+    # X ankle offset tips the leg backward (COM -Z), Z tips it toward +X (COM +X).
+    h = 0.5 * problem.body.height_m
+    inv_j0 = jnp.array([[0.0, -1.0], [1.0, 0.0]], amplitudes.dtype) / h
+    residual = lambda b: _build_with_residual(problem, amplitudes, b)[0]  # noqa: E731
+    return broyden_2d(residual, b0, inv_j0, 10)
 
 
 def _inverse_2x2(J):
@@ -293,41 +322,62 @@ def _inverse_2x2(J):
     return inv_det * jnp.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]])
 
 
-@jax.custom_jvp
-def balance_offsets(problem: StanceProblem, amplitudes: Float[Array, "6"]) -> Float[Array, "2"]:
-    """Dominant-ankle X/Z offsets (rad) that put the COM projection on the desired point.
+def _zero_tangent(tree):
+    def zero(x):
+        x = jnp.asarray(x)
+        if jnp.issubdtype(x.dtype, jnp.inexact):
+            return jnp.zeros_like(x)
+        return np.zeros(x.shape, jax.dtypes.float0)
 
-    Sec. 4: for a static pose the paper searches for the offsets; we solve
+    return jax.tree.map(zero, tree)
+
+
+@jax.custom_jvp
+def balanced_rotations(problem: StanceProblem, amplitudes: Float[Array, "6"]) -> BalancedBuild:
+    """The pose (`build_rotations`) with the balance offsets solved (sec. 4).
+
+    For a static pose the paper searches for the dominant-ankle offsets; we solve
     `com_xz(offsets) = goal` by Broyden's method (`balance.broyden_2d`), starting from the
     rigid-body Jacobian (tipping the leg by a about the ankle moves the COM by ~h a, h the
-    COM height). Derivatives come from the implicit function theorem (a custom JVP:
-    d offsets = -J_b^-1 dr, with the exact J_b), so no derivative runs through the
-    iterations, and reverse mode and higher orders work.
+    COM height). Derivatives come from the implicit function theorem in a custom JVP: one
+    linearisation of the pose at the solution gives both the exact 2x2 Jacobian J_b of the
+    residual in the offsets and the tangents of the pose, d offsets = -J_b^-1 dr, so no
+    derivative runs through the iterations and the pose is not built twice. Reverse mode
+    and higher orders work.
     """
-    b0 = jnp.zeros(2, amplitudes.dtype)
-    # X ankle offset tips the leg backward (COM -Z), Z tips it toward +X (COM +X).
-    h = 0.5 * problem.body.height_m
-    inv_j0 = jnp.array([[0.0, -1.0], [1.0, 0.0]], amplitudes.dtype) / h
-    return broyden_2d(lambda b: _com_residual(problem, amplitudes, b), b0, inv_j0, 10)
+    b = _solve_balance(problem, amplitudes)
+    _, (root, local, info) = _build_with_residual(problem, amplitudes, b)
+    return BalancedBuild(b, root, local, info)
 
 
-@balance_offsets.defjvp
-def _balance_offsets_jvp(primals, tangents):
+@balanced_rotations.defjvp
+def _balanced_rotations_jvp(primals, tangents):
     problem, amplitudes = primals
-    b = balance_offsets(problem, amplitudes)
-    Jb = jax.jacfwd(lambda x: _com_residual(problem, amplitudes, x))(b)
-    _, dr = jax.jvp(lambda p, a: _com_residual(p, a, b), primals, tangents)
-    return b, -_inverse_2x2(Jb) @ dr
+    dp, da = tangents
+    # Through the custom JVP itself, so that a second derivative (the implicit adjoint of
+    # the solver) uses this rule again instead of differentiating Broyden's iterations.
+    b = balanced_rotations(problem, amplitudes).balance_xz
+    (_, out), lin = jax.linearize(_build_with_residual, problem, amplitudes, b)
+    zp, za = _zero_tangent(problem), _zero_tangent(amplitudes)
+    dr_b, dout_b = jax.vmap(lambda e: lin(zp, za, e))(jnp.eye(2, dtype=b.dtype))
+    dr, dout = lin(dp, da, jnp.zeros_like(b))
+    db = -_inverse_2x2(dr_b.T) @ dr
+    dout = jax.tree.map(lambda t, tb: t + jnp.tensordot(db, tb, axes=1), dout, dout_b)
+    return BalancedBuild(b, *out), BalancedBuild(db, *dout)
+
+
+def balance_offsets(problem: StanceProblem, amplitudes: Float[Array, "6"]) -> Float[Array, "2"]:
+    """Dominant-ankle X/Z offsets (rad) that put the COM projection on the desired point."""
+    return balanced_rotations(problem, amplitudes).balance_xz
 
 
 def balanced_pose(
     problem: StanceProblem, amplitudes: Float[Array, "6"]
 ) -> tuple[StancePose, PoseInfo, Float[Array, "2"]]:
-    """`build_pose` with the balance offsets solved (`balance_offsets`).
+    """`build_pose` with the balance offsets solved (`balanced_rotations`).
 
     Returns:
         `(pose, info, balance_xz)`.
     """
-    b = balance_offsets(problem, amplitudes)
-    pose, info = build_pose(problem, amplitudes, b)
-    return pose, info, b
+    built = balanced_rotations(problem, amplitudes)
+    return built.pose(), built.info, built.balance_xz

@@ -1,17 +1,22 @@
 """The body shape solver (Neff & Fiume 2004, sec. 5.2, eq. 5): gradient-based, batched, differentiable."""
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float, Int
 
+from fourierjax._jit import filter_jit
 from fourierjax.stance.penalties import hermite_penalty
 from fourierjax.stance.problem import (
     NUM_AMPLITUDES,
+    BalancedBuild,
     StanceProblem,
-    balanced_pose,
+    _zero_tangent,
+    balanced_rotations,
     desired_balance_point,
 )
 from fourierjax.stance.skeleton48 import StancePose
@@ -22,6 +27,18 @@ def amplitudes_from_unknowns(problem: StanceProblem, y: Float[Array, "6"]) -> Fl
     return problem.shape[:NUM_AMPLITUDES] + problem.free * y
 
 
+def _evaluate(y: Float[Array, "6"], problem: StanceProblem) -> tuple[Float[Array, ""], BalancedBuild]:
+    """`(objective, balanced pose)`: the pose is built once for both."""
+    amps = amplitudes_from_unknowns(problem, y)
+    pen = hermite_penalty(problem.amplitude_penalty, problem.free * y)
+    total = jnp.sum(problem.amplitude_weights * problem.free * pen)
+    total = total + 0.5 * jnp.sum((1.0 - problem.free) * y * y)
+    built = balanced_rotations(problem, amps)
+    dist = jnp.sqrt(jnp.sum((built.info.shoulders - problem.targets) ** 2, axis=-1) + 1e-12)
+    reach = hermite_penalty(problem.reach, dist)
+    return total + jnp.sum(problem.target_active * problem.reach_weights * reach), built
+
+
 def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
     """Eq. 5, obj = sum_i w_i f_i: amplitude penalties plus active reach penalties.
 
@@ -29,14 +46,7 @@ def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
     (`free == 0`) get a unit quadratic on their (ignored) offset, which keeps the minimiser
     and its Hessian well defined.
     """
-    amps = amplitudes_from_unknowns(problem, y)
-    pen = hermite_penalty(problem.amplitude_penalty, problem.free * y)
-    total = jnp.sum(problem.amplitude_weights * problem.free * pen)
-    total = total + 0.5 * jnp.sum((1.0 - problem.free) * y * y)
-    _, info, _ = balanced_pose(problem, amps)
-    dist = jnp.sqrt(jnp.sum((info.shoulders - problem.targets) ** 2, axis=-1) + 1e-12)
-    reach = hermite_penalty(problem.reach, dist)
-    return total + jnp.sum(problem.target_active * problem.reach_weights * reach)
+    return _evaluate(y, problem)[0]
 
 
 class StanceSolution(eqx.Module):
@@ -64,17 +74,19 @@ class StanceSolution(eqx.Module):
     free_foot_gap_m: Float[Array, ""]
 
 
-def _finish(problem: StanceProblem, y, obj, steps, ok) -> StanceSolution:
-    amps = amplitudes_from_unknowns(problem, y)
-    pose, info, b = balanced_pose(problem, amps)
+def _finish(problem: StanceProblem, y, steps, ok) -> StanceSolution:
+    # Built again from the solution (not taken from the solver's aux), so that derivatives
+    # flow through the implicit adjoint of `y`.
+    obj, built = _evaluate(y, problem)
+    info, b = built.info, built.balance_xz
     goal = desired_balance_point(problem)
     com_err = jnp.sqrt((info.com[0] - goal[0]) ** 2 + (info.com[2] - goal[1]) ** 2)
     reach_err = problem.target_active * jnp.sqrt(
         jnp.sum((info.wrists - problem.targets) ** 2, axis=-1) + 1e-24
     )
     return StanceSolution(
-        amplitudes=amps,
-        pose=pose,
+        amplitudes=amplitudes_from_unknowns(problem, y),
+        pose=built.pose(),
         balance_xz=b,
         objective=obj,
         iterations=steps,
@@ -87,29 +99,70 @@ def _finish(problem: StanceProblem, y, obj, steps, ok) -> StanceSolution:
     )
 
 
-def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
+def _solve_spd(H: Float[Array, "n n"], rhs: Float[Array, " n"]) -> Float[Array, " n"]:
+    """Solve H x = rhs for a small symmetric positive definite H by Gaussian elimination.
+
+    Unrolled over the (static, small) size, without LAPACK (STYLE.md: batched LAPACK calls
+    hang on 2 cores). A relative ridge of 1e-10 guards a singular pivot.
+    """
+    n = H.shape[0]
+    ridge = 1e-10 * (jnp.max(jnp.abs(jnp.diagonal(H))) + 1e-30)
+    A = H + ridge * jnp.eye(n, dtype=H.dtype)
+    b = rhs
+    for k in range(n):
+        piv = A[k, k]
+        f = A[k + 1 :, k] / piv
+        A = A.at[k + 1 :, :].add(-f[:, None] * A[k, :][None, :])
+        b = b.at[k + 1 :].add(-f * b[k])
+    x = jnp.zeros_like(b)
+    for k in reversed(range(n)):
+        x = x.at[k].set((b[k] - A[k, k + 1 :] @ x[k + 1 :]) / A[k, k])
+    return x
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2, 3))
+def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
+    """`(y*, steps, converged)`: BFGS on eq. 5; derivatives by the implicit function theorem.
+
+    At the optimum grad_y f(y*, p) = 0, so dy* = -H^-1 (d/dp grad_y f) dp with H the 6x6
+    Hessian. One linearisation of grad_y f at (y*, p) gives both the Hessian (applied to the
+    six unit vectors) and the mixed term (applied to dp); the 6x6 system is solved in closed
+    form. No derivative runs through the iterations; reverse mode and vmap work.
+    """
     # BFGS keeps an inverse-Hessian estimate, so a step needs no linear solve (no LAPACK in
-    # the batched path). The implicit adjoint solves with the Hessian at the optimum; BiCGStab
-    # keeps that LAPACK-free too (STYLE.md: batched LAPACK hangs on 2 cores).
+    # the batched path).
     solver = optx.BFGS(rtol=rtol, atol=atol)
-    adjoint = optx.ImplicitAdjoint(linear_solver=lx.BiCGStab(rtol=1e-8, atol=1e-10, max_steps=64))
     y0 = jnp.zeros(NUM_AMPLITUDES, problem.shape.dtype)
-    sol = optx.minimise(
-        objective, solver, y0, args=problem, max_steps=max_steps, throw=False, adjoint=adjoint
-    )
-    ok = sol.result == optx.RESULTS.successful
-    obj = objective(sol.value, problem)
-    return _finish(problem, sol.value, obj, sol.stats["num_steps"], ok)
+    sol = optx.minimise(objective, solver, y0, args=problem, max_steps=max_steps, throw=False)
+    return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
-@eqx.filter_jit
+@_optimum.defjvp
+def _optimum_jvp(rtol, atol, max_steps, primals, tangents):
+    (problem,), (dp,) = primals, tangents
+    y, steps, ok = _optimum(problem, rtol, atol, max_steps)
+    _, lin = jax.linearize(jax.grad(objective), y, problem)
+    zero_p = _zero_tangent(problem)
+    H = jax.vmap(lambda e: lin(e, zero_p))(jnp.eye(y.shape[0], dtype=y.dtype))
+    dy = -_solve_spd(0.5 * (H + H.T), lin(jnp.zeros_like(y), dp))
+    zero = np.zeros((), jax.dtypes.float0)
+    return (y, steps, ok), (dy, zero, zero)
+
+
+def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
+    y, steps, ok = _optimum(problem, rtol, atol, max_steps)
+    return _finish(problem, y, steps, ok)
+
+
+@filter_jit
 def solve_stance(
     problem: StanceProblem, rtol: float = 1e-6, atol: float = 1e-6, max_steps: int = 200
 ) -> StanceSolution:
     """Solve one stance: torso amplitudes minimising eq. 5 with balance and analytic IK inside.
 
     Differentiable with respect to every array in `problem` (intensity, targets, feet, body)
-    through the optimum by implicit differentiation (optimistix `ImplicitAdjoint`).
+    through the optimum by implicit differentiation (`_optimum`: the implicit function theorem
+    with the 6x6 Hessian at the solution).
 
     Arguments:
         problem: a `StanceProblem` (`make_problem` or a shape set's `problem`).
@@ -122,7 +175,7 @@ def solve_stance(
     return _solve_one(problem, rtol, atol, max_steps)
 
 
-@eqx.filter_jit
+@filter_jit
 def solve_stances(
     problems: StanceProblem,
     rtol: float = 1e-6,
