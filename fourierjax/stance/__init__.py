@@ -7,9 +7,11 @@ from fourierjax.stance.penalties import HermitePenalty, hermite_penalty, quadrat
 from fourierjax.stance.problem import (
     AMPLITUDES,
     SHAPE_PARAMS,
+    BalancedBuild,
     StanceProblem,
     balance_offsets,
     balanced_pose,
+    balanced_rotations,
     build_pose,
     make_problem,
 )
@@ -44,11 +46,20 @@ from fourierjax.stance.solver import (
 
 __all__ = [
     "AMPLITUDES", "DOFS", "DOF_NAMES", "SHAPE_PARAMS", "TOPOLOGY", "Body", "Feet",
-    "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem", "StanceSolution",
-    "TorsoFit", "animate", "anticipation", "balance_offsets", "balanced_pose", "build_pose",
+    "BalancedBuild", "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem", "StanceSolution",
+    "TorsoFit", "animate", "anticipation", "balance_offsets", "balanced_pose", "balanced_rotations", "build_pose",
     "builtin_shape_sets", "center_of_mass", "cmu_torso_directions", "dof_vector",
     "ease_in_out", "fit_torso", "get_shape_set", "hermite_penalty", "load_shape_set",
     "lower_body_ik", "make_body", "make_feet", "make_problem", "objective", "parse_shape_set",
     "perturb", "pose_fk", "pose_to_motion", "quadratic_penalty", "reach_penalty", "rest_pose",
-    "solve_stance", "solve_stances", "stack_problems", "torso_directions", "write_stance_bvh",
+    "solve_stance", "solve_stance_bounded", "solve_stances", "stack_problems", "torso_directions", "write_stance_bvh",
 ]  # fmt: skip
+
+
+def __getattr__(name):
+    # jaxopt (for the bounded solver only) is imported on first use, not with the package.
+    if name == "solve_stance_bounded":
+        from fourierjax.stance.bounded import solve_stance_bounded
+
+        return solve_stance_bounded
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
