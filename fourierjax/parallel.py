@@ -104,7 +104,7 @@ def fit_batch_sharded(
 ) -> FitResult:
     """`fourier.fit_batch` with the clip axis split over the devices of `mesh`.
 
-    Each device fits its share of clips (variable projection with a hand-rolled Cholesky:
+    Each device fits its share of clips (variable projection with a small Gauss-Jordan elimination:
     plain jnp, so no batched LAPACK call, which hangs on small CPUs). The batch is padded to a
     multiple of the device count by repeating the last clip and the padding is dropped from the
     result, so any batch size works. Results equal an unsharded `fit_batch` to rounding.

@@ -15,6 +15,7 @@ def entry_points(size: str):
     from experiments.benchmarks.fit import gait_like_clips
     from experiments.benchmarks.synthesis import random_models
     from fourierjax import data, fourier, kinematics, parallel, style
+    from fourierjax.crowd import crowd_positions, make_crowd
 
     m = data.load("07_01")
     skel = m.skeleton()
@@ -28,6 +29,8 @@ def entry_points(size: str):
     mb = fourier.FourierModel(models.offset[1], models.amplitude[1], models.phase[1], models.omega[1])
     cskel, cmodels = crowd_models(16)
     crowd_frame = make_crowd_frame()
+    crowd = make_crowd(cskel, cmodels)
+    t_half = jnp.asarray(0.5, jnp.float32)
     eps = {
         "kinematics.joint_positions": lambda: kinematics.joint_positions(skel, ch),
         "kinematics.fk_frames": lambda: kinematics.fk_frames(skel, ch),
@@ -38,8 +41,8 @@ def entry_points(size: str):
         "parallel.fit_batch_sharded": lambda: parallel.fit_batch_sharded(xj, 1 / 120, 3),
         "style.interpolate": lambda: style.interpolate(ma, mb, 0.3),
         "style.characteristic": lambda: style.characteristic(ma, mb),
-        "crowd frame (synthesize + joint_positions)": lambda: crowd_frame(
-            cskel, cmodels, jnp.asarray(0.5, jnp.float32)),
+        "crowd frame (synthesize + joint_positions)": lambda: crowd_frame(cskel, cmodels, t_half),
+        "crowd.crowd_positions": lambda: crowd_positions(crowd, t_half),
     }
     if size != "full":  # CI: two cheap entry points, enough to keep the code path alive
         eps = {k: eps[k] for k in ("kinematics.joint_positions", "parallel.synthesize_sharded")}
