@@ -59,7 +59,7 @@ def run(size: str) -> list[Record]:
     ref_obj = np.array([r["objective"] for r in ref])
     our_obj = np.asarray(sols.objective, np.float64)[:subset]
     excess = our_obj - ref_obj
-    tol = 1e-6 * (1.0 + np.abs(ref_obj))
+    tol = 1e-5 * (1.0 + np.abs(ref_obj))  # float32 objectives: ~10 ulp at 100 (as test_stance_solver)
     rec1 = Record("stance_1", 1.0 / single["median"], 1.0 / np.median(ref_sec), "solves/s",
                   description="one stance solve (jitted solve_stance) vs one scipy Powell solve",
                   baseline_name="stance.reference.solve_reference (scipy Powell, coordinate "

@@ -120,6 +120,36 @@ def _solve_spd(H: Float[Array, "n n"], rhs: Float[Array, " n"]) -> Float[Array, 
     return x
 
 
+#: Longest BFGS step in the amplitude offsets (rad, 2-norm).
+_MAX_STEP = 0.5
+
+
+class _CappedNewton(optx.AbstractDescent):
+    """optimistix's Newton descent with the direction capped to `max_length` (2-norm).
+
+    BFGS starts from an identity Hessian, so its first step is the raw gradient, which a steep
+    reach wall makes tens of radians long: measured on a reach problem of the posture sweep, it
+    leapt into a far basin (collar amplitudes past 2 pi; objective 366.8 where the direction-set
+    reference finds 117.0). Capping keeps the search local; near the optimum the Newton steps
+    are short and unchanged.
+    """
+
+    max_length: float
+    inner: optx.NewtonDescent = optx.NewtonDescent()
+
+    def init(self, y, f_info_struct):
+        return self.inner.init(y, f_info_struct)
+
+    def query(self, y, f_info, state):
+        state = self.inner.query(y, f_info, state)
+        n = jnp.sqrt(sum(jnp.sum(x * x) for x in jax.tree.leaves(state.newton)))
+        scale = jnp.minimum(1.0, self.max_length / jnp.maximum(n, 1e-30))
+        return eqx.tree_at(lambda st: st.newton, state, jax.tree.map(lambda x: x * scale, state.newton))
+
+    def step(self, step_size, state):
+        return self.inner.step(step_size, state)
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2, 3))
 def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
     """`(y*, steps, converged)`: BFGS on eq. 5; derivatives by the implicit function theorem.
@@ -130,8 +160,8 @@ def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
     form. No derivative runs through the iterations; reverse mode and vmap work.
     """
     # BFGS keeps an inverse-Hessian estimate, so a step needs no linear solve (no LAPACK in
-    # the batched path).
-    solver = optx.BFGS(rtol=rtol, atol=atol)
+    # the batched path). Its steps are capped in length (`_CappedNewton`).
+    solver = eqx.tree_at(lambda s: s.descent, optx.BFGS(rtol=rtol, atol=atol), _CappedNewton(_MAX_STEP))
     y0 = jnp.zeros(NUM_AMPLITUDES, problem.shape.dtype)
     sol = optx.minimise(objective, solver, y0, args=problem, max_steps=max_steps, throw=False)
     return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
