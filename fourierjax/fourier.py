@@ -57,6 +57,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from fourierjax import _jit
+from fourierjax._linalg import spd_solve as _spd_solve
 
 REPRESENTATIONS = ("euler", "expmap")
 ROOT_CHANNELS = ("root.vx", "root.vz", "root.y")
@@ -288,25 +289,6 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
 
 
 # ------------------------------------------------------------------------------- linear solves
-
-
-def _spd_solve(G: Float[Array, "P P"], rhs: Float[Array, "P K"]) -> Float[Array, "P K"]:
-    """Solve ``G x = rhs`` for symmetric positive definite ``G`` in plain jnp (no LAPACK call).
-
-    Gauss-Jordan elimination on ``[G | rhs]`` without pivoting (the pivots of an SPD matrix
-    are its positive Schur complements, clamped at ``tiny`` like a Cholesky diagonal). One
-    small fori_loop: it compiles in half the time of a Cholesky factorisation and two
-    triangular solves (three loops), and it appears once per call site of every fit.
-    """
-    P = G.shape[-1]
-    M = jnp.concatenate([G, rhs], axis=1)
-    is_row = jnp.eye(P, dtype=bool)
-
-    def body(j, M):
-        row = M[j] / jnp.maximum(M[j, j], jnp.finfo(M.dtype).tiny)
-        return jnp.where(is_row[j][:, None], row[None, :], M - M[:, j][:, None] * row[None, :])
-
-    return jax.lax.fori_loop(0, P, body, M)[:, P:]
 
 
 def _masked_mean(x: Float[Array, "T C"], w: Float[Array, " T"]) -> Float[Array, " C"]:
@@ -773,17 +755,11 @@ def fit_batch(
     features = _as_array(features)
     if features.ndim != 3:
         raise ValueError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
-    C = features.shape[2]
-    mask, frame_time_s, omega_steps, channel_weights = _check_fit_args(
-        "fit_batch", features.shape, num_harmonics, channel_names, mask, frame_time_s,
-        omega_steps, channel_weights)
-    out = _fit_batched(features, mask, frame_time_s, omega_steps,
-                       _default_channel_weights(channel_names, C) if channel_weights is None
-                       else channel_weights,
-                       num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
-                       search_halfwidth=search_halfwidth, grid_points=grid_points,
-                       golden_iterations=golden_iterations, odd_threshold=odd_threshold)
-    return _fit_result(out, representation, channel_names)
+    return _run_fit(_fit_batched, "fit_batch", features, frame_time_s, num_harmonics, mask=mask,
+                    omega_steps=omega_steps, channel_weights=channel_weights,
+                    representation=representation, channel_names=channel_names, f_min_hz=f_min_hz,
+                    f_max_hz=f_max_hz, search_halfwidth=search_halfwidth, grid_points=grid_points,
+                    golden_iterations=golden_iterations, odd_threshold=odd_threshold)
 
 
 def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
@@ -847,24 +823,24 @@ def fit(
     features = _as_array(features)
     if features.ndim != 2:
         raise ValueError(f"fit: features must be [T, C], got shape {features.shape}")
-    return _fit_one(features, frame_time_s, num_harmonics, mask=mask, omega_steps=omega_steps,
-                    **kwargs)
+    return _run_fit(_fit_single, "fit", features, frame_time_s, num_harmonics, mask=mask,
+                    omega_steps=omega_steps, **kwargs)
 
 
-def _fit_one(features, frame_time_s, num_harmonics, *, mask=None, omega_steps=None,
+def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None, omega_steps=None,
              channel_weights=None, representation="euler", channel_names=(), f_min_hz=0.4,
              f_max_hz=3.0, search_halfwidth=0.25, grid_points=33, golden_iterations=40,
              odd_threshold=0.1) -> FitResult:
-    C = features.shape[-1]
+    """Check the arguments of `fit` / `fit_batch` (`name`) and run its jitted `program`."""
     mask, frame_time_s, omega_steps, channel_weights = _check_fit_args(
-        "fit", features.shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
+        name, features.shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
         channel_weights)
-    out = _fit_single(features, mask, frame_time_s, omega_steps,
-                      _default_channel_weights(channel_names, C) if channel_weights is None
-                      else channel_weights,
-                      num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
-                      search_halfwidth=search_halfwidth, grid_points=grid_points,
-                      golden_iterations=golden_iterations, odd_threshold=odd_threshold)
+    if channel_weights is None:
+        channel_weights = _default_channel_weights(channel_names, features.shape[-1])
+    out = program(features, mask, frame_time_s, omega_steps, channel_weights,
+                  num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
+                  search_halfwidth=search_halfwidth, grid_points=grid_points,
+                  golden_iterations=golden_iterations, odd_threshold=odd_threshold)
     return _fit_result(out, representation, channel_names)
 
 
