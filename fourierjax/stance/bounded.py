@@ -11,8 +11,8 @@ from jaxtyping import Array, Float
 
 from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
-from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem, _zero_tangent
-from fourierjax.stance.solver import StanceSolution, _finish, _solve_spd, objective
+from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem
+from fourierjax.stance.solver import StanceSolution, _finish, _implicit_terms, _solve_spd, objective
 
 with warnings.catch_warnings():
     # jaxopt announces on import that it is no longer maintained (STYLE.md); it is used here
@@ -42,14 +42,12 @@ def _bounded_optimum_jvp(tol, maxiter, primals, tangents):
     problem, lower, upper = primals
     dp, dlo, dhi = tangents
     y, steps, ok = _bounded_optimum(problem, lower, upper, tol, maxiter)
-    _, lin = jax.linearize(jax.grad(objective), y, problem)
-    H = jax.vmap(lambda e: lin(e, _zero_tangent(problem)))(jnp.eye(y.shape[0], dtype=y.dtype))
-    H = 0.5 * (H + H.T)
+    H, mixed = _implicit_terms(y, problem, dp)
     span = jnp.maximum(upper - lower, 1.0)
     at_lo, at_hi = y <= lower + 1e-6 * span, y >= upper - 1e-6 * span
     active = at_lo | at_hi
     dy_active = jnp.where(at_lo, dlo, jnp.where(at_hi, dhi, 0.0))
-    rhs = lin(jnp.zeros_like(y), dp) + H @ dy_active
+    rhs = mixed + H @ dy_active
     mask = active[:, None] | active[None, :]
     M = jnp.where(mask, jnp.eye(y.shape[0], dtype=y.dtype), H)
     dy = -_solve_spd(M, jnp.where(active, 0.0, rhs)) + dy_active

@@ -10,6 +10,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from fourierjax._jit import filter_jit
+from fourierjax._linalg import spd_solve
 from fourierjax.stance.penalties import hermite_penalty
 from fourierjax.stance.problem import (
     NUM_AMPLITUDES,
@@ -100,24 +101,10 @@ def _finish(problem: StanceProblem, y, steps, ok) -> StanceSolution:
 
 
 def _solve_spd(H: Float[Array, "n n"], rhs: Float[Array, " n"]) -> Float[Array, " n"]:
-    """Solve H x = rhs for a small symmetric positive definite H by Gaussian elimination.
-
-    Unrolled over the (static, small) size, without LAPACK (STYLE.md: batched LAPACK calls
-    hang on 2 cores). A relative ridge of 1e-10 guards a singular pivot.
-    """
-    n = H.shape[0]
+    """Solve H x = rhs for the small SPD Hessian (`_linalg.spd_solve`, no LAPACK), with a relative
+    ridge of 1e-10 against a singular pivot."""
     ridge = 1e-10 * (jnp.max(jnp.abs(jnp.diagonal(H))) + 1e-30)
-    A = H + ridge * jnp.eye(n, dtype=H.dtype)
-    b = rhs
-    for k in range(n):
-        piv = A[k, k]
-        f = A[k + 1 :, k] / piv
-        A = A.at[k + 1 :, :].add(-f[:, None] * A[k, :][None, :])
-        b = b.at[k + 1 :].add(-f * b[k])
-    x = jnp.zeros_like(b)
-    for k in reversed(range(n)):
-        x = x.at[k].set((b[k] - A[k, k + 1 :] @ x[k + 1 :]) / A[k, k])
-    return x
+    return spd_solve(H + ridge * jnp.eye(H.shape[0], dtype=H.dtype), rhs[:, None])[:, 0]
 
 
 #: Longest BFGS step in the amplitude offsets (rad, 2-norm).
@@ -167,14 +154,21 @@ def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
     return sol.value, sol.stats["num_steps"], sol.result == optx.RESULTS.successful
 
 
+def _implicit_terms(y, problem: StanceProblem, dp):
+    """`(H, mixed)` at an optimum y of eq. 5: the (symmetrised) 6x6 Hessian in y and
+    `(d grad_y f / dp) dp`, both from one linearisation of grad_y f."""
+    _, lin = jax.linearize(jax.grad(objective), y, problem)
+    zero_p = _zero_tangent(problem)
+    H = jax.vmap(lambda e: lin(e, zero_p))(jnp.eye(y.shape[0], dtype=y.dtype))
+    return 0.5 * (H + H.T), lin(jnp.zeros_like(y), dp)
+
+
 @_optimum.defjvp
 def _optimum_jvp(rtol, atol, max_steps, primals, tangents):
     (problem,), (dp,) = primals, tangents
     y, steps, ok = _optimum(problem, rtol, atol, max_steps)
-    _, lin = jax.linearize(jax.grad(objective), y, problem)
-    zero_p = _zero_tangent(problem)
-    H = jax.vmap(lambda e: lin(e, zero_p))(jnp.eye(y.shape[0], dtype=y.dtype))
-    dy = -_solve_spd(0.5 * (H + H.T), lin(jnp.zeros_like(y), dp))
+    H, mixed = _implicit_terms(y, problem, dp)
+    dy = -_solve_spd(H, mixed)
     zero = np.zeros((), jax.dtypes.float0)
     return (y, steps, ok), (dy, zero, zero)
 
