@@ -301,3 +301,96 @@ def test_fit_compiles_one_program_per_call_signature():
         F.fit_batch(x, 1 / 60.0, 2, mask=np.ones((3, 130), bool))
     with pytest.raises(ValueError, match="omega_steps shape"):
         F.fit_batch(x, 1 / 60.0, 2, omega_steps=np.ones(2))
+
+
+# ----------------------------------------------------------------------------- synthesize_batch
+
+
+def _batch(rng, B, C, N, dtype=np.float32):
+    """Random stacked models: amplitudes ~ 1/n, phases in (-pi, pi], omega 4..8 rad/s."""
+    amp = rng.uniform(0.05, 0.5, size=(B, C, N)) / np.arange(1, N + 1)
+    return F.FourierModel(
+        jnp.asarray(rng.normal(size=(B, C)), dtype), jnp.asarray(amp, dtype),
+        jnp.asarray(rng.uniform(-np.pi, np.pi, size=(B, C, N)), dtype),
+        jnp.asarray(rng.uniform(4.0, 8.0, size=B), dtype),
+    )
+
+
+def _eq1_batch(models, t):
+    """Float64 numpy closed form of Unuma eq. 1 for stacked models: [B, T, C]."""
+    off, amp, ph, om = (np.asarray(x, np.float64) for x in (models.offset, models.amplitude,
+                                                           models.phase, models.omega))
+    n = np.arange(1, amp.shape[-1] + 1)
+    t = np.asarray(t, np.float64)
+    theta = om[:, None] * t  # [B, T] from t [T] or [B, T]
+    arg = n * theta[:, :, None, None] + ph[:, None]  # [B, T, C, N]
+    return off[:, None] + np.sum(amp[:, None] * np.sin(arg), axis=-1)
+
+
+@pytest.mark.parametrize("B, C, N", [(1, 1, 1), (3, 57, 3), (5, 13, 1), (8, 8, 7), (2, 6, 4)])
+def test_synthesize_batch_equals_vmap_and_closed_form(B, C, N):
+    rng = np.random.default_rng(B * 100 + C * 10 + N)
+    models = _batch(rng, B, C, N)
+    t = jnp.asarray(np.arange(61) / 120.0 - 0.1, jnp.float32)
+    out = F.synthesize_batch(models, t)
+    assert out.shape == (B, 61, C) and out.dtype == jnp.float32
+    ref = jax.vmap(F.synthesize, in_axes=(0, None))(models, t)
+    np.testing.assert_allclose(out, ref, atol=2e-6)  # float32 round-off of |x| ~ 3
+    np.testing.assert_allclose(out, _eq1_batch(models, t), atol=2e-6)
+    # Under an outer jit and with one row of times per character.
+    tb = jnp.asarray(np.random.default_rng(1).uniform(0, 3, size=(B, 17)), jnp.float32)
+    outb = jax.jit(F.synthesize_batch)(models, tb)
+    np.testing.assert_allclose(outb, _eq1_batch(models, tb), atol=5e-6)
+    np.testing.assert_allclose(outb[-1], F.synthesize(jax.tree.map(lambda x: x[-1], models), tb[-1]),
+                               atol=5e-6)
+
+
+def test_synthesize_batch_float64_and_gradients_match_finite_differences(x64):
+    rng = np.random.default_rng(11)
+    models = _batch(rng, 3, 5, 3, np.float64)
+    t = np.linspace(-0.5, 2.0, 40)
+    np.testing.assert_allclose(F.synthesize_batch(models, t), _eq1_batch(models, t), atol=1e-12)
+    target = rng.normal(size=(3, 40, 5))
+    weights = rng.normal(size=(3, 40, 5))
+
+    def loss(m, t):
+        return jnp.sum(weights * (F.synthesize_batch(m, t) - target) ** 2)
+
+    g, gt = jax.jit(jax.grad(loss, argnums=(0, 1)))(models, jnp.asarray(t))
+    ref = jax.grad(lambda m: jnp.sum(
+        weights * (jax.vmap(F.synthesize, in_axes=(0, None))(m, t) - target) ** 2))(models)
+    eps = 1e-6
+    for field in ("offset", "amplitude", "phase", "omega"):
+        val = np.asarray(getattr(models, field))
+        grad = np.asarray(getattr(g, field))
+        assert np.all(np.isfinite(grad))
+        np.testing.assert_allclose(grad, getattr(ref, field), rtol=1e-10, atol=1e-10)
+        for idx in [tuple(rng.integers(0, s) for s in val.shape) for _ in range(3)]:
+            def at(d, idx=idx, field=field, val=val):
+                v = val.copy()
+                v[idx] += d
+                return float(loss(eqx_replace(models, field, jnp.asarray(v)), t))
+
+            fd = (at(eps) - at(-eps)) / (2 * eps)
+            np.testing.assert_allclose(grad[idx], fd, rtol=1e-6, atol=1e-6)
+    i = 7
+    fd_t = (float(loss(models, t + eps * (np.arange(40) == i))) -
+            float(loss(models, t - eps * (np.arange(40) == i)))) / (2 * eps)
+    np.testing.assert_allclose(float(gt[i]), fd_t, rtol=1e-6, atol=1e-6)
+
+
+def test_synthesize_batch_bad_shapes_name_the_argument():
+    rng = np.random.default_rng(12)
+    models = _batch(rng, 4, 3, 2)
+    one = jax.tree.map(lambda x: x[0], models)
+    with pytest.raises(ValueError, match="`models`.*offset shape \\(3,\\)"):
+        F.synthesize_batch(one, jnp.zeros(5))
+    with pytest.raises(ValueError, match="`models` must be a FourierModel"):
+        F.synthesize_batch(np.zeros((4, 3)), jnp.zeros(5))
+    for bad in (jnp.zeros(()), jnp.zeros((3, 5)), jnp.zeros((4, 5, 1))):
+        with pytest.raises(ValueError, match="`t_s`"):
+            F.synthesize_batch(models, bad)
+    # A non-finite time spoils only its own frame (the runtime 1 inside stays 1).
+    t = jnp.asarray([np.nan, 0.1, 0.2], jnp.float32)
+    out = np.asarray(F.synthesize_batch(models, t))
+    assert np.all(np.isnan(out[:, 0])) and np.all(np.isfinite(out[:, 1:]))
