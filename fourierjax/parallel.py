@@ -138,9 +138,10 @@ def fit_batch_sharded(
     return res if size == B else jax.tree.map(lambda x: x[:B], res)
 
 
-@jax.jit
 def _synthesize_batch(models: FourierModel, t_s):
-    return jax.vmap(fourier.synthesize, in_axes=(0, None))(models, t_s)
+    # `fourier.synthesize_batch` is jitted; given inputs sharded along B (and times replicated)
+    # XLA partitions its one [B, T, C] loop along B with no communication.
+    return fourier.synthesize_batch(models, t_s)
 
 
 def synthesize_sharded(
@@ -148,11 +149,14 @@ def synthesize_sharded(
 ) -> jax.Array:
     """Synthesize a batch of models (Unuma 1995 eq. 1) with the character axis over devices.
 
+    Each device runs `fourier.synthesize_batch` on its share of the characters.
+
     **Arguments:**
 
     - `models`: a `FourierModel` whose leaves have a leading character axis `[B, ...]`
       (`fourier.stack_models`).
-    - `t_s`: `[T]` times in seconds, shared by all characters (replicated on every device).
+    - `t_s`: `[T]` times in seconds shared by all characters (replicated on every device), or
+      `[B, T]` one row per character (split like the characters).
     - `mesh`, `axis_name`: the mesh (default `data_mesh()`) and its data axis.
 
     **Returns:** `[B, T, C]` channel values, sharded over the mesh along `B`.
@@ -166,7 +170,11 @@ def synthesize_sharded(
     size = -(-B // n) * n
     padded = jax.tree.map(lambda x: _pad_leading(x, size) if eqx.is_array(x) else x, models)
     sharded = shard_batch(padded, mesh, axis_name)
-    t_s = jax.device_put(jnp.asarray(t_s, models.offset.dtype), replicated(mesh))
+    t_s = jnp.asarray(t_s, models.offset.dtype)
+    if t_s.ndim == 2 and t_s.shape[0] == B:  # one row of times per character: split like them
+        t_s = shard_batch(_pad_leading(t_s, size), mesh, axis_name)
+    else:  # shared times (other shapes are refused by fourier.synthesize_batch)
+        t_s = jax.device_put(t_s, replicated(mesh))
     out = _synthesize_batch(sharded, t_s)
     return out if size == B else out[:B]
 

@@ -48,6 +48,13 @@ _SCRIPT = textwrap.dedent(
     np.testing.assert_allclose(np.asarray(out), np.asarray(ref), rtol=1e-5, atol=1e-5)
     full = parallel.synthesize_sharded(fourier.stack_models([jax.tree.map(lambda v: v[0], one.model)] * 8), ts)
     assert len(full.sharding.device_set) == 4
+    # Each device synthesizes its own characters: the compiled program has no collectives.
+    eight = parallel.shard_batch(fourier.stack_models([jax.tree.map(lambda v: v[0], one.model)] * 8), mesh)
+    hlo = jax.jit(fourier.synthesize_batch).lower(eight, jax.device_put(ts, parallel.replicated(mesh)))
+    hlo = hlo.compile().as_text()
+    assert not any(op in hlo for op in ("all-reduce", "all-gather", "collective-permute", "all-to-all"))
+    rows = parallel.synthesize_sharded(one.model, jnp.stack([ts] * 6), mesh=mesh)  # times [B, T]
+    np.testing.assert_allclose(np.asarray(rows), np.asarray(ref), rtol=1e-5, atol=1e-5)
 
     # Crowd pose: FK of 10 characters split over the devices.
     m = data.load("07_01")
