@@ -328,25 +328,30 @@ def _harmonic_rows(theta: Array, num_harmonics: int, one: Array) -> list[Array]:
     return sines[:num_harmonics] + cosines[:num_harmonics]
 
 
-def _synthesize_batch(models: FourierModel, t_s: Array) -> Array:
-    a, b = models.sin_cos()  # [B, C, N]
-    theta = models.omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
+def _synthesize_batch(offset, amplitude, phase, omega, t_s, dtype):
+    offset, amplitude, phase, omega, t_s = (jnp.asarray(x, dtype) for x in
+                                            (offset, amplitude, phase, omega, t_s))
+    num_harmonics = amplitude.shape[-1]
+    a, b = amplitude * jnp.cos(phase), amplitude * jnp.sin(phase)  # [B, C, N] (sin_cos)
+    theta = omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
     # A runtime 1 that XLA cannot fold (0 * x is not 0 for x = inf or nan). A scalar: XLA
     # rewrites a division by a broadcast array into a cheap multiplication, which it fuses
     # again. Taken from the times, which `parallel.synthesize_sharded` replicates on every
     # device; the where keeps a non-finite first time from spoiling every frame.
     t0 = jnp.sum(t_s.reshape(-1)[:1])
     one = 1.0 + 0.0 * jnp.where(jnp.isfinite(t0), t0, 0.0)
-    rows = _harmonic_rows(theta, models.num_harmonics, one)  # 2N x [B, T]
+    rows = _harmonic_rows(theta, num_harmonics, one)  # 2N x [B, T]
     # [B, 2N, C]: each coefficient row is contiguous along channels, like the output.
     coef = _store(jnp.concatenate([jnp.swapaxes(a, -1, -2), jnp.swapaxes(b, -1, -2)], axis=-2), one)
-    out = models.offset[:, None, :]
+    out = offset[:, None, :]
     for k, row in enumerate(rows):
         out = out + row[:, :, None] * coef[:, None, k, :]
-    return jnp.broadcast_to(out, (*theta.shape, models.num_channels))
+    return jnp.broadcast_to(out, (*theta.shape, offset.shape[-1]))
 
 
-_synthesize_batch_jit = _jit.filter_jit(_synthesize_batch)
+# Arrays, not the Module, through jit: filter_jit's pytree handling and a Module rebuild cost
+# ~0.4 ms per call, more than the whole synthesis of a few characters.
+_synthesize_batch_jit = _jit.jit(_synthesize_batch, static_argnames="dtype")
 
 
 def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[Array, "B T C"]:
@@ -362,7 +367,7 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
             ``[B, C]``, amplitude and phase ``[B, C, N]``, omega ``[B]`` (rad/s).
         t_s: ``[T]`` times in seconds shared by all characters, or ``[B, T]`` one row each.
     Returns:
-        ``[B, T, C]`` channel values (radians for angle channels).
+        ``[B, T, C]`` channel values (radians for angle channels), in the models' dtype.
     Raises:
         UserError (a ValueError) naming ``models`` or ``t_s`` when the shapes do not fit.
     """
@@ -374,18 +379,15 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
             f"offset [B, C], got offset shape {models.offset.shape}"
         )
     num_chars = models.offset.shape[0]
-    dtype = jnp.result_type(models.amplitude.dtype, models.offset.dtype, models.omega.dtype,
-                            models.phase.dtype)
-    if not jnp.issubdtype(dtype, jnp.floating):
-        dtype = jnp.result_type(float)
-    t_s = jnp.asarray(t_s, dtype)
-    if t_s.ndim not in (1, 2) or (t_s.ndim == 2 and t_s.shape[0] != num_chars):
+    shape = np.shape(t_s)
+    if len(shape) not in (1, 2) or (len(shape) == 2 and shape[0] != num_chars):
         raise UserError(
             f"synthesize_batch: `t_s` must be [T] (shared) or [{num_chars}, T] (one row per "
-            f"character), got shape {t_s.shape}"
+            f"character), got shape {shape}"
         )
-    models = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_array_like(x) else x, models)
-    return _synthesize_batch_jit(models, t_s)
+    dtype = jnp.result_type(models.offset, models.amplitude, models.phase, models.omega, float)
+    return _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s,
+                                 dtype=np.dtype(dtype).name)
 
 
 # ------------------------------------------------------------------------------- linear solves
