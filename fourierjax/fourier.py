@@ -14,9 +14,10 @@ gait cycle = two steps). Stack models with ``jax.tree.map(lambda *x: jnp.stack(x
 (same static fields) and vmap: ``jax.vmap(synthesize, in_axes=(0, None))(models, t_s)``.
 
 * ``synthesize(model, t_s[T]) -> [T, C]``, ``synthesize_phase(model, phase[T]) -> [T, C]``.
-* ``synthesize_batch(models, t_s[T] or [B, T]) -> [B, T, C]``: stacked models at once, equal to
-  the vmap above to round-off and several times faster on CPU (one elementwise loop over the
-  output, a basis of one sin/cos per character and frame); use it for crowds and batches.
+* ``synthesize_batch(models, t_s[T] or [B, T]) -> [B, T, C]``: that vmap, equal to float32
+  round-off and faster: one elementwise loop over the output (channels innermost) with a stored
+  basis of one sin/cos per character and frame and the harmonic recurrence, at about the speed
+  of writing the output at 1024 characters (see the notes above ``_store``).
 * ``model.sin_cos() -> (a[C, N], b[C, N])`` with ``x = offset + sum a sin(n th) + b cos(n th)``
   (the linear coordinates: PCA and averaging belong here); ``FourierModel.from_sin_cos(...)``.
 * ``model.to_cosine() -> (offset, amplitude, phase_cos)``: Tilmanne eq. 1,
@@ -261,11 +262,57 @@ def _basis_rows_sc(s1, c1, num_harmonics: int):
     return jnp.stack([jnp.ones_like(s1), *sin_n, *cos_n], axis=0)
 
 
+# Batched synthesis (`synthesize_batch`) is laid out for XLA:CPU (measured at 1024 characters x
+# 57 channels x 240 frames, N = 3, on 2 cores; experiments/benchmarks/synthesis.py):
+#
+# * Under vmap, the [T, 2N] @ [2N, C] product of `synthesize_phase` becomes a batched
+#   dot_general of 1024 tiny matrices, which XLA:CPU runs as a slow loop. The elementwise form
+#   (`_synthesize_phase_elementwise`) is, under vmap, one loop over [B, T, C] with channels
+#   innermost, the layout of the result, so it is written once, contiguously (LLVM vectorizes
+#   it 8 channels at a time): per sample the offset plus 2N multiply-adds of a per-frame basis
+#   value and a per-channel coefficient. It runs at about the speed of merely writing the output.
+# * The basis sin(n theta), cos(n theta) is computed once per frame (one sin, one cos, then the
+#   angle-addition recurrence over harmonics): O(B T) trig calls, not O(B T C). XLA fuses cheap
+#   producers into every consumer, which would put the basis inside the output loop; dividing
+#   by a runtime 1 (`_store`, the trick of `fourierjax.crowd`) makes each basis row and the
+#   coefficient table "expensive" to XLA, so they are computed once and stored. The 1 is made
+#   from the value itself (`1 + 0 * x`, which XLA does not fold for floats), so it has the
+#   value's shape under any vmap: a 1 broadcast from a scalar would be rewritten into a cheap
+#   multiplication and fused again. It changes speed only, never finite values or gradients.
+# * `synthesize` itself keeps the product: callers compare jitted and eager synthesis bit for
+#   bit, and the elementwise loop is fused (multiply-adds contracted) under jit but run op by op
+#   when eager, which changes the last bit (about 1e-7 relative).
+
+
+def _store(x: Array) -> Array:
+    """``x / (1 + 0 * x)``: the value of ``x`` (for finite ``x``), computed once and stored.
+
+    A division is too expensive for XLA to duplicate into each consumer, and ``1 + 0 * x`` is
+    not folded (``0 * x`` is nan for infinite ``x``).
+    """
+    return x / (1.0 + 0.0 * x)
+
+
+def _harmonic_rows(theta: Array, num_harmonics: int) -> list[Array]:
+    """``[sin(n theta) for n = 1..N] + [cos(n theta) for n = 1..N]``, each stored once.
+
+    Two trig calls per sample, harmonics by the angle-addition recurrence (as accurate as
+    ``sin(n * theta)`` in float32: both carry the rounding of ``n * theta``).
+    """
+    s1, c1 = _store(jnp.sin(theta)), _store(jnp.cos(theta))
+    sines, cosines = [s1], [c1]
+    for _ in range(num_harmonics - 1):
+        s, c = sines[-1], cosines[-1]
+        sines.append(_store(s * c1 + c * s1))
+        cosines.append(_store(c * c1 - s * s1))
+    return sines[:num_harmonics] + cosines[:num_harmonics]
+
+
 def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Array, "T C"]:
     """Evaluate the model at cycle phases ``phase`` (radians), Unuma 1995 eq. 1.
 
     Arguments:
-        model: one FourierModel (vmap for several).
+        model: one FourierModel (vmap for several, or ``synthesize_batch``).
         phase: ``[T]`` cycle phase theta in radians (any values; 2 pi = one gait cycle).
     Returns:
         ``[T, C]`` channel values (radians for angle channels).
@@ -274,17 +321,29 @@ def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Ar
     a, b = model.sin_cos()
     n = jnp.arange(1, model.num_harmonics + 1, dtype=phase.dtype)
     nt = phase[:, None] * n[None, :]  # T x N trig calls, not T x C x N
-    # One [T, 2N] basis and one contraction: 2.3x faster than two products at 1024 characters
-    # (experiments/benchmarks/synthesis.py, variant "fused_basis").
+    # One [T, 2N] basis and one contraction (one character at a time; for many, the elementwise
+    # form of `synthesize_batch` is faster under vmap).
     basis = jnp.concatenate([jnp.sin(nt), jnp.cos(nt)], axis=1)
     return model.offset[None, :] + basis @ jnp.concatenate([a, b], axis=1).T
+
+
+def _synthesize_phase_elementwise(model: FourierModel, phase: Float[Array, " T"]) -> Float[Array, "T C"]:
+    """``synthesize_phase`` as one elementwise loop over the output (fast under vmap)."""
+    phase = jnp.asarray(phase, dtype=model.amplitude.dtype)
+    a, b = model.sin_cos()  # [C, N]
+    rows = _harmonic_rows(phase, model.num_harmonics)  # 2N x [T]
+    coef = _store(jnp.concatenate([a.T, b.T], axis=0))  # [2N, C]: rows contiguous along channels
+    out = model.offset[None, :]
+    for k, row in enumerate(rows):
+        out = out + row[:, None] * coef[k][None, :]
+    return jnp.broadcast_to(out, (phase.shape[0], model.num_channels))
 
 
 def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T C"]:
     """Evaluate the model at times ``t_s`` (seconds): ``synthesize_phase(model, omega * t_s)``.
 
     Arguments:
-        model: one FourierModel (vmap for several).
+        model: one FourierModel (vmap for several, or ``synthesize_batch``).
         t_s: ``[T]`` times in seconds (any length and frame rate).
     Returns:
         ``[T, C]`` channel values.
@@ -293,60 +352,11 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
     return synthesize_phase(model, model.omega * t_s)
 
 
-# Batched synthesis, laid out for XLA:CPU (measured at 1024 characters x 57 channels x 240 frames,
-# N = 3, on 2 cores; experiments/benchmarks/synthesis.py):
-#
-# * `vmap(synthesize)` turns the [T, 2N] @ [2N, C] product of each character into a batched
-#   dot_general of 1024 tiny matrices, which XLA:CPU runs as a slow loop (about 0.1-0.4 of the
-#   time it takes merely to write the [B, T, C] output).
-# * Here the output is one elementwise loop over [B, T, C] with channels innermost (the layout of
-#   the result, so it is written once, contiguously): per sample the offset plus 2N
-#   multiply-adds of a per-(character, frame) basis value and a per-(character, channel)
-#   coefficient. That loop runs at the speed of writing the output.
-# * The basis sin(n theta), cos(n theta) is computed once per character and frame (one sin, one
-#   cos, then the angle-addition recurrence over harmonics): O(B T) trig calls, not O(B T C).
-#   XLA fuses cheap producers into every consumer, which would put the trig calls inside the
-#   [B, T, C] loop (3x slower); dividing by a runtime 1 (`_store`, as in `fourierjax.crowd`)
-#   makes each basis row "expensive" to XLA, so it is computed once and stored. The division
-#   changes speed only, never values or gradients.
-
-
-def _store(x: Array, one: Array) -> Array:
-    """``x / one`` with ``one`` a runtime 1: XLA computes ``x`` once instead of fusing it into
-    each consumer (a division is too expensive to duplicate, and ``1 + 0 * t`` is not folded)."""
-    return x / one
-
-
-def _harmonic_rows(theta: Array, num_harmonics: int, one: Array) -> list[Array]:
-    """``[sin(n theta) for n = 1..N] + [cos(n theta) for n = 1..N]``, each stored once."""
-    s1, c1 = _store(jnp.sin(theta), one), _store(jnp.cos(theta), one)
-    sines, cosines = [s1], [c1]
-    for _ in range(num_harmonics - 1):
-        s, c = sines[-1], cosines[-1]
-        sines.append(_store(s * c1 + c * s1, one))
-        cosines.append(_store(c * c1 - s * s1, one))
-    return sines[:num_harmonics] + cosines[:num_harmonics]
-
-
 def _synthesize_batch(offset, amplitude, phase, omega, t_s, dtype):
-    offset, amplitude, phase, omega, t_s = (jnp.asarray(x, dtype) for x in
-                                            (offset, amplitude, phase, omega, t_s))
-    num_harmonics = amplitude.shape[-1]
-    a, b = amplitude * jnp.cos(phase), amplitude * jnp.sin(phase)  # [B, C, N] (sin_cos)
-    theta = omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
-    # A runtime 1 that XLA cannot fold (0 * x is not 0 for x = inf or nan). A scalar: XLA
-    # rewrites a division by a broadcast array into a cheap multiplication, which it fuses
-    # again. Taken from the times, which `parallel.synthesize_sharded` replicates on every
-    # device; the where keeps a non-finite first time from spoiling every frame.
-    t0 = jnp.sum(t_s.reshape(-1)[:1])
-    one = 1.0 + 0.0 * jnp.where(jnp.isfinite(t0), t0, 0.0)
-    rows = _harmonic_rows(theta, num_harmonics, one)  # 2N x [B, T]
-    # [B, 2N, C]: each coefficient row is contiguous along channels, like the output.
-    coef = _store(jnp.concatenate([jnp.swapaxes(a, -1, -2), jnp.swapaxes(b, -1, -2)], axis=-2), one)
-    out = offset[:, None, :]
-    for k, row in enumerate(rows):
-        out = out + row[:, :, None] * coef[:, None, k, :]
-    return jnp.broadcast_to(out, (*theta.shape, offset.shape[-1]))
+    models = FourierModel(*(jnp.asarray(x, dtype) for x in (offset, amplitude, phase, omega)))
+    t_s = jnp.asarray(t_s, dtype)
+    theta = models.omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
+    return jax.vmap(_synthesize_phase_elementwise)(models, theta)
 
 
 # Arrays, not the Module, through jit: filter_jit's pytree handling and a Module rebuild cost
@@ -358,9 +368,10 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     """Evaluate ``B`` stacked models at shared (or per-character) times, Unuma 1995 eq. 1.
 
     Equal to ``jax.vmap(synthesize, in_axes=(0, None))(models, t_s)`` to float32 round-off, and
-    several times faster on CPU: one elementwise loop over the ``[B, T, C]`` output with a basis
-    of one sin and one cos per character and frame (harmonics by the angle-addition recurrence).
-    Differentiable in every model leaf and in ``t_s``; jitted (also fine inside jit, vmap, grad).
+    faster on CPU (1.6x on a loaded 2-core machine at 1024 x 57 x 240, more when quiet): one
+    elementwise loop over the ``[B, T, C]`` output with a basis of one sin and one cos per
+    character and frame (harmonics by the angle-addition recurrence). Jitted; differentiable in
+    every model leaf and in ``t_s``; also fine inside jit, vmap and grad.
 
     Arguments:
         models: a FourierModel with a leading character axis (``stack_models``): offset

@@ -394,3 +394,15 @@ def test_synthesize_batch_bad_shapes_name_the_argument():
     t = jnp.asarray([np.nan, 0.1, 0.2], jnp.float32)
     out = np.asarray(F.synthesize_batch(models, t))
     assert np.all(np.isnan(out[:, 0])) and np.all(np.isfinite(out[:, 1:]))
+
+
+def test_synthesize_batch_keeps_trig_out_of_the_output_loop():
+    """The basis is computed per (character, frame) and stored: no sin/cos in the [B, T, C] loop."""
+    models = _batch(np.random.default_rng(13), 4, 9, 3)
+    t = jnp.arange(10, dtype=jnp.float32)
+    hlo = jax.jit(F.synthesize_batch).lower(models, t).compile().as_text()
+    blocks = [b for b in hlo.split("\n\n") if "ROOT" in b]
+    big = [b for b in blocks if "f32[4,10,9]" in b.split("ROOT")[1].split("\n")[0]]
+    assert big, hlo
+    trig = [b for b in blocks if " sine(" in b or " cosine(" in b]
+    assert trig and not any(b in trig for b in big), hlo
