@@ -394,6 +394,12 @@ def test_synthesize_batch_bad_shapes_name_the_argument():
     t = jnp.asarray([np.nan, 0.1, 0.2], jnp.float32)
     out = np.asarray(F.synthesize_batch(models, t))
     assert np.all(np.isnan(out[:, 0])) and np.all(np.isfinite(out[:, 1:]))
+    # Finite gradients at zero amplitude and omega; empty batches and frame counts keep shapes.
+    z = F.FourierModel(jnp.zeros((2, 3)), jnp.zeros((2, 3, 2)), jnp.zeros((2, 3, 2)), jnp.zeros(2))
+    g = jax.grad(lambda m: jnp.sum(F.synthesize_batch(m, t[1:]) ** 2))(z)
+    assert all(np.all(np.isfinite(np.asarray(leaf))) for leaf in jax.tree.leaves(g))
+    assert F.synthesize_batch(z, jnp.zeros(0)).shape == (2, 0, 3)
+    assert F.synthesize_batch(jax.tree.map(lambda x: x[:0], z), t).shape == (0, 3, 3)
 
 
 def test_synthesize_batch_keeps_trig_out_of_the_output_loop():
