@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from experiments.benchmarks._common import Record, timeit
@@ -134,6 +136,10 @@ def run(size: str) -> list[Record]:
             "vmap_synthesize_fraction_of_write_bound": float(np.median(per_round_old)),
             "speedup_over_vmap_synthesize": old["median"] / ours["median"],
             "write_stats": wr, "vmap_synthesize_stats": old,
+            # The write bound is mostly page faults on the fresh output buffer (glibc maps a
+            # new one per call): ~0.6 G/s with 4 KiB pages, ~2.3 G/s with transparent huge
+            # pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1) on the 2-core machine.
+            "glibc_tunables": os.environ.get("GLIBC_TUNABLES"),
         }
         for vname, fn in variants().items():
             vf = jax.jit(jax.vmap(fn, in_axes=(0, None)))
