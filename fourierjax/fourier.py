@@ -372,10 +372,10 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
 
     Equal to ``jax.vmap(synthesize, in_axes=(0, None))(models, t_s)`` to float32 round-off, and
     about 2x faster on 2 CPU cores at 1024 x 57 x 240 (0.8 of the speed of merely writing the
-    output, against 0.45 for the vmap): one
-    elementwise loop over the ``[B, T, C]`` output with a basis of one sin and one cos per
-    character and frame (harmonics by the angle-addition recurrence). Jitted; differentiable in
-    every model leaf and in ``t_s``; also fine inside jit, vmap and grad.
+    output, against 0.45 for the vmap): one elementwise loop over the ``[B, T, C]`` output with
+    a basis of one sin and one cos per character and frame (harmonics by the angle-addition
+    recurrence). Jitted; differentiable in every model leaf and in ``t_s``; also fine inside
+    jit, vmap and grad.
 
     Arguments:
         models: a FourierModel with a leading character axis (``stack_models``): offset
