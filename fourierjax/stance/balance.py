@@ -77,35 +77,65 @@ def inside_polygon_margin(polygon: np.ndarray, point: np.ndarray) -> float:
     return min(margins)
 
 
-def broyden_2d(
-    residual: Callable[[Float[Array, "2"]], Float[Array, "2"]],
+def newton_2d_with_tangents(
+    fn: Callable,
+    a: Float[Array, " n"],
     x0: Float[Array, "2"],
-    inverse_jacobian0: Float[Array, "2 2"],
-    num_steps: int = 10,
-) -> Float[Array, "2"]:
-    """Solve `residual(x) = 0` for two unknowns by Broyden's ("good") method.
+    a_directions: Float[Array, "m n"],
+    num_evaluations: int = 5,
+    max_step: float = 0.25,
+):
+    """Solve `fn(a, x)[0] = 0` for two unknowns x by Newton's method, with directional derivatives.
 
-    One residual evaluation per step, a fixed number of steps in a `fori_loop` (compiled
-    once), the inverse Jacobian estimate updated in closed form: no LAPACK call (safe in
-    batched code on 2 cores, STYLE.md) and no derivative of the residual. Start from a good
-    `inverse_jacobian0` (the balance solve passes the rigid-body estimate). Differentiate
-    the solution by the implicit function theorem, not through this loop.
+    `fn(a, x) -> (r [2], aux)`. Every evaluation is one forward-mode pass of `fn` with m + 2
+    tangent directions at once (vmapped JVPs sharing one primal): `(da_i, 0)` for the rows of
+    `a_directions` and `(0, e_k)` for the two unknowns. The last two give the exact Jacobian
+    dr/dx for the Newton step; the others are returned from the last evaluation, so a caller
+    gets the solution *and* its tangents from one traced copy of `fn` (inside a `fori_loop`):
+    the stance solver's objective needs the pose, its balance Jacobian and its derivatives
+    in the six torso amplitudes, and compiles about half the XLA kernels it did with a
+    Broyden loop followed by a separate linearisation. Steps are clipped to `max_step` per
+    component (the COM is near-linear in the ankle offsets, and 5 evaluations from 0 reach
+    float32 round-off on the posture sweeps: worst residual 1.8e-7 m over 40 random problems,
+    1.1e-6 m with 4).
+
+    No LAPACK (a closed-form 2x2 inverse). Differentiate the solution by the implicit
+    function theorem, not through this loop.
+
+    Returns:
+        `(x, (r, aux), (dr, daux))` at the LAST EVALUATED x (not the one after the last
+        step), so that `r`, `aux` and the tangents describe exactly the returned x. `dr` is
+        `[m + 2, 2]`, `daux` has a leading `m + 2` axis (the two balance directions last).
     """
+    m = a_directions.shape[0]
+    da = jnp.concatenate([a_directions, jnp.zeros((2,) + a.shape, a.dtype)])
+    dx = jnp.concatenate([jnp.zeros((m, 2), x0.dtype), jnp.eye(2, dtype=x0.dtype)])
+
+    def evaluate(x):
+        # Every evaluation carries all m + 2 directions: one traced copy of `fn`.
+        def along(da_i, dx_i):
+            return jax.jvp(fn, (a, x), (da_i, dx_i))
+
+        return jax.vmap(along, out_axes=(None, 0))(da, dx)
 
     def step(_, carry):
-        x, x_prev, r_prev, B = carry
-        r = residual(x)
-        dx, dr = x - x_prev, r - r_prev
-        Bdr = B @ dr
-        denom = dx @ Bdr
-        ok = jnp.abs(denom) > 1e-20
-        B = B + jnp.where(ok, jnp.outer(dx - Bdr, dx @ B) / jnp.where(ok, denom, 1.0), 0.0)
-        # A quarter radian per step at most: the COM is near-linear in the offsets.
-        x_new = x - jnp.clip(B @ r, -0.25, 0.25)
-        return x_new, x, r, B
+        x = carry[0]
+        (r, aux), (dr, daux) = evaluate(x)
+        x_new = x - jnp.clip(inverse_2x2(dr[m:].T) @ r, -max_step, max_step)
+        return x_new, x, ((r, aux), (dr, daux))
 
-    carry = (x0, x0, jnp.zeros_like(x0), inverse_jacobian0)
-    return jax.lax.fori_loop(0, num_steps, step, carry)[0]
+    shapes = jax.eval_shape(evaluate, x0)
+    empty = jax.tree.map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
+    _, x, out = jax.lax.fori_loop(0, num_evaluations, step, (x0, x0, empty))
+    return (x,) + out
+
+
+def inverse_2x2(J: Float[Array, "2 2"]) -> Float[Array, "2 2"]:
+    """Closed-form inverse of a 2x2 matrix; 0 where it is singular (|det| <= 1e-12)."""
+    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+    ok = jnp.abs(det) > 1e-12
+    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
+    return inv_det * jnp.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]])
 
 
 def feedback_update(

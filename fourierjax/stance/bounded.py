@@ -11,8 +11,15 @@ from jaxtyping import Array, Float
 
 from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
-from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem
-from fourierjax.stance.solver import StanceSolution, _finish, _implicit_terms, _solve_spd, objective
+from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem, balanced_rotations
+from fourierjax.stance.solver import (
+    StanceSolution,
+    _finish,
+    _implicit_terms,
+    _solve_spd,
+    _value_grad_build,
+    amplitudes_from_unknowns,
+)
 
 with warnings.catch_warnings():
     # jaxopt announces on import that it is no longer maintained (STYLE.md); it is used here
@@ -31,7 +38,13 @@ def _bounded_optimum(problem: StanceProblem, lower, upper, tol: float, maxiter: 
     follow the bound; the free ones solve the Hessian system restricted to them (the 6x6
     `solver._solve_spd`). No derivative runs through jaxopt's iterations.
     """
-    solver = jaxopt.LBFGSB(fun=objective, maxiter=maxiter, tol=tol, implicit_diff=False)
+    def value_and_grad(y, p):
+        value, grad, _ = _value_grad_build(y, p)
+        return value, grad
+
+    solver = jaxopt.LBFGSB(
+        fun=value_and_grad, value_and_grad=True, maxiter=maxiter, tol=tol, implicit_diff=False
+    )
     y0 = jnp.clip(jnp.zeros(NUM_AMPLITUDES, problem.shape.dtype), lower, upper)
     y, state = solver.run(y0, (lower, upper), problem)
     return y, state.iter_num, state.error <= tol
@@ -98,5 +111,6 @@ def solve_stance_bounded(
     bad = jnp.any(jnp.isnan(lo) | jnp.isnan(hi) | (lo > hi))
     lo = eqx.error_if(lo, bad, "solve_stance_bounded: bounds must be numbers with lower <= upper")
     y, steps, ok = _bounded_optimum(problem, lo, hi, tol, maxiter)
-    return _finish(problem, y, steps, ok)
+    built = balanced_rotations(problem, amplitudes_from_unknowns(problem, y))
+    return _finish(problem, y, steps, ok, built)
 

@@ -11,7 +11,7 @@ from fourierjax import rotations
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.arms import arm_free, arm_to_target
-from fourierjax.stance.balance import balance_point, broyden_2d
+from fourierjax.stance.balance import balance_point, inverse_2x2, newton_2d_with_tangents
 from fourierjax.stance.gaze import gaze_rotation
 from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
 from fourierjax.stance.penalties import HermitePenalty, quadratic_penalty, reach_penalty
@@ -306,20 +306,33 @@ def _build_with_residual(problem: StanceProblem, amplitudes, balance_xz):
     return r, (root, local, info)
 
 
-def _solve_balance(problem: StanceProblem, amplitudes) -> Float[Array, "2"]:
+#: Newton evaluations of the balance solve (`balance.newton_2d_with_tangents`).
+BALANCE_EVALUATIONS = 5
+
+
+def balanced_rotations_with_tangents(
+    problem: StanceProblem, amplitudes: Float[Array, "6"], directions: Float[Array, "m 6"]
+) -> tuple[BalancedBuild, BalancedBuild]:
+    """`balanced_rotations` and its derivatives along `m` directions in the amplitudes.
+
+    One traced copy of the pose builder serves the balance solve and the derivatives (see
+    `balance.newton_2d_with_tangents`): the solver's objective gets its gradient from this
+    in forward mode with `directions` = the 6x6 identity. The tangents follow the implicit
+    function theorem: along a direction da the balance offsets move by db = -J_b^-1 dr and
+    the pose by its partial derivative plus J_pose,b db.
+
+    Returns:
+        `(built, d_built)`: `d_built` has a leading `m` axis on every leaf.
+    """
+    m = directions.shape[0]
     b0 = jnp.zeros(2, amplitudes.dtype)
-    # X ankle offset tips the leg backward (COM -Z), Z tips it toward +X (COM +X).
-    h = 0.5 * problem.body.height_m
-    inv_j0 = jnp.array([[0.0, -1.0], [1.0, 0.0]], amplitudes.dtype) / h
-    residual = lambda b: _build_with_residual(problem, amplitudes, b)[0]  # noqa: E731
-    return broyden_2d(residual, b0, inv_j0, 10)
-
-
-def _inverse_2x2(J):
-    det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
-    ok = jnp.abs(det) > 1e-12
-    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
-    return inv_det * jnp.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]])
+    b, (_, out), (dr, dout) = newton_2d_with_tangents(
+        lambda a, x: _build_with_residual(problem, a, x),
+        amplitudes, b0, directions, BALANCE_EVALUATIONS,
+    )
+    db = -(inverse_2x2(dr[m:].T) @ dr[:m].T).T  # [m, 2]
+    dout = jax.tree.map(lambda t: t[:m] + jnp.tensordot(db, t[m:], axes=1), dout)
+    return BalancedBuild(b, *out), BalancedBuild(db, *dout)
 
 
 def _zero_tangent(tree):
@@ -337,17 +350,15 @@ def balanced_rotations(problem: StanceProblem, amplitudes: Float[Array, "6"]) ->
     """The pose (`build_rotations`) with the balance offsets solved (sec. 4).
 
     For a static pose the paper searches for the dominant-ankle offsets; we solve
-    `com_xz(offsets) = goal` by Broyden's method (`balance.broyden_2d`), starting from the
-    rigid-body Jacobian (tipping the leg by a about the ankle moves the COM by ~h a, h the
-    COM height). Derivatives come from the implicit function theorem in a custom JVP: one
-    linearisation of the pose at the solution gives both the exact 2x2 Jacobian J_b of the
-    residual in the offsets and the tangents of the pose, d offsets = -J_b^-1 dr, so no
-    derivative runs through the iterations and the pose is not built twice. Reverse mode
-    and higher orders work.
+    `com_xz(offsets) = goal` by Newton's method from zero offsets, with the exact 2x2
+    Jacobian from forward-mode derivatives (`balance.newton_2d_with_tangents`). Derivatives
+    come from the implicit function theorem in a custom JVP: one linearisation of the pose
+    at the solution gives both the exact 2x2 Jacobian J_b of the residual in the offsets
+    and the tangents of the pose, d offsets = -J_b^-1 dr, so no derivative runs through the
+    iterations. Reverse mode and higher orders work.
     """
-    b = _solve_balance(problem, amplitudes)
-    _, (root, local, info) = _build_with_residual(problem, amplitudes, b)
-    return BalancedBuild(b, root, local, info)
+    none = jnp.zeros((0, NUM_AMPLITUDES), amplitudes.dtype)
+    return balanced_rotations_with_tangents(problem, amplitudes, none)[0]
 
 
 @balanced_rotations.defjvp
@@ -355,13 +366,13 @@ def _balanced_rotations_jvp(primals, tangents):
     problem, amplitudes = primals
     dp, da = tangents
     # Through the custom JVP itself, so that a second derivative (the implicit adjoint of
-    # the solver) uses this rule again instead of differentiating Broyden's iterations.
+    # the solver) uses this rule again instead of differentiating Newton's iterations.
     b = balanced_rotations(problem, amplitudes).balance_xz
     (_, out), lin = jax.linearize(_build_with_residual, problem, amplitudes, b)
     zp, za = _zero_tangent(problem), _zero_tangent(amplitudes)
     dr_b, dout_b = jax.vmap(lambda e: lin(zp, za, e))(jnp.eye(2, dtype=b.dtype))
     dr, dout = lin(dp, da, jnp.zeros_like(b))
-    db = -_inverse_2x2(dr_b.T) @ dr
+    db = -inverse_2x2(dr_b.T) @ dr
     dout = jax.tree.map(lambda t, tb: t + jnp.tensordot(db, tb, axes=1), dout, dout_b)
     return BalancedBuild(b, *out), BalancedBuild(db, *dout)
 
