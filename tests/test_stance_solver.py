@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from fourierjax.errors import UserError
 from fourierjax.stance.balance import inside_polygon_margin, monitor_points_world, support_polygon
 from fourierjax.stance.problem import desired_balance_point
 from fourierjax.stance.reference import solve_reference
@@ -120,3 +121,17 @@ def test_gradient_solver_no_worse_than_direction_set(solved):
     print("  ours objective, reference objective, BFGS steps, direction-set sweeps, evaluations")
     for r in rows:
         print("  {:.6g}  {:.6g}  {}  {}  {}".format(*r))
+
+
+def test_batch_strategies_agree_and_bad_batch_size_is_refused(solved):
+    """The default (one by one on CPU), vmapped and chunked batches solve the same problems."""
+    problems, sol = solved
+    part = jax.tree.map(lambda a: a[-3:], problems)  # two recoil problems and the reach ones
+    ref = jax.tree.map(lambda a: a[-3:], sol)
+    for batch_size in (None, 2):
+        other = solve_stances(part, batch_size=batch_size)
+        np.testing.assert_allclose(other.objective, ref.objective, rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(other.com_error_m, ref.com_error_m, atol=1e-4)
+    for bad in (0, -1, 2.5, "fast"):
+        with pytest.raises(UserError, match="batch_size"):
+            solve_stances(part, batch_size=bad)

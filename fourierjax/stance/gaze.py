@@ -38,6 +38,7 @@ def gaze_rotation(
     side = u.safe_normalize(u.cross(_EY, fwd), jnp.array([1.0, 0.0, 0.0]))
     up = u.cross(fwd, side)
     R_look = u.mm(u.tr(R_parent_world), u.columns(side, up, fwd))
-    q = rotations.quat_from_matrix(jnp.stack([R_head_local, R_look]))  # one conversion for both
-    q = rotations.quat_slerp(q[0], q[1], weight)
-    return rotations.matrix_from_quat(q)
+    # slerp(R_a, R_b, w) = R_a (R_a^T R_b)^w: one matrix to convert, the power by the log/exp.
+    delta = rotations.quat_from_matrix(u.mm(u.tr(R_head_local), R_look))
+    step = rotations.quat_from_expmap(weight * rotations.expmap_from_quat(delta))
+    return u.mm(R_head_local, rotations.matrix_from_quat(step))

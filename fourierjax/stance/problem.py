@@ -224,27 +224,37 @@ def build_rotations(
     p_chest = lb.root_position + u.mv(lb.pelvis, off[J["abdomen"]]) + u.mv(R_abd, off[J["chest"]])
     R_neck = u.mm(R_chest, spine[2])
     p_head = p_chest + u.mv(R_chest, off[J["neck"]]) + u.mv(R_neck, off[J["head"]])
-    gaps, shoulders = [], []
-    names = (("elbow_right", "arm_out_right", "swivel_right"),
-             ("elbow_left", "arm_out_left", "swivel_left"))  # fmt: skip
-    for k, side in ((RIGHT, -1.0), (LEFT, 1.0)):
-        elbow_n, out_n, swivel_n = names[k]
-        L[COLLAR[k]] = collars[k]
-        R_collar = u.mm(R_chest, collars[k])
-        p_shoulder = p_chest + u.mv(R_chest, off[COLLAR[k]]) + u.mv(R_collar, off[SHOULDER[k]])
-        shoulders.append(p_shoulder)
-        outward = lb.pelvis[:, 0] * side
-        upper = u.safe_norm(off[ELBOW[k]])
-        fore = u.safe_norm(off[WRIST[k]])
-        R_sh_t, R_el_t, gap = arm_to_target(
-            p_shoulder, R_collar, upper, fore, problem.targets[k], s[P[swivel_n]], outward
-        )
-        R_sh_f, R_el_f = arm_free(s[P[elbow_n]], s[P[out_n]], side)
-        on = problem.target_active[k] > 0.5
-        L[SHOULDER[k]] = jnp.where(on, R_sh_t, R_sh_f)
-        L[ELBOW[k]] = jnp.where(on, R_el_t, R_el_f)
+    # Both arms at once (a leading axis of 2: right, left): one copy of the arm IK in the graph.
+    L[COLLAR[RIGHT]], L[COLLAR[LEFT]] = collars[RIGHT], collars[LEFT]
+    R_collars = u.mm(R_chest[None], collars)
+    arm_off = {name: jnp.stack([off[idx[RIGHT]], off[idx[LEFT]]])
+               for name, idx in (("collar", COLLAR), ("shoulder", SHOULDER), ("elbow", ELBOW),
+                                 ("wrist", WRIST))}  # fmt: skip
+    shoulders = (p_chest[None] + u.mv(R_chest[None], arm_off["collar"])
+                 + u.mv(R_collars, arm_off["shoulder"]))
+    sides = jnp.array([-1.0, 1.0], off.dtype)  # the arm's outside is -X (right), +X (left)
+
+    def arm_params(*names):
+        return jnp.stack([s[P[n]] for n in names])
+
+    R_sh_t, R_el_t, gap = jax.vmap(arm_to_target)(
+        shoulders,
+        R_collars,
+        u.safe_norm(arm_off["elbow"]),
+        u.safe_norm(arm_off["wrist"]),
+        problem.targets,
+        arm_params("swivel_right", "swivel_left"),
+        lb.pelvis[None, :, 0] * sides[:, None],
+    )
+    R_sh_f, R_el_f = jax.vmap(arm_free)(
+        arm_params("elbow_right", "elbow_left"), arm_params("arm_out_right", "arm_out_left"), sides
+    )
+    on = problem.target_active > 0.5
+    R_sh = jnp.where(on[:, None, None], R_sh_t, R_sh_f)
+    R_el = jnp.where(on[:, None, None], R_el_t, R_el_f)
+    for k in (RIGHT, LEFT):
+        L[SHOULDER[k]], L[ELBOW[k]] = R_sh[k], R_el[k]
         L[WRIST[k]] = jnp.eye(3, dtype=off.dtype)
-        gaps.append(jnp.where(on, gap, 0.0))
     L[J["head"]] = gaze_rotation(
         spine[3], R_neck, p_head, problem.gaze_point, s[P["gaze_weight"]]
     )
@@ -252,9 +262,9 @@ def build_rotations(
     Rw, Pw = fk_matrices(body, lb.root_position, local)
     info = PoseInfo(
         com=center_of_mass_matrices(body, Rw, Pw),
-        shoulders=jnp.stack(shoulders),
+        shoulders=shoulders,
         wrists=Pw[jnp.array(WRIST)],
-        reach_gaps=jnp.stack(gaps),
+        reach_gaps=jnp.where(on, gap, 0.0),
         free_foot_gap=lb.free_foot_gap_m,
     )
     return lb.root_position, local, info
@@ -306,6 +316,15 @@ def _build_with_residual(problem: StanceProblem, amplitudes, balance_xz):
     return r, (root, local, info)
 
 
+def _build_output_like(dtype):
+    """Zeros shaped like `_build_with_residual`'s output (saves tracing the builder for it)."""
+    def z(*shape):
+        return jnp.zeros(shape, dtype)
+
+    info = PoseInfo(com=z(3), shoulders=z(2, 3), wrists=z(2, 3), reach_gaps=z(2), free_foot_gap=z())
+    return z(2), (z(3), z(len(JOINT_NAMES), 3, 3), info)
+
+
 #: Newton evaluations of the balance solve (`balance.newton_2d_with_tangents`).
 BALANCE_EVALUATIONS = 5
 
@@ -329,6 +348,7 @@ def balanced_rotations_with_tangents(
     b, (_, out), (dr, dout) = newton_2d_with_tangents(
         lambda a, x: _build_with_residual(problem, a, x),
         amplitudes, b0, directions, BALANCE_EVALUATIONS,
+        out_like=_build_output_like(amplitudes.dtype),
     )
     db = -(inverse_2x2(dr[m:].T) @ dr[:m].T).T  # [m, 2]
     dout = jax.tree.map(lambda t: t[:m] + jnp.tensordot(db, t[m:], axes=1), dout)
