@@ -3,7 +3,7 @@
 from fourierjax import anthropometry, contacts, fourier, gait, kinematics, motion, rotations, skeleton, spectrum, style
 from fourierjax.crowd import Crowd, crowd_positions, make_crowd
 from fourierjax.errors import FourierJaxError, UserError
-from fourierjax.fourier import FourierModel, synthesize, synthesize_phase
+from fourierjax.fourier import FourierModel, synthesize, synthesize_batch, synthesize_phase
 from fourierjax.io.bvh import BVHError, Motion, read_bvh, write_bvh
 from fourierjax.kinematics import FKResult, forward_kinematics, joint_positions
 from fourierjax.skeleton import Skeleton, Topology
@@ -36,6 +36,7 @@ __all__ = [
     "spectrum",
     "style",
     "synthesize",
+    "synthesize_batch",
     "synthesize_phase",
     "write_bvh",
 ]

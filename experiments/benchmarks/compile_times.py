@@ -31,6 +31,7 @@ def entry_points(size: str):
     crowd_frame = make_crowd_frame()
     crowd = make_crowd(cskel, cmodels)
     t_half = jnp.asarray(0.5, jnp.float32)
+    t240 = jnp.arange(240, dtype=jnp.float32) / 120
     eps = {
         "kinematics.joint_positions": lambda: kinematics.joint_positions(skel, ch),
         "kinematics.fk_frames": lambda: kinematics.fk_frames(skel, ch),
@@ -38,6 +39,7 @@ def entry_points(size: str):
         "fourier.fit_batch (N=7)": lambda: fourier.fit_batch(xj, 1 / 120, 7),
         "fourier.fit": lambda: fourier.fit(x0, 1 / 120, 3),
         "parallel.synthesize_sharded": lambda: parallel.synthesize_sharded(models, jnp.arange(240.0) / 120),
+        "fourier.synthesize_batch": lambda: fourier.synthesize_batch(models, t240),
         "parallel.fit_batch_sharded": lambda: parallel.fit_batch_sharded(xj, 1 / 120, 3),
         "style.interpolate": lambda: style.interpolate(ma, mb, 0.3),
         "style.characteristic": lambda: style.characteristic(ma, mb),
