@@ -23,6 +23,7 @@ from fourierjax.stance.skeleton48 import (
     JOINT_NAMES,
     KNEE,
     LEFT,
+    PARENTS,
     RIGHT,
     SHOULDER,
     SPINE,
@@ -31,7 +32,6 @@ from fourierjax.stance.skeleton48 import (
     J,
     StancePose,
     center_of_mass_matrices,
-    fk_matrices,
 )
 from fourierjax.stance.torso import class_weights, collar_quats, collar_sign, spine_quats
 
@@ -177,6 +177,11 @@ def make_problem(
     )
 
 
+def _pair(x, joints: tuple[int, int]):
+    """`x[joints]` for a (right, left) pair of joint indices, stacked."""
+    return jnp.stack([x[joints[RIGHT]], x[joints[LEFT]]])
+
+
 def arm_lengths(body: Body) -> Float[Array, "2"]:
     """Shoulder-to-wrist length of the right and left arm (m)."""
     off = body.offsets
@@ -218,20 +223,33 @@ def build_rotations(
     for i, j in enumerate(SPINE):
         L[j] = spine[i]
     collars = collar_quats(cy, cz, problem.collar_signs)
-    # World frames of the shoulders' parents and the neck (they do not depend on the arms).
-    R_abd = u.mm(lb.pelvis, spine[0])
-    R_chest = u.mm(R_abd, spine[1])
-    p_chest = lb.root_position + u.mv(lb.pelvis, off[J["abdomen"]]) + u.mv(R_abd, off[J["chest"]])
-    R_neck = u.mm(R_chest, spine[2])
-    p_head = p_chest + u.mv(R_chest, off[J["neck"]]) + u.mv(R_neck, off[J["head"]])
+    # World frames are built along the way (the arm IK and gaze need some of them), so the
+    # pose needs no separate forward kinematics: fewer XLA kernels in the solver's loop.
+    Rw, Pw = [None] * len(JOINT_NAMES), [None] * len(JOINT_NAMES)
+    Rw[0], Pw[0] = lb.pelvis, lb.root_position
+    for j in SPINE[:3]:  # abdomen, chest, neck
+        p = PARENTS[j]
+        Rw[j], Pw[j] = u.mm(Rw[p], L[j]), Pw[p] + u.mv(Rw[p], off[j])
+    R_chest, p_chest, R_neck = Rw[J["chest"]], Pw[J["chest"]], Rw[J["neck"]]
+    p_head = Pw[J["neck"]] + u.mv(R_neck, off[J["head"]])
+    # Legs, both at once: thigh = pelvis hip, shin = thigh knee, foot = shin ankle (world).
+    R_thigh = u.mm(lb.pelvis[None], lb.hips)
+    R_shin = u.mm(R_thigh, lb.knees)
+    R_foot = u.mm(R_shin, lb.ankles)
+    p_hip = lb.root_position[None] + u.mv(lb.pelvis[None], _pair(off, HIP))
+    p_knee = p_hip + u.mv(R_thigh, _pair(off, KNEE))
+    p_ankle = p_knee + u.mv(R_shin, _pair(off, ANKLE))
+    for k in (RIGHT, LEFT):
+        Rw[HIP[k]], Pw[HIP[k]] = R_thigh[k], p_hip[k]
+        Rw[KNEE[k]], Pw[KNEE[k]] = R_shin[k], p_knee[k]
+        Rw[ANKLE[k]], Pw[ANKLE[k]] = R_foot[k], p_ankle[k]
     # Both arms at once (a leading axis of 2: right, left): one copy of the arm IK in the graph.
     L[COLLAR[RIGHT]], L[COLLAR[LEFT]] = collars[RIGHT], collars[LEFT]
     R_collars = u.mm(R_chest[None], collars)
-    arm_off = {name: jnp.stack([off[idx[RIGHT]], off[idx[LEFT]]])
-               for name, idx in (("collar", COLLAR), ("shoulder", SHOULDER), ("elbow", ELBOW),
-                                 ("wrist", WRIST))}  # fmt: skip
-    shoulders = (p_chest[None] + u.mv(R_chest[None], arm_off["collar"])
-                 + u.mv(R_collars, arm_off["shoulder"]))
+    arm_off = {name: _pair(off, idx) for name, idx in (("collar", COLLAR), ("shoulder", SHOULDER),
+                                                        ("elbow", ELBOW), ("wrist", WRIST))}  # fmt: skip
+    p_collars = p_chest[None] + u.mv(R_chest[None], arm_off["collar"])
+    shoulders = p_collars + u.mv(R_collars, arm_off["shoulder"])
     sides = jnp.array([-1.0, 1.0], off.dtype)  # the arm's outside is -X (right), +X (left)
 
     def arm_params(*names):
@@ -252,18 +270,27 @@ def build_rotations(
     on = problem.target_active > 0.5
     R_sh = jnp.where(on[:, None, None], R_sh_t, R_sh_f)
     R_el = jnp.where(on[:, None, None], R_el_t, R_el_f)
+    R_upper = u.mm(R_collars, R_sh)
+    R_fore = u.mm(R_upper, R_el)
+    p_elbow = shoulders + u.mv(R_upper, arm_off["elbow"])
+    wrists = p_elbow + u.mv(R_fore, arm_off["wrist"])
     for k in (RIGHT, LEFT):
         L[SHOULDER[k]], L[ELBOW[k]] = R_sh[k], R_el[k]
         L[WRIST[k]] = jnp.eye(3, dtype=off.dtype)
+        Rw[COLLAR[k]], Pw[COLLAR[k]] = R_collars[k], p_collars[k]
+        Rw[SHOULDER[k]], Pw[SHOULDER[k]] = R_upper[k], shoulders[k]
+        Rw[ELBOW[k]], Pw[ELBOW[k]] = R_fore[k], p_elbow[k]
+        Rw[WRIST[k]], Pw[WRIST[k]] = R_fore[k], wrists[k]
     L[J["head"]] = gaze_rotation(
         spine[3], R_neck, p_head, problem.gaze_point, s[P["gaze_weight"]]
     )
+    head = J["head"]
+    Rw[head], Pw[head] = u.mm(R_neck, L[head]), p_head
     local = jnp.stack(L)
-    Rw, Pw = fk_matrices(body, lb.root_position, local)
     info = PoseInfo(
-        com=center_of_mass_matrices(body, Rw, Pw),
+        com=center_of_mass_matrices(body, jnp.stack(Rw), jnp.stack(Pw)),
         shoulders=shoulders,
-        wrists=Pw[jnp.array(WRIST)],
+        wrists=wrists,
         reach_gaps=jnp.where(on, gap, 0.0),
         free_foot_gap=lb.free_foot_gap_m,
     )

@@ -326,9 +326,9 @@ def fk_matrices(
     """Forward kinematics on rotation matrices for this fixed topology (inner loops).
 
     Same result as `pose_fk` (tested against `fourierjax.kinematics.forward_kinematics`),
-    written joint by joint with broadcast matrix products: the solver evaluates it many times
-    and its compile time grows with the op count, which this keeps ~5x lower than a
-    quaternion FK.
+    written joint by joint with broadcast matrix products (a handful of XLA ops each, ~5x
+    fewer than a quaternion FK). The solver itself does not call it: `problem.build_rotations`
+    builds the world frames along the way.
 
     Returns:
         `(world rotations [J, 3, 3], world positions [J, 3])`.
