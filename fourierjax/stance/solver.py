@@ -41,12 +41,6 @@ def _objective_given_shoulders(y: Float[Array, "6"], problem: StanceProblem, sho
     return total + jnp.sum(problem.target_active * problem.reach_weights * reach)
 
 
-def _evaluate(y: Float[Array, "6"], problem: StanceProblem) -> tuple[Float[Array, ""], BalancedBuild]:
-    """`(objective, balanced pose)`: the pose is built once for both."""
-    built = balanced_rotations(problem, amplitudes_from_unknowns(problem, y))
-    return _objective_given_shoulders(y, problem, built.info.shoulders), built
-
-
 def _value_grad_build(y: Float[Array, "6"], problem: StanceProblem):
     """`(objective, grad_y objective, balanced pose)` in forward mode from one traced pose builder.
 
@@ -88,7 +82,8 @@ def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
     (`free == 0`) get a unit quadratic on their (ignored) offset, which keeps the minimiser
     and its Hessian well defined.
     """
-    return _evaluate(y, problem)[0]
+    built = balanced_rotations(problem, amplitudes_from_unknowns(problem, y))
+    return _objective_given_shoulders(y, problem, built.info.shoulders)
 
 
 class StanceSolution(eqx.Module):
@@ -303,7 +298,7 @@ def solve_stances(
         batch_size = 1 if jax.default_backend() == "cpu" else None
     if batch_size is None:
         return jax.vmap(one)(arrays)
-    if not isinstance(batch_size, int) or batch_size < 1:
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
         raise UserError(f"solve_stances: batch_size must be a positive int, None or 'auto', got {batch_size!r}")
     if batch_size == 1:
         return jax.lax.map(one, arrays)
