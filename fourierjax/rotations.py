@@ -346,18 +346,19 @@ def quat_from_matrix(R: Float[Array, "... 3 3"]) -> Float[Array, "... 4"]:
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = (_unstack(row) for row in _unstack_rows(R))
     trace = r00 + r11 + r22
     # Candidate c is 4 * q_c * q for a unit q: the largest q_c gives the best-conditioned one.
-    candidates = _stack_matrix(
-        (
-            (r21 - r12, 1.0 + r00 - r11 - r22, r10 + r01, r20 + r02),
-            (r02 - r20, r01 + r10, 1.0 + r11 - r22 - r00, r21 + r12),
-            (r10 - r01, r02 + r20, r12 + r21, 1.0 + r22 - r00 - r11),
-            (1.0 + trace, r21 - r12, r02 - r20, r10 - r01),
-        )
+    candidates = (
+        (r21 - r12, 1.0 + r00 - r11 - r22, r10 + r01, r20 + r02),
+        (r02 - r20, r01 + r10, 1.0 + r11 - r22 - r00, r21 + r12),
+        (r10 - r01, r02 + r20, r12 + r21, 1.0 + r22 - r00 - r11),
     )
-    choice = jnp.argmax(jnp.stack([r00, r11, r22, trace], axis=-1), axis=-1)
-    one_hot = jax.nn.one_hot(choice, 4, dtype=R.dtype)
-    q = jnp.sum(candidates * one_hot[..., :, None], axis=-2)
-    q, _ = _safe_normalize(q)
+    # Elementwise selects, not an argmax and a one-hot sum: they fuse (the stance solver's
+    # gaze runs this inside its compiled loop).
+    q, best = [1.0 + trace, r21 - r12, r02 - r20, r10 - r01], trace
+    for diag, cand in zip((r00, r11, r22), candidates):
+        pick = diag > best
+        q = [jnp.where(pick, c, x) for c, x in zip(cand, q)]
+        best = jnp.maximum(best, diag)
+    q, _ = _safe_normalize(jnp.stack(q, axis=-1))
     return _canonical_sign(q)
 
 

@@ -140,6 +140,9 @@ def test_arm_reaches_target_and_points_at_unreachable(x64):
     for target, reach in (([-0.3, 1.2, 0.35], True), ([-0.5, 1.6, 1.5], False)):
         t = jnp.array(target)
         R_sh, R_el, gap = arm_to_target(shoulder, Rp, 0.28, 0.27, t, 0.3, jnp.array([-1.0, 0, 0]))
+        for R in (R_sh, R_el):  # proper rotations (the upper arm's X axis is built, not crossed)
+            np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+            np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
         elbow = shoulder + R_sh @ jnp.array([0, -0.28, 0])
         wrist = elbow + (R_sh @ R_el) @ jnp.array([0, -0.27, 0])
         assert np.isfinite(np.asarray(wrist)).all()
@@ -162,3 +165,28 @@ def test_gaze_weight_blends_rest_to_full_alignment(x64):
     np.testing.assert_allclose(gaze_rotation(R0, jnp.eye(3), head, point, 0.0), R0, atol=1e-9)
     half = Rotation.from_matrix(np.asarray(gaze_rotation(R0, jnp.eye(3), head, point, 0.5)))
     np.testing.assert_allclose(half.magnitude(), np.pi / 8, atol=1e-9)  # half of 45 deg yaw
+
+
+def test_gaze_is_a_slerp_toward_the_look_at_frame_at_any_angle(x64):
+    """Against scipy: R_a (R_a^T R_b)^w for random shape poses and parent frames, weights in and
+    beyond [0, 1], and relative rotations up to a hair below 180 degrees."""
+    rng = np.random.default_rng(3)
+    for i in range(40):
+        R_parent = Rotation.random(random_state=rng).as_matrix()
+        head = rng.normal(size=3)
+        point = head + rng.normal(size=3)
+        fwd = (point - head) / np.linalg.norm(point - head)
+        side = np.cross([0.0, 1.0, 0.0], fwd)
+        side /= np.linalg.norm(side)
+        R_b = R_parent.T @ np.stack([side, np.cross(fwd, side), fwd], axis=-1)
+        if i % 4 == 0:  # the shape pose turned almost 180 degrees away from the look-at frame
+            axis = rng.normal(size=3)
+            turn = np.pi - 10.0 ** -rng.uniform(1, 6)
+            R_a = R_b @ Rotation.from_rotvec(axis / np.linalg.norm(axis) * turn).as_matrix()
+        else:
+            R_a = Rotation.random(random_state=rng).as_matrix()
+        w = rng.uniform(-0.5, 1.5)
+        delta = Rotation.from_matrix(R_a.T @ R_b).as_rotvec()
+        expected = R_a @ Rotation.from_rotvec(w * delta).as_matrix()
+        got = gaze_rotation(jnp.asarray(R_a), jnp.asarray(R_parent), jnp.asarray(head), jnp.asarray(point), w)
+        np.testing.assert_allclose(np.asarray(got), expected, atol=1e-9)

@@ -1,6 +1,7 @@
 """Small NaN-safe geometry helpers shared by the stance modules (elementary rotations, norms)."""
 
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -26,36 +27,57 @@ def quat_euler_zxy(z, x, y) -> Float[Array, "... 4"]:
     return rotations.quat_multiply(q, quat_axis(1, y))
 
 
+def _rsqrt_where(sq, small):
+    """1/sqrt(sq) where not `small`, else 0 (one rsqrt instead of a sqrt and a divide)."""
+    return where(small, 0.0, jax.lax.rsqrt(where(small, 1.0, sq)))
+
+
 def safe_norm(v: Float[Array, "... n"]) -> Float[Array, "..."]:
     """|v| with a zero (not NaN) gradient at v = 0 (double-where shim)."""
     sq = _sum3(v * v)
-    small = sq < _EPS * _EPS
-    return jnp.where(small, 0.0, jnp.sqrt(jnp.where(small, 1.0, sq)))
+    return sq * _rsqrt_where(sq, sq < _EPS * _EPS)
 
 
 def safe_normalize(v: Float[Array, "... n"], fallback: Float[Array, "... n"]) -> Float[Array, "... n"]:
     """v / |v|, or `fallback` (assumed unit) where |v| is ~0; finite gradients everywhere."""
     sq = _sum3(v * v)[..., None]
     small = sq < 1e-20
-    inv = jnp.where(small, 0.0, 1.0 / jnp.sqrt(jnp.where(small, 1.0, sq)))
-    return jnp.where(small, fallback, v * inv)
+    return where(small, fallback, v * _rsqrt_where(sq, small))
 
 
 def safe_sqrt(x: Float[Array, "..."], floor: float = 0.0) -> Float[Array, "..."]:
     """sqrt(max(x, floor)) with a zero gradient where x <= floor (and at 0)."""
     lo = x <= max(floor, 1e-30)
-    return jnp.where(lo, jnp.sqrt(max(floor, 0.0)), jnp.sqrt(jnp.where(lo, 1.0, x)))
+    return where(lo, float(np.sqrt(max(floor, 0.0))), x * _rsqrt_where(x, lo))
+
+
+def where(cond, x, y):
+    """`jnp.where` for the traced stance code: a bare `select_n`, without `jnp.where`'s nested
+    jit (about 120 of them were traced into the stance solver's loop); same broadcasting."""
+    cond, x, y = jnp.asarray(cond), jnp.asarray(x), jnp.asarray(y)
+    dtype = jnp.result_type(x, y)
+    shape = jnp.broadcast_shapes(cond.shape, x.shape, y.shape)
+
+    def full(v, dt):
+        v = v if v.dtype == dt else v.astype(dt)
+        return v if v.shape == shape else jnp.broadcast_to(v, shape)
+
+    return jax.lax.select(full(cond, cond.dtype), full(x, dtype), full(y, dtype))
+
+
+def clip(x, lo, hi):
+    """`jnp.clip` without its nested jit."""
+    return jnp.minimum(jnp.maximum(x, lo), hi)
+
+
+def _split3(x):
+    """The three components along the last axis, each keeping a length-1 axis (one `split`)."""
+    return jnp.split(x, 3, axis=-1)
 
 
 def cross(a, b):
-    return jnp.stack(
-        [
-            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
-        ],
-        axis=-1,
-    )
+    (a0, a1, a2), (b0, b1, b2) = _split3(a), _split3(b)
+    return jnp.concatenate([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 def dot(a, b):
@@ -67,7 +89,8 @@ def _sum3(x):
     (a reduction is a kernel of its own: 27 fewer kernels in the compiled solver)."""
     if x.shape[-1] != 3:
         return jnp.sum(x, axis=-1)
-    return x[..., 0] + x[..., 1] + x[..., 2]
+    a, b, c = _split3(x)
+    return jax.lax.squeeze(a + b + c, (x.ndim - 1,))
 
 
 def quat_from_columns(ex, ey, ez) -> Float[Array, "... 4"]:
@@ -99,9 +122,15 @@ def rot(axis: int, angle) -> Float[Array, "... 3 3"]:
     element-wise ops that fuse, instead of stacking nine scalars.
     """
     angle = jnp.asarray(angle)
-    lead = (1,) * angle.ndim  # explicit ranks (the tests raise on rank promotion)
-    fixed, c, s = (jnp.asarray(m.reshape(lead + (3, 3)), angle.dtype) for m in _ROT_PARTS[axis])
-    return fixed + jnp.cos(angle)[..., None, None] * c + jnp.sin(angle)[..., None, None] * s
+    return rot_cs(axis, jnp.cos(angle), jnp.sin(angle))
+
+
+def rot_cs(axis: int, cos, sin) -> Float[Array, "... 3 3"]:
+    """`rot(axis, angle)` from the angle's cosine and sine (no trigonometry)."""
+    cos, sin = jnp.asarray(cos), jnp.asarray(sin)
+    lead = (1,) * cos.ndim  # explicit ranks (the tests raise on rank promotion)
+    fixed, c, s = (jnp.asarray(m.reshape(lead + (3, 3)), cos.dtype) for m in _ROT_PARTS[axis])
+    return fixed + cos[..., None, None] * c + sin[..., None, None] * s
 
 
 def mm(a, b):

@@ -9,6 +9,23 @@ from fourierjax.stance import _util as u
 _EY = jnp.array([0.0, 1.0, 0.0])
 
 
+def _arm_cosines(
+    upper: Float[Array, ""], fore: Float[Array, ""], distance: Float[Array, ""]
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """Cosines of the elbow's interior angle and of the shoulder angle (`elbow_flexion`).
+
+    The distance is clamped to `[|upper - fore|, upper + fore]` and the cosines a hair
+    inside [-1, 1] (the sine `sqrt(1 - c^2)` and arccos have infinite slopes at +-1).
+    """
+    dmax = upper + fore
+    dmin = jnp.abs(upper - fore) + 1e-6
+    d = u.clip(distance, dmin, dmax)
+    cos_elbow = (upper * upper + fore * fore - d * d) / (2.0 * upper * fore)
+    cos_shoulder = (upper * upper + d * d - fore * fore) / (2.0 * upper * d)
+    lim = 1.0 - 1e-7
+    return u.clip(cos_elbow, -lim, lim), u.clip(cos_shoulder, -lim, lim)
+
+
 def elbow_flexion(
     upper: Float[Array, ""], fore: Float[Array, ""], distance: Float[Array, ""]
 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
@@ -21,16 +38,8 @@ def elbow_flexion(
         `(flexion, shoulder_angle)`: the shoulder angle is between the upper arm and the
         shoulder->wrist axis.
     """
-    dmax = upper + fore
-    dmin = jnp.abs(upper - fore) + 1e-6
-    d = jnp.clip(distance, dmin, dmax)
-    cos_elbow = (upper * upper + fore * fore - d * d) / (2.0 * upper * fore)
-    cos_shoulder = (upper * upper + d * d - fore * fore) / (2.0 * upper * d)
-    # arccos has an infinite slope at +-1: keep the argument a hair inside (no NaN gradients).
-    lim = 1.0 - 1e-7
-    interior = jnp.arccos(jnp.clip(cos_elbow, -lim, lim))
-    alpha = jnp.arccos(jnp.clip(cos_shoulder, -lim, lim))
-    return jnp.pi - interior, alpha
+    cos_elbow, cos_shoulder = _arm_cosines(upper, fore, distance)
+    return jnp.pi - jnp.arccos(cos_elbow), jnp.arccos(cos_shoulder)
 
 
 def arm_to_target(
@@ -50,6 +59,9 @@ def arm_to_target(
     takes the elbow away from the body. An unreachable target gives a straight arm pointing
     at it.
 
+    The triangle's angles enter only through their cosines and sines (law of cosines, no
+    arccos): fewer transcendental operations in the stance solver's compiled loop.
+
     Arguments:
         shoulder: `[3]` world shoulder joint.
         R_parent_world: `[3, 3]` world rotation of the collar (the shoulder's parent).
@@ -64,22 +76,26 @@ def arm_to_target(
     axis = target - shoulder
     dist = u.safe_norm(axis)
     c = u.safe_normalize(axis, -_EY)
-    flex, alpha = elbow_flexion(upper, fore, dist)
+    cos_elbow, cos_a = _arm_cosines(upper, fore, dist)
+    sin_elbow, sin_a = u.safe_sqrt(1.0 - cos_elbow * cos_elbow), u.safe_sqrt(1.0 - cos_a * cos_a)
     ref = -_EY + 0.25 * outward
     ref = ref - u.dot(ref, c) * c
     e0 = u.safe_normalize(ref, u.safe_normalize(u.cross(c, _EY), outward))
     side = u.cross(c, e0)
     # Orient the swivel so that a positive angle moves the elbow toward `outward`.
-    s = jnp.where(u.dot(side, outward) >= 0.0, 1.0, -1.0)
-    e = jnp.cos(swivel) * e0 + s * jnp.sin(swivel) * side
-    # Upper-arm frame: -Y along the upper arm, +Z toward the forearm's bend, X = Y x Z.
-    ua = jnp.cos(alpha) * c + jnp.sin(alpha) * e
-    ez = jnp.sin(alpha) * c - jnp.cos(alpha) * e
-    ey = -ua
-    ex = u.cross(ey, ez)
+    s = u.where(u.dot(side, outward) >= 0.0, 1.0, -1.0)
+    cos_sw, sin_sw = jnp.cos(swivel), s * jnp.sin(swivel)
+    e = cos_sw * e0 + sin_sw * side
+    # Upper-arm frame: -Y along the upper arm, +Z toward the forearm's bend, X = Y x Z, which
+    # is c x e (c, e orthonormal) = cos(swivel) side - sin(swivel) e0.
+    ez = sin_a * c - cos_a * e
+    ey = -(cos_a * c + sin_a * e)
+    ex = cos_sw * side - sin_sw * e0
     R_local = u.mm(u.tr(R_parent_world), u.columns(ex, ey, ez))
-    # Forearm bends toward the upper arm's +Z: Rx(-flex) maps -Y to (0, -cos, sin).
-    return R_local, u.rot(0, -flex), jnp.maximum(dist - (upper + fore), 0.0)
+    # Forearm bends toward the upper arm's +Z: Rx(-flex) maps -Y to (0, -cos, sin), with
+    # flex = pi - interior: cos(-flex) = -cos(interior), sin(-flex) = -sin(interior).
+    R_elbow = u.rot_cs(0, -cos_elbow, -sin_elbow)
+    return R_local, R_elbow, jnp.maximum(dist - (upper + fore), 0.0)
 
 
 def arm_free(

@@ -9,6 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax.stance import _util as u
 from fourierjax.stance.ik import Feet
 from fourierjax.stance.skeleton48 import LEFT, RIGHT, Body
 
@@ -124,7 +125,7 @@ def newton_2d_with_tangents(
     def step(_, carry):
         x = carry[0]
         (r, aux), (dr, daux) = evaluate(x)
-        x_new = x - jnp.clip(inverse_2x2(dr[m:].T) @ r, -max_step, max_step)
+        x_new = x - u.clip(inverse_2x2(dr[m:].T) @ r, -max_step, max_step)
         return x_new, x, ((r, aux), (dr, daux))
 
     primal = jax.eval_shape(fn, a, x0) if out_like is None else out_like
@@ -138,7 +139,7 @@ def inverse_2x2(J: Float[Array, "2 2"]) -> Float[Array, "2 2"]:
     """Closed-form inverse of a 2x2 matrix; 0 where it is singular (|det| <= 1e-12)."""
     det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
     ok = jnp.abs(det) > 1e-12
-    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
+    inv_det = u.where(ok, 1.0 / u.where(ok, det, 1.0), 0.0)
     return inv_det * jnp.array([[J[1, 1], -J[0, 1]], [-J[1, 0], J[0, 0]]])
 
 

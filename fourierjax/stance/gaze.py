@@ -38,7 +38,24 @@ def gaze_rotation(
     side = u.safe_normalize(u.cross(_EY, fwd), jnp.array([1.0, 0.0, 0.0]))
     up = u.cross(fwd, side)
     R_look = u.mm(u.tr(R_parent_world), u.columns(side, up, fwd))
-    # slerp(R_a, R_b, w) = R_a (R_a^T R_b)^w: one matrix to convert, the power by the log/exp.
-    delta = rotations.quat_from_matrix(u.mm(u.tr(R_head_local), R_look))
-    step = rotations.quat_from_expmap(weight * rotations.expmap_from_quat(delta))
-    return u.mm(R_head_local, rotations.matrix_from_quat(step))
+    # slerp(R_a, R_b, w) = R_a (R_a^T R_b)^w, the power taken on the quaternion of R_a^T R_b.
+    return u.mm(R_head_local, _matrix_power(u.mm(u.tr(R_head_local), R_look), weight))
+
+
+def _matrix_power(M: Float[Array, "3 3"], weight: Float[Array, ""]) -> Float[Array, "3 3"]:
+    """M^w for a rotation matrix: the rotation about M's axis by w times its angle (<= pi).
+
+    On M's quaternion (`rotations.quat_from_matrix`: exact at every angle, 180 degrees
+    included, with w >= 0): q^w = (cos w phi, sin w phi n), phi = atan2(|q_xyz|, q_w). One
+    atan2 and elementwise operations, where a log and an exp map took two Taylor branches
+    each (fewer kernels in the stance solver's compiled loop).
+    """
+    q = rotations.quat_from_matrix(M)
+    qw, qv = q[..., 0], q[..., 1:]
+    sin_phi = u.safe_norm(qv)
+    phi = jnp.arctan2(sin_phi, qw)
+    # sin(w phi) / sin(phi) -> w as phi -> 0.
+    small = sin_phi < 1e-6
+    ratio = u.where(small, weight, jnp.sin(weight * phi) / u.where(small, 1.0, sin_phi))
+    step = jnp.concatenate([jnp.cos(weight * phi)[..., None], ratio[..., None] * qv], axis=-1)
+    return rotations.matrix_from_quat(step)

@@ -148,7 +148,7 @@ def free_hip_position(
     W, C = hip_width, free_leg_length
     a = (W * W - C * C + nA * nA) / (2.0 * jnp.maximum(nA, 1e-9))
     r = u.safe_sqrt(W * W - a * a)
-    a_clamped = jnp.clip(a, -W, W)
+    a_clamped = u.clip(a, -W, W)
     gap = jnp.maximum(nA - (W + C), 0.0) + jnp.maximum(jnp.abs(W - C) - nA, 0.0)
     centre = root_hip + a_clamped * Ahat
     inplane = hip_dir_desired - u.dot(hip_dir_desired, Ahat) * Ahat

@@ -6,6 +6,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from fourierjax.errors import UserError
+from fourierjax.stance import _util as u
 
 
 class HermitePenalty(eqx.Module):
@@ -95,16 +96,26 @@ def hermite_penalty(p: HermitePenalty, x: Float[Array, "..."]) -> Float[Array, "
 
     def pick(a):
         a = jnp.broadcast_to(a, batch + (2, 2))
-        return jnp.where(right, a[..., 1, :], a[..., 0, :])
+        return u.where(right, a[..., 1, :], a[..., 0, :])
 
     w, v, s = pick(p.widths), pick(p.values), pick(p.slopes)
     t = jnp.abs(dx)
     w0, w1 = w[..., 0], w[..., 1]
+    v0, v1, s0, s1 = v[..., 0], v[..., 1], s[..., 0], s[..., 1]
+    # One cubic on the segment t falls in: [0, w0] from (0, 0) to (v0, s0), then [w0, w0 + w1]
+    # from (v0, s0) to (v1, s1); a line beyond.
+    second = t > w0
     zero = jnp.zeros_like(t)
-    seg0 = _hermite(jnp.minimum(t, w0), w0, zero, zero, v[..., 0], s[..., 0])
-    seg1 = _hermite(jnp.clip(t - w0, 0.0, w1), w1, v[..., 0], s[..., 0], v[..., 1], s[..., 1])
-    tail = v[..., 1] + s[..., 1] * (t - w0 - w1)  # only selected beyond the last knot
-    return jnp.where(t <= w0, seg0, jnp.where(t <= w0 + w1, seg1, tail))
+    cubic = _hermite(
+        u.where(second, u.clip(t - w0, 0.0, w1), t),
+        u.where(second, w1, w0),
+        u.where(second, v0, zero),
+        u.where(second, s0, zero),
+        u.where(second, v1, v0),
+        u.where(second, s1, s0),
+    )
+    tail = v1 + s1 * (t - w0 - w1)  # only selected beyond the last knot
+    return u.where(t <= w0 + w1, cubic, tail)
 
 
 def check_penalty(p: HermitePenalty, name: str = "penalty") -> None:
