@@ -27,7 +27,7 @@ def quat_euler_zxy(z, x, y) -> Float[Array, "... 4"]:
     return rotations.quat_multiply(q, quat_axis(1, y))
 
 
-def _rsqrt_where(sq, small):
+def rsqrt_where(sq, small):
     """1/sqrt(sq) where not `small`, else 0 (one rsqrt instead of a sqrt and a divide)."""
     return where(small, 0.0, jax.lax.rsqrt(where(small, 1.0, sq)))
 
@@ -35,20 +35,20 @@ def _rsqrt_where(sq, small):
 def safe_norm(v: Float[Array, "... n"]) -> Float[Array, "..."]:
     """|v| with a zero (not NaN) gradient at v = 0 (double-where shim)."""
     sq = _sum3(v * v)
-    return sq * _rsqrt_where(sq, sq < _EPS * _EPS)
+    return sq * rsqrt_where(sq, sq < _EPS * _EPS)
 
 
 def safe_normalize(v: Float[Array, "... n"], fallback: Float[Array, "... n"]) -> Float[Array, "... n"]:
     """v / |v|, or `fallback` (assumed unit) where |v| is ~0; finite gradients everywhere."""
     sq = _sum3(v * v)[..., None]
     small = sq < 1e-20
-    return where(small, fallback, v * _rsqrt_where(sq, small))
+    return where(small, fallback, v * rsqrt_where(sq, small))
 
 
 def safe_sqrt(x: Float[Array, "..."], floor: float = 0.0) -> Float[Array, "..."]:
     """sqrt(max(x, floor)) with a zero gradient where x <= floor (and at 0)."""
     lo = x <= max(floor, 1e-30)
-    return where(lo, float(np.sqrt(max(floor, 0.0))), x * _rsqrt_where(x, lo))
+    return where(lo, float(np.sqrt(max(floor, 0.0))), x * rsqrt_where(x, lo))
 
 
 def where(cond, x, y):

@@ -95,16 +95,29 @@ def _leg_vector(body: Body, side: int, knee: Float[Array, ""]) -> Float[Array, "
     return -o_ankle - u.mv(u.rot(0, -knee), o_knee)
 
 
-def _ankle_from_vector(w: Float[Array, "3"], v: Float[Array, "3"]) -> tuple[Array, Array]:
-    """Ankle angles (x, z) with R_a = Rz(z) Rx(x) and R_a^T w = v (|w| = |v|, w_x = 0)."""
-    wy, wz = w[1], w[2]
+def _unit2(a, b):
+    """(a, b) / |(a, b)|, or (1, 0) where it is ~0: the cosine and sine of the angle of (a, b)."""
+    sq = a * a + b * b
+    small = sq < 1e-20
+    inv = u.rsqrt_where(sq, small)
+    return u.where(small, 1.0, a * inv), b * inv
+
+
+def _ankle_from_vector(w: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Array, "3 3"]:
+    """Ankle rotation R_a = Rz(z) Rx(x) with R_a^T w = v (|w| = |v|, w_x = 0).
+
+    The angles enter only through their cosines and sines, from normalised 2-vectors (no
+    atan2 and trigonometric round trip in the stance solver's loop).
+    """
+    (_, wy, wz), (vx, vy, vz) = (jnp.split(x, 3, axis=-1) for x in (w, v))
     # Rz(-z) w = (wy sin z, wy cos z, wz): its x must equal v_x.
-    c2 = wy * wy - v[0] * v[0]
-    cz = u.safe_sqrt(c2, floor=1e-12)  # = wy cos z  (>= 0: |z| <= pi/2)
-    az = jnp.arctan2(v[0], cz)
-    # Rx(-x) rotates (wy cos z, wz) onto (v_y, v_z) in the YZ plane.
-    ax = jnp.arctan2(wz, cz) - jnp.arctan2(v[2], v[1])
-    return ax, az
+    cz = u.safe_sqrt(wy * wy - vx * vx, floor=1e-12)  # = wy cos z  (>= 0: |z| <= pi/2)
+    cos_z, sin_z = _unit2(cz, vx)
+    # Rx(-x) rotates (wy cos z, wz) onto (v_y, v_z) in the YZ plane: x = angle(cz, wz) -
+    # angle(vy, vz).
+    (c1, s1), (c2, s2) = _unit2(cz, wz), _unit2(vy, vz)
+    cos_x, sin_x = c1 * c2 + s1 * s2, s1 * c2 - c1 * s2
+    return u.mm(u.rot_cs(2, cos_z[0], sin_z[0]), u.rot_cs(0, cos_x[0], sin_x[0]))
 
 
 def pelvis_frame_desired(feet: Feet, pelvis_xyz: Float[Array, "3"]) -> Float[Array, "3 3"]:
@@ -214,8 +227,7 @@ def lower_body_ik(
 
     # Free ankle: its angles put the free hip where it must be.
     v_f = u.mv(u.tr(R_feet[f]), hip_f - feet.positions[f])
-    ax_f, az_f = _ankle_from_vector(w_f, v_f)
-    R_ankle_f = u.mm(u.rot(2, az_f), u.rot(0, ax_f))
+    R_ankle_f = _ankle_from_vector(w_f, v_f)
     R_shin_f = u.mm(R_feet[f], u.tr(R_ankle_f))
 
     # Pelvis frame: X along the actual hip vector, Y the projected desired up vector.
