@@ -1,6 +1,8 @@
 """A stance problem (shape vector, states, constraints) and the pose it builds (sec. 5)."""
 
 
+import functools
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -23,7 +25,6 @@ from fourierjax.stance.skeleton48 import (
     JOINT_NAMES,
     KNEE,
     LEFT,
-    PARENTS,
     RIGHT,
     SHOULDER,
     SPINE,
@@ -224,13 +225,12 @@ def build_rotations(
     collars = collar_quats(cy, cz, problem.collar_signs)
     # World frames are built along the way (the arm IK and gaze need some of them), so the
     # pose needs no separate forward kinematics: fewer XLA kernels in the solver's loop.
-    Rw, Pw = [None] * len(JOINT_NAMES), [None] * len(JOINT_NAMES)
-    Rw[0], Pw[0] = lb.pelvis, lb.root_position
+    Rw, Pw = [lb.pelvis], [lb.root_position]  # pelvis, abdomen, chest, neck, head
     for j in SPINE[:3]:  # abdomen, chest, neck
-        p = PARENTS[j]
-        Rw[j], Pw[j] = u.mm(Rw[p], L[j]), Pw[p] + u.mv(Rw[p], off[j])
-    R_chest, p_chest, R_neck = Rw[J["chest"]], Pw[J["chest"]], Rw[J["neck"]]
-    p_head = Pw[J["neck"]] + u.mv(R_neck, off[J["head"]])
+        Rw.append(u.mm(Rw[-1], L[j]))
+        Pw.append(Pw[-1] + u.mv(Rw[-2], off[j]))
+    R_chest, p_chest, R_neck = Rw[2], Pw[2], Rw[3]
+    p_head = Pw[3] + u.mv(R_neck, off[J["head"]])
     # Legs, both at once: thigh = pelvis hip, shin = thigh knee, foot = shin ankle (world).
     R_thigh = u.mm(lb.pelvis[None], lb.hips)
     R_shin = u.mm(R_thigh, lb.knees)
@@ -238,10 +238,6 @@ def build_rotations(
     p_hip = lb.root_position[None] + u.mv(lb.pelvis[None], _pair(off, HIP))
     p_knee = p_hip + u.mv(R_thigh, _pair(off, KNEE))
     p_ankle = p_knee + u.mv(R_shin, _pair(off, ANKLE))
-    for k in (RIGHT, LEFT):
-        Rw[HIP[k]], Pw[HIP[k]] = R_thigh[k], p_hip[k]
-        Rw[KNEE[k]], Pw[KNEE[k]] = R_shin[k], p_knee[k]
-        Rw[ANKLE[k]], Pw[ANKLE[k]] = R_foot[k], p_ankle[k]
     # Both arms at once (a leading axis of 2: right, left): one copy of the arm IK in the graph.
     L[COLLAR[RIGHT]], L[COLLAR[LEFT]] = collars[RIGHT], collars[LEFT]
     R_collars = u.mm(R_chest[None], collars)
@@ -276,18 +272,23 @@ def build_rotations(
     for k in (RIGHT, LEFT):
         L[SHOULDER[k]], L[ELBOW[k]] = R_sh[k], R_el[k]
         L[WRIST[k]] = jnp.eye(3, dtype=off.dtype)
-        Rw[COLLAR[k]], Pw[COLLAR[k]] = R_collars[k], p_collars[k]
-        Rw[SHOULDER[k]], Pw[SHOULDER[k]] = R_upper[k], shoulders[k]
-        Rw[ELBOW[k]], Pw[ELBOW[k]] = R_fore[k], p_elbow[k]
-        Rw[WRIST[k]], Pw[WRIST[k]] = R_fore[k], wrists[k]
     L[J["head"]] = gaze_rotation(
         spine[3], R_neck, p_head, problem.gaze_point, s[P["gaze_weight"]]
     )
-    head = J["head"]
-    Rw[head], Pw[head] = u.mm(R_neck, L[head]), p_head
+    Rw.append(u.mm(R_neck, L[J["head"]]))
+    Pw.append(p_head)
     local = jnp.stack(L)
+    # The COM by blocks of joints that are contiguous in the skeleton (`_com`), each block one
+    # batched product: world frames [side, joint] of the arms (collar, shoulder, elbow,
+    # wrist) and legs (hip, knee, ankle), and pelvis..head.
+    stack = functools.partial(jnp.stack, axis=1)
+    blocks = (
+        (jnp.stack(Rw), jnp.stack(Pw), J["pelvis"]),
+        (stack([R_collars, R_upper, R_fore, R_fore]), stack([p_collars, shoulders, p_elbow, wrists]), COLLAR[RIGHT]),
+        (stack([R_thigh, R_shin, R_foot]), stack([p_hip, p_knee, p_ankle]), HIP[RIGHT]),
+    )
     info = PoseInfo(
-        com=_com(body, Rw, Pw),
+        com=_com(body, blocks),
         shoulders=shoulders,
         wrists=wrists,
         reach_gaps=u.where(on, gap, 0.0),
@@ -296,15 +297,30 @@ def build_rotations(
     return lb.root_position, local, info
 
 
-def _com(body: Body, Rw, Pw):
-    """`center_of_mass_matrices` from per-joint world frames, summed joint by joint: one fused
-    sum, where stacking the 19 frames first made 40 more XLA kernels in the solver's loop."""
+# `build_rotations` sums the COM by blocks of joints that must be contiguous, row-major.
+assert [J[n] for n in ("pelvis", "abdomen", "chest", "neck", "head")] == list(range(5))
+assert [c + i for c in (COLLAR[RIGHT], COLLAR[LEFT]) for i in range(4)] == [
+    idx[k] for k in (RIGHT, LEFT) for idx in (COLLAR, SHOULDER, ELBOW, WRIST)
+] == list(range(COLLAR[RIGHT], COLLAR[RIGHT] + 8))
+assert [idx[k] for k in (RIGHT, LEFT) for idx in (HIP, KNEE, ANKLE)] == list(range(HIP[RIGHT], HIP[RIGHT] + 6))
+
+
+def _com(body: Body, blocks) -> Float[Array, "3"]:
+    """`center_of_mass_matrices` from blocks of world frames `(R [..., 3, 3], P [..., 3], first)`
+    covering the joints `first, first + 1, ...` in the order of their leading axes (row-major).
+
+    One batched product and sum per block: the 19 frames neither stacked into one array (40
+    more XLA kernels in the solver's loop) nor summed one by one (~250 traced operations).
+    """
     w = body.mass_fractions / jnp.sum(body.mass_fractions)
-    c = body.com_offsets
-    total = None
-    for j in range(len(JOINT_NAMES)):
-        term = w[j] * (Pw[j] + u.mv(Rw[j], c[j]))
-        total = term if total is None else total + term
+    total = 0.0
+    for R, pos, first in blocks:
+        lead = pos.shape[:-1]
+        n = int(np.prod(lead))
+        ww = w[first : first + n].reshape(lead)
+        c = body.com_offsets[first : first + n].reshape(lead + (3,))
+        seg = ww[..., None] * (pos + u.mv(R, c))
+        total = total + jnp.sum(seg.reshape(n, 3), axis=0)
     return total
 
 
