@@ -47,8 +47,8 @@ def _value_grad_build(y: Float[Array, "6"], problem: StanceProblem):
     The six amplitude directions ride along the balance solve's own derivatives
     (`problem.balanced_rotations_with_tangents`), so the solver's loop holds one copy of the
     pose builder (primal plus 8 batched tangents) instead of a balance loop, a linearisation,
-    its 2-direction balance Jacobian and a transposed copy for reverse mode: 432 instead of
-    846 XLA kernels for value and gradient, and 1.4x faster per evaluation (2 cores).
+    its 2-direction balance Jacobian and a transposed copy for reverse mode: about half the
+    XLA kernels for value and gradient, and 1.4x faster per evaluation (2 cores).
     Derivatives with respect to the problem are NOT defined here (the implicit derivatives
     of the solve use `objective`).
     """
@@ -282,9 +282,9 @@ def solve_stances(
     an integer k solves chunks of k vmapped problems one chunk after another (`jax.lax.map`),
     which bounds memory and the iterations a hard problem imposes on easy ones; 1 solves them
     one by one. "auto" (default) is 1 on CPU and None elsewhere: on CPU a solve is bound by
-    kernel launches, not arithmetic, and the sequential program compiles like a single solve
-    (435 instead of 577 XLA kernels). Measured on 2 CPU cores, 256 problems of the stance
-    benchmark: 75 solves/s one by one, 97-99 in chunks of 2-4, 36 vmapped at once.
+    kernel launches, not arithmetic, and the sequential program compiles like a single solve.
+    Measured on 2 CPU cores, 256 problems of the stance benchmark (before the solver's BFGS
+    restart): 75 solves/s one by one, 97-99 in chunks of 2-4, 36 vmapped at once.
 
     Returns:
         A `StanceSolution` whose leaves have a leading batch axis.
