@@ -101,6 +101,25 @@ def test_unreachable_free_foot_is_reported_without_nan():
     assert np.isfinite(g)
 
 
+def test_pose_builder_world_frames_and_com_match_forward_kinematics():
+    """The pose builder places joints and sums the COM from world frames it builds along the way
+    (no separate FK); check them against FK of its own local rotations, including a free foot
+    the leg cannot reach (its ankle is then not on its mark)."""
+    from fourierjax.stance.problem import build_pose, make_problem
+    from fourierjax.stance.skeleton48 import center_of_mass
+
+    for width in (None, 0.9):
+        feet = ikm.make_feet(BODY, width)
+        prob = make_problem(BODY, {"knee_right": 0.3, "gaze_weight": 0.7}, feet=feet,
+                            target_right=jnp.array([-0.3, 1.2, 0.4]))
+        pose, info = build_pose(prob, jnp.array([0.2, -0.1, 0.15, 0.1, -0.05, 0.0]), jnp.array([0.04, -0.03]))
+        fk = pose_fk(BODY, pose)
+        np.testing.assert_allclose(info.com, center_of_mass(BODY, fk), atol=2e-6)
+        np.testing.assert_allclose(info.shoulders, np.asarray(fk.positions)[[6, 10]], atol=2e-6)
+        np.testing.assert_allclose(info.wrists, np.asarray(fk.positions)[[8, 12]], atol=2e-6)
+        assert (float(info.free_foot_gap) > 0.1) == (width is not None)
+
+
 def test_rest_pose_is_reproduced():
     feet = ikm.make_feet(BODY)
     lb = ikm.lower_body_ik(BODY, feet, jnp.zeros(2), jnp.zeros(2), jnp.zeros(3))

@@ -68,6 +68,8 @@ class LowerBody(eqx.Module):
     - `pelvis`: `[3, 3]` world orientation of the pelvis.
     - `hips`, `knees`, `ankles`: `[2, 3, 3]` local rotations (right, left).
     - `hip_positions`: `[2, 3]` world hip joints.
+    - `thighs`, `shins`, `feet`: `[2, 3, 3]` world frames of the hip, knee and ankle joints
+      (the feet are the planted ones).
     - `free_foot_gap_m`: how far the free foot's leg cannot reach (0 when the circle of
       valid hip positions exists, i.e. the foot is planted exactly).
     """
@@ -79,6 +81,9 @@ class LowerBody(eqx.Module):
     ankles: Float[Array, "2 3 3"]
     hip_positions: Float[Array, "2 3"]
     free_foot_gap_m: Float[Array, ""]
+    thighs: Float[Array, "2 3 3"]
+    shins: Float[Array, "2 3 3"]
+    feet: Float[Array, "2 3 3"]
 
     def quats(self) -> dict[str, Float[Array, "... 4"]]:
         """The rotations as wxyz quaternions: pelvis [4], hips/knees/ankles [2, 4]."""
@@ -241,17 +246,21 @@ def lower_body_ik(
     R_knees = u.rot(0, knees)
     shins = [None, None]
     shins[d], shins[f] = R_shin_d, R_shin_f
+    shins = jnp.stack(shins)
     ankles = [None, None]
     ankles[d], ankles[f] = R_ankle_d, R_ankle_f
-    hips = [u.mm(u.tr(R_p), u.mm(shins[s], u.tr(R_knees[s]))) for s in (RIGHT, LEFT)]
+    thighs = u.mm(shins, u.tr(R_knees))  # world: shin = thigh knee
     hip_pos = [None, None]
     hip_pos[d], hip_pos[f] = hip_d, hip_f
     return LowerBody(
         root_position=root,
         pelvis=R_p,
-        hips=jnp.stack(hips),
+        hips=u.mm(u.tr(R_p)[None], thighs),
         knees=R_knees,
         ankles=jnp.stack(ankles),
         hip_positions=jnp.stack(hip_pos),
         free_foot_gap_m=gap,
+        thighs=thighs,
+        shins=shins,
+        feet=R_feet,
     )

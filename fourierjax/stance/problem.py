@@ -231,11 +231,10 @@ def build_rotations(
         Pw.append(Pw[-1] + u.mv(Rw[-2], off[j]))
     R_chest, p_chest, R_neck = Rw[2], Pw[2], Rw[3]
     p_head = Pw[3] + u.mv(R_neck, off[J["head"]])
-    # Legs, both at once: thigh = pelvis hip, shin = thigh knee, foot = shin ankle (world).
-    R_thigh = u.mm(lb.pelvis[None], lb.hips)
-    R_shin = u.mm(R_thigh, lb.knees)
-    R_foot = u.mm(R_shin, lb.ankles)
-    p_hip = lb.root_position[None] + u.mv(lb.pelvis[None], _pair(off, HIP))
+    # Legs: world frames from the IK (the feet keep their planted orientation); the ankles
+    # by forward kinematics, as a free foot the leg cannot reach is not on its mark.
+    R_thigh, R_shin, R_foot = lb.thighs, lb.shins, lb.feet
+    p_hip = lb.hip_positions
     p_knee = p_hip + u.mv(R_thigh, _pair(off, KNEE))
     p_ankle = p_knee + u.mv(R_shin, _pair(off, ANKLE))
     # Both arms at once (a leading axis of 2: right, left): one copy of the arm IK in the graph.
