@@ -266,6 +266,11 @@ def test_axis_angle_and_slerp(x64):
     # One pair, a time axis of t.
     ts = jnp.linspace(0.0, 1.0, 5)
     assert rot.quat_slerp(q0[0], q1[0], ts).shape == (5, 4)
+    # The power on its own: scipy's rotation vector scaled (shortest arc), any norm of q.
+    tp = rng.uniform(-0.5, 1.5, size=N)
+    expected = np.stack([_wxyz(Rotation.from_rotvec(r0[i].as_rotvec() * tp[i]).as_quat()) for i in range(N)])
+    _assert_same_quat(rot.quat_power(3.0 * q0, jnp.asarray(tp)), expected, atol=1e-12)
+    _assert_same_quat(rot.quat_power(-q0, jnp.asarray(tp)), expected, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- continuity

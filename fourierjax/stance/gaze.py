@@ -43,19 +43,6 @@ def gaze_rotation(
 
 
 def _matrix_power(M: Float[Array, "3 3"], weight: Float[Array, ""]) -> Float[Array, "3 3"]:
-    """M^w for a rotation matrix: the rotation about M's axis by w times its angle (<= pi).
-
-    On M's quaternion (`rotations.quat_from_matrix`: exact at every angle, 180 degrees
-    included, with w >= 0): q^w = (cos w phi, sin w phi n), phi = atan2(|q_xyz|, q_w). One
-    atan2 and elementwise operations, where a log and an exp map took two Taylor branches
-    each (fewer kernels in the stance solver's compiled loop).
-    """
-    q = rotations.quat_from_matrix(M)
-    qw, qv = q[..., 0], q[..., 1:]
-    sin_phi = u.safe_norm(qv)
-    phi = jnp.arctan2(sin_phi, qw)
-    # sin(w phi) / sin(phi) -> w as phi -> 0.
-    small = sin_phi < 1e-6
-    ratio = u.where(small, weight, jnp.sin(weight * phi) / u.where(small, 1.0, sin_phi))
-    step = jnp.concatenate([jnp.cos(weight * phi)[..., None], ratio[..., None] * qv], axis=-1)
-    return rotations.matrix_from_quat(step)
+    """M^w for a rotation matrix, on its quaternion (`rotations.quat_power`; `quat_from_matrix`
+    is exact at every angle, 180 degrees included)."""
+    return rotations.matrix_from_quat(rotations.quat_power(rotations.quat_from_matrix(M), weight))
