@@ -120,6 +120,37 @@ def test_pose_builder_world_frames_and_com_match_forward_kinematics():
         assert (float(info.free_foot_gap) > 0.1) == (width is not None)
 
 
+def _primitives(jaxpr) -> set[str]:
+    """Names of the primitives in a jaxpr and every jaxpr nested in it."""
+    from jax.extend.core import jaxprs_in_params
+
+    names = set()
+    for e in jaxpr.eqns:
+        names.add(e.primitive.name)
+        for sub in jaxprs_in_params(e.params):
+            names |= _primitives(sub)
+    return names
+
+
+def test_pose_builder_can_be_traced_with_jit_disabled():
+    """The solver traces the pose builder under `jax.disable_jit` (no nested jits to trace,
+    `problem._build_with_residual`), which is only safe while the builder holds no `lax` loop
+    or conditional: with jit disabled those run in Python (a loop unrolled into the solver's
+    program). And the numbers are the same."""
+    from fourierjax.stance.problem import _build_with_residual, build_rotations, make_problem
+
+    prob = make_problem(BODY, {"knee_right": 0.3, "gaze_weight": 0.7},
+                        target_right=jnp.array([-0.3, 1.2, 0.4]))
+    a, b = jnp.array([0.2, -0.1, 0.15, 0.1, -0.05, 0.0]), jnp.array([0.04, -0.03])
+    names = _primitives(jax.make_jaxpr(build_rotations)(prob, a, b).jaxpr)
+    assert {"mul", "sin", "select_n"} <= names  # it looked inside
+    assert not names & {"scan", "while", "cond", "switch"}, names
+    jitted = jax.jit(build_rotations)(prob, a, b)
+    _, built = jax.jit(_build_with_residual)(prob, a, b)
+    for x, y in zip(jax.tree.leaves(jitted), jax.tree.leaves(built), strict=True):
+        np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6)
+
+
 def test_rest_pose_is_reproduced():
     feet = ikm.make_feet(BODY)
     lb = ikm.lower_body_ik(BODY, feet, jnp.zeros(2), jnp.zeros(2), jnp.zeros(3))

@@ -38,6 +38,38 @@ def _block(x):
     return jax.block_until_ready(x)
 
 
+#: JAX's duration events (seconds) for the phases of a first call, summed over every program
+#: that call compiles (the entry point's own and any small eager op around it).
+PHASE_EVENTS = {
+    "trace_s": "/jax/core/compile/jaxpr_trace_duration",
+    "lower_s": "/jax/core/compile/jaxpr_to_mlir_module_duration",
+    "xla_compile_s": "/jax/core/compile/backend_compile_duration",
+}
+
+
+def first_call_phases(fn) -> tuple[float, dict]:
+    """`(seconds, phases)` of a first call: `phases` holds trace / lowering / XLA compile seconds
+    (`PHASE_EVENTS`) and `programs_compiled` (how many XLA programs the call compiled)."""
+    from jax import monitoring
+
+    phases = dict.fromkeys(PHASE_EVENTS, 0.0)
+    phases["programs_compiled"] = 0
+    by_event = {v: k for k, v in PHASE_EVENTS.items()}
+
+    def listener(event, duration_secs, **_):
+        key = by_event.get(event)
+        if key is not None:
+            phases[key] += duration_secs
+            phases["programs_compiled"] += key == "xla_compile_s"
+
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        seconds = first_call(fn)
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    return seconds, {k: round(v, 4) if isinstance(v, float) else v for k, v in phases.items()}
+
+
 def timeit(fn: Callable[[], object], repeats: int = 5, warmup: int = 1) -> dict:
     """Median and spread of `fn()` wall time after `warmup` calls; JAX results are blocked on.
 

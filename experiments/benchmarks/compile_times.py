@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.benchmarks._common import COMPILE_TIMES, Record, first_call, timeit
+from experiments.benchmarks._common import COMPILE_TIMES, Record, first_call_phases, timeit
 
 
 def entry_points(size: str):
@@ -51,38 +51,6 @@ def entry_points(size: str):
     return eps
 
 
-#: JAX's duration events (seconds) for the phases of a first call, summed over every program
-#: that call compiles (the entry point's own and any small eager op around it).
-PHASE_EVENTS = {
-    "trace_s": "/jax/core/compile/jaxpr_trace_duration",
-    "lower_s": "/jax/core/compile/jaxpr_to_mlir_module_duration",
-    "xla_compile_s": "/jax/core/compile/backend_compile_duration",
-}
-
-
-def first_call_phases(fn) -> tuple[float, dict]:
-    """`(seconds, phases)` of a first call: `phases` holds trace / lowering / XLA compile seconds
-    (`PHASE_EVENTS`) and `programs_compiled` (how many XLA programs the call compiled)."""
-    from jax import monitoring
-
-    phases = dict.fromkeys(PHASE_EVENTS, 0.0)
-    phases["programs_compiled"] = 0
-    by_event = {v: k for k, v in PHASE_EVENTS.items()}
-
-    def listener(event, duration_secs, **_):
-        key = by_event.get(event)
-        if key is not None:
-            phases[key] += duration_secs
-            phases["programs_compiled"] += key == "xla_compile_s"
-
-    monitoring.register_event_duration_secs_listener(listener)
-    try:
-        seconds = first_call(fn)
-    finally:
-        monitoring.unregister_event_duration_listener(listener)
-    return seconds, {k: round(v, 4) if isinstance(v, float) else v for k, v in phases.items()}
-
-
 def run(size: str) -> list[Record]:
     import jax
 
@@ -99,9 +67,7 @@ def run(size: str) -> list[Record]:
         times[name] = {"first_call_s": first, "steady_call_s": steady,
                        "compile_s": max(first - steady, 0.0), **phases}
     for name, v in COMPILE_TIMES.items():  # measured inside other benchmarks
-        times.setdefault(name, {"first_call_s": v["first_call_s"],
-                                "steady_call_s": v.get("steady_call_s"),
-                                "compile_s": v.get("compile_s", v["first_call_s"])})
+        times.setdefault(name, {"compile_s": v["first_call_s"], **v})
     worst = max(times, key=lambda k: times[k]["compile_s"]) if times else None
     rec = Record(
         "compile_max_s",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from experiments.benchmarks._common import COMPILE_TIMES, Record, first_call, not_measured, timeit
+from experiments.benchmarks._common import COMPILE_TIMES, Record, first_call_phases, not_measured, timeit
 
 
 def make_problems(count: int):
@@ -43,18 +43,20 @@ def run(size: str) -> list[Record]:
     try:
         set_name, problems = make_problems(B)
         one = jax.tree.map(lambda x: x[0] if eqx_is_array(x) else x, problems)
-        first_one = first_call(lambda: solve_stance(one))
-        first_all = first_call(lambda: solve_stances(problems))
+        first_one, phases_one = first_call_phases(lambda: solve_stance(one))
+        first_all, phases_all = first_call_phases(lambda: solve_stances(problems))
         single = timeit(lambda: solve_stance(one), repeats=repeats * 3)
         sols = solve_stances(problems)
         jax.block_until_ready(sols)
         ours = timeit(lambda: solve_stances(problems), repeats=repeats)
         # Compile time = first call minus a steady call (as compile_times does for the others):
         # the first call of 1024 solves also runs them.
-        for name, first, steady in (("stance.solve_stance", first_one, single["median"]),
-                                    ("stance.solve_stances (1024)", first_all, ours["median"])):
+        for name, first, steady, phases in (
+            ("stance.solve_stance", first_one, single["median"], phases_one),
+            ("stance.solve_stances (1024)", first_all, ours["median"], phases_all),
+        ):
             COMPILE_TIMES[name] = {"first_call_s": first, "steady_call_s": steady,
-                                   "compile_s": max(first - steady, 0.0)}
+                                   "compile_s": max(first - steady, 0.0), **phases}
         ref = []
         for i in range(subset):
             p = jax.tree.map(lambda x, i=i: x[i] if eqx_is_array(x) else x, problems)
