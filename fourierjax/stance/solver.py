@@ -283,8 +283,9 @@ def solve_stances(
     which bounds memory and the iterations a hard problem imposes on easy ones; 1 solves them
     one by one. "auto" (default) is 1 on CPU and None elsewhere: on CPU a solve is bound by
     kernel launches, not arithmetic, and the sequential program compiles like a single solve.
-    Measured on 2 CPU cores, 256 problems of the stance benchmark (before the solver's BFGS
-    restart): 75 solves/s one by one, 97-99 in chunks of 2-4, 36 vmapped at once.
+    Measured on 2 CPU cores, 256 problems of the stance benchmark, interleaved runs: 116-132
+    solves/s one by one, 81-90 in chunks of 2 or 4, 25 vmapped at once (same objectives to
+    float32 round-off).
 
     Returns:
         A `StanceSolution` whose leaves have a leading batch axis.
