@@ -123,6 +123,42 @@ def test_validation_names_the_key(text, key):
         parse_shape_set(text, "my.toml")
 
 
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda s: s.problem(BODY, float("nan")), "intensity holds NaN"),
+        (lambda s: s.problem(BODY, "strong"), "intensity must be numbers"),
+        (lambda s: s.problem(BODY, 0.5, target_right=[0.1, float("inf"), 0.3]), "target_right holds NaN"),
+        (lambda s: s.problem(BODY, 0.5, target_left="front"), "target_left must be numbers"),
+        (lambda s: s.problem(BODY, 0.5, object_xyz=[0.0, 1.0]), "object_xyz must be 3 coordinates"),
+        (lambda s: s.problem(BODY, 0.5, object_xyz=[0.0, float("nan"), 1.0]), "object_xyz holds NaN"),
+    ],
+)
+def test_problem_arguments_are_checked_when_their_values_are_known(call, match):
+    """A NaN target or intensity used to flow into the solver and come out as a NaN pose."""
+    with pytest.raises(UserError, match=match):
+        call(get_shape_set("posture"))
+
+
+def test_problem_shape_and_gaze_are_checked():
+    from fourierjax.stance.problem import make_problem
+
+    with pytest.raises(UserError, match=r"shape\['sagittal'\] holds NaN"):
+        make_problem(BODY, {"sagittal": float("nan")})
+    with pytest.raises(UserError, match="single numbers; not \\['coronal'\\]"):
+        make_problem(BODY, {"coronal": [0.1, 0.2]})
+    with pytest.raises(UserError, match="gaze_point must be 3 coordinates"):
+        make_problem(BODY, gaze_point=[0.0, 1.6])
+    with pytest.raises(UserError, match="gaze_point holds NaN"):
+        make_problem(BODY, gaze_point=[0.0, float("nan"), 2.0])
+    # Traced values cannot be checked and pass through (vmapped sweeps, gradients).
+    s = get_shape_set("posture")
+    probs = jax.vmap(lambda i, t: s.problem(BODY, i, target_right=t))(
+        jnp.linspace(-1.0, 1.0, 3), jnp.tile(jnp.array([-0.3, 1.2, 0.4]), (3, 1))
+    )
+    assert probs.shape.shape == (3, len(SHAPE_PARAMS))
+
+
 def test_user_shape_set_from_configs():
     s = get_shape_set("configs/shape_sets/slouch.toml")
     assert s.name == "slouch" and s.positive.abdomen_offset

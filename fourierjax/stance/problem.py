@@ -87,6 +87,18 @@ class StanceProblem(eqx.Module):
     dominant: str = eqx.field(static=True, default="right")
 
 
+def as_finite(x, name: str, dtype=None) -> Array:
+    """`x` as an array, or a `UserError` naming `name` if it is not numbers or (when its values
+    are known, i.e. not traced) holds NaN or infinity."""
+    try:
+        a = jnp.asarray(x, dtype)
+    except (TypeError, ValueError) as err:
+        raise UserError(f"{name} must be numbers, got {x!r} ({err})") from None
+    if not isinstance(a, jax.core.Tracer) and not np.isfinite(np.asarray(a)).all():
+        raise UserError(f"{name} holds NaN or infinite values: {np.asarray(a).tolist()}")
+    return a
+
+
 def make_problem(
     body: Body,
     shape=None,
@@ -133,9 +145,13 @@ def make_problem(
         unknown = sorted(set(shape) - set(SHAPE_PARAMS))
         if unknown:
             raise UserError(f"unknown shape parameter(s) {unknown}; known: {list(SHAPE_PARAMS)}")
-        vec = jnp.array([float(shape.get(n, 0.0)) for n in SHAPE_PARAMS], dtype)
+        values = [as_finite(shape.get(n, 0.0), f"shape[{n!r}]", dtype) for n in SHAPE_PARAMS]
+        bad = [n for n, v in zip(SHAPE_PARAMS, values) if v.shape != ()]
+        if bad:
+            raise UserError(f"shape values must be single numbers; not {bad}")
+        vec = jnp.stack(values)
     else:
-        vec = jnp.asarray(shape, dtype)
+        vec = as_finite(shape, "shape", dtype)
         if vec.shape != (len(SHAPE_PARAMS),):
             raise UserError(f"shape must have {len(SHAPE_PARAMS)} values, got shape {vec.shape}")
     if feet is None:
@@ -146,13 +162,16 @@ def make_problem(
             targets.append(jnp.zeros(3, dtype))
             active.append(0.0)
         else:
-            t = jnp.asarray(t, dtype)
+            t = as_finite(t, f"target_{hand}", dtype)
             if t.shape != (3,):
                 raise UserError(f"target_{hand} must be 3 coordinates, got shape {t.shape}")
             targets.append(t)
             active.append(1.0)
     if gaze_point is None:
         gaze_point = jnp.array([0.0, 0.94 * body.height_m, 2.0], dtype)
+    gaze_point = as_finite(gaze_point, "gaze_point", dtype)
+    if gaze_point.shape != (3,):
+        raise UserError(f"gaze_point must be 3 coordinates, got shape {gaze_point.shape}")
     arm = arm_lengths(body)
     free = jnp.array([1.0] * 5 + [1.0 if abdomen_offset else 0.0], dtype)
     reach = reach_penalty(arm[0])
@@ -172,7 +191,7 @@ def make_problem(
         target_active=jnp.array(active, dtype),
         reach=reach,
         reach_weights=jnp.full(2, reach_weight, dtype),
-        gaze_point=jnp.asarray(gaze_point, dtype),
+        gaze_point=gaze_point,
         dominant=dominant,
     )
 

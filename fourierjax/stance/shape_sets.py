@@ -36,7 +36,7 @@ from jaxtyping import Array, Float
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.ik import Feet
-from fourierjax.stance.problem import SHAPE_PARAMS, StanceProblem, make_problem
+from fourierjax.stance.problem import SHAPE_PARAMS, StanceProblem, as_finite, make_problem
 from fourierjax.stance.skeleton48 import Body
 from fourierjax.stance.torso import COLLAR_STATES, SHAPE_CLASSES, class_weights, collar_sign
 
@@ -139,6 +139,12 @@ class ShapeSet:
         """
         if object_xyz is None and self.needs_object:
             raise UserError(f"shape set {self.name!r} needs an object position (--object x,y,z)")
+        intensity = as_finite(intensity, f"shape set {self.name!r}: intensity")
+        if object_xyz is not None:
+            object_xyz = as_finite(object_xyz, f"shape set {self.name!r}: object_xyz")
+            if object_xyz.shape != (3,):
+                raise UserError(f"shape set {self.name!r}: object_xyz must be 3 coordinates, "
+                                f"got shape {object_xyz.shape}")
         base = make_problem(
             body,
             feet=feet,
