@@ -677,6 +677,9 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
     T, C = features.shape
     N, G = num_harmonics, grid_points
     w = jnp.asarray(mask, dtype)
+    # Frames left out may hold anything (NaN for missing markers): 0 * NaN would still poison
+    # every weighted sum, so they are zeroed first.
+    features = jnp.where(w[:, None] > 0, features, jnp.zeros((), dtype))
     t_s = jnp.arange(T, dtype=dtype) * frame_time_s
     n_valid = jnp.sum(w)
     duration = n_valid * frame_time_s
@@ -871,7 +874,7 @@ def fit_batch(
     """
     features = _as_array(features)
     if features.ndim != 3:
-        raise ValueError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
+        raise UserError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
     return _run_fit(_fit_batched, "fit_batch", features, frame_time_s, num_harmonics, mask=mask,
                     omega_steps=omega_steps, channel_weights=channel_weights,
                     representation=representation, channel_names=channel_names, f_min_hz=f_min_hz,
@@ -888,9 +891,9 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
     """
     batch, (T, C) = tuple(shape[:-2]), shape[-2:]
     if channel_names and len(channel_names) != C:
-        raise ValueError(f"{name}: {len(channel_names)} channel_names for {C} channels")
+        raise UserError(f"{name}: {len(channel_names)} channel_names for {C} channels")
     if num_harmonics < 1:
-        raise ValueError(f"{name}: num_harmonics must be >= 1, got {num_harmonics}")
+        raise UserError(f"{name}: num_harmonics must be >= 1, got {num_harmonics}")
     out = []
     for arg, value, expected, exact in (("mask", mask, (*batch, T), True),
                                          ("frame_time_s", frame_time_s, batch, False),
@@ -900,9 +903,29 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
             value = _as_array(value)
         if value is not None and (np.shape(value) != expected if exact else
                                   not _broadcasts_to(np.shape(value), expected)):
-            raise ValueError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}")
+            raise UserError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}")
         out.append(value)
     return tuple(out)
+
+
+def _check_fit_values(name, features, mask, frame_time_s) -> None:
+    """Value checks where the values are known (not traced): the frames the fit uses must be
+    finite (frames left out by ``mask`` may hold NaN), and frame times positive. A JAX array
+    is read back to the host for this (zero-copy on CPU)."""
+    if any(isinstance(v, jax.core.Tracer) for v in (features, mask, frame_time_s)):
+        return
+    dt = np.asarray(frame_time_s, float)
+    if not (np.isfinite(dt).all() and (dt > 0).all()):
+        raise UserError(f"{name}: frame_time_s must be positive seconds, got {dt.tolist()}")
+    bad = ~np.isfinite(np.asarray(features))
+    if mask is not None:
+        bad &= np.asarray(mask).astype(bool)[..., None]
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise UserError(
+            f"{name}: features hold {int(bad.sum())} NaN or infinite value(s) in frames the fit "
+            f"uses, the first at index {first}; leave such frames out with mask="
+        )
 
 
 def _broadcasts_to(shape, target) -> bool:
@@ -939,7 +962,7 @@ def fit(
     """
     features = _as_array(features)
     if features.ndim != 2:
-        raise ValueError(f"fit: features must be [T, C], got shape {features.shape}")
+        raise UserError(f"fit: features must be [T, C], got shape {features.shape}")
     return _run_fit(_fit_single, "fit", features, frame_time_s, num_harmonics, mask=mask,
                     omega_steps=omega_steps, **kwargs)
 
@@ -952,6 +975,7 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
     mask, frame_time_s, omega_steps, channel_weights = _check_fit_args(
         name, features.shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
         channel_weights)
+    _check_fit_values(name, features, mask, frame_time_s)
     if channel_weights is None:
         channel_weights = _default_channel_weights(channel_names, features.shape[-1])
     out = program(features, mask, frame_time_s, omega_steps, channel_weights,
