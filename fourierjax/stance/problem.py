@@ -32,6 +32,7 @@ from fourierjax.stance.skeleton48 import (
     Body,
     J,
     StancePose,
+    center_of_mass_matrices,
 )
 from fourierjax.stance.torso import class_weights, collar_quats, collar_sign, spine_quats
 
@@ -296,9 +297,11 @@ def build_rotations(
     Rw.append(u.mm(R_neck, L[J["head"]]))
     Pw.append(p_head)
     local = jnp.stack(L)
-    # The COM by blocks of joints that are contiguous in the skeleton (`_com`), each block one
-    # batched product: world frames [side, joint] of the arms (collar, shoulder, elbow,
-    # wrist) and legs (hip, knee, ankle), and pelvis..head.
+    # The COM by blocks of joints that are contiguous in the skeleton, each block one batched
+    # product (`center_of_mass_matrices` with `first`): world frames [side, joint] of the arms
+    # (collar, shoulder, elbow, wrist) and legs (hip, knee, ankle), and pelvis..head. Neither
+    # the 19 frames stacked into one array (40 more XLA kernels in the solver's loop) nor
+    # summed one by one (~250 traced operations).
     stack = functools.partial(jnp.stack, axis=1)
     blocks = (
         (jnp.stack(Rw), jnp.stack(Pw), J["pelvis"]),
@@ -306,7 +309,7 @@ def build_rotations(
         (stack([R_thigh, R_shin, R_foot]), stack([p_hip, p_knee, p_ankle]), HIP[RIGHT]),
     )
     info = PoseInfo(
-        com=_com(body, blocks),
+        com=sum(center_of_mass_matrices(body, R, pos, first) for R, pos, first in blocks),
         shoulders=shoulders,
         wrists=wrists,
         reach_gaps=u.where(on, gap, 0.0),
@@ -321,25 +324,6 @@ assert [c + i for c in (COLLAR[RIGHT], COLLAR[LEFT]) for i in range(4)] == [
     idx[k] for k in (RIGHT, LEFT) for idx in (COLLAR, SHOULDER, ELBOW, WRIST)
 ] == list(range(COLLAR[RIGHT], COLLAR[RIGHT] + 8))
 assert [idx[k] for k in (RIGHT, LEFT) for idx in (HIP, KNEE, ANKLE)] == list(range(HIP[RIGHT], HIP[RIGHT] + 6))
-
-
-def _com(body: Body, blocks) -> Float[Array, "3"]:
-    """`center_of_mass_matrices` from blocks of world frames `(R [..., 3, 3], P [..., 3], first)`
-    covering the joints `first, first + 1, ...` in the order of their leading axes (row-major).
-
-    One batched product and sum per block: the 19 frames neither stacked into one array (40
-    more XLA kernels in the solver's loop) nor summed one by one (~250 traced operations).
-    """
-    w = body.mass_fractions / jnp.sum(body.mass_fractions)
-    total = 0.0
-    for R, pos, first in blocks:
-        lead = pos.shape[:-1]
-        n = int(np.prod(lead))
-        ww = w[first : first + n].reshape(lead)
-        c = body.com_offsets[first : first + n].reshape(lead + (3,))
-        seg = ww[..., None] * (pos + u.mv(R, c))
-        total = total + jnp.sum(seg.reshape(n, 3), axis=0)
-    return total
 
 
 def build_pose(

@@ -346,11 +346,24 @@ def fk_matrices(
 
 
 def center_of_mass_matrices(
-    body: Body, world_rotations: Float[Array, "joints 3 3"], positions: Float[Array, "joints 3"]
+    body: Body,
+    world_rotations: Float[Array, "... 3 3"],
+    positions: Float[Array, "... 3"],
+    first: int = 0,
 ) -> Float[Array, "3"]:
-    """`center_of_mass` from `fk_matrices` output (m)."""
+    """`center_of_mass` from `fk_matrices` output (m).
+
+    With `first`, the frames may cover a block of contiguous joints `first, first + 1, ...`,
+    in the row-major order of their leading axes (e.g. `[side, joint]`), and the result is
+    that block's share of the whole-body COM: the stance pose builder sums its blocks of
+    world frames this way, one batched product per block.
+    """
     from fourierjax.stance._util import mv
 
-    seg = positions + mv(world_rotations, body.com_offsets)
+    lead = positions.shape[:-1]
+    n = int(np.prod(lead))
     w = body.mass_fractions / jnp.sum(body.mass_fractions)
-    return jnp.sum(w[:, None] * seg, axis=0)
+    w = w[first : first + n].reshape(lead)
+    c = body.com_offsets[first : first + n].reshape(lead + (3,))
+    seg = w[..., None] * (positions + mv(world_rotations, c))
+    return jnp.sum(seg.reshape(n, 3), axis=0)
