@@ -27,3 +27,70 @@ def test_wrapped_functions_work_at_top_level_and_under_transformations():
 def test_static_arguments_pass_through():
     f = jit(lambda x, n: x * n, static_argnums=1)
     assert float(f(jnp.float32(2.0), 3)) == 6.0
+
+
+def test_unknown_cpu_compiler_options_are_dropped(monkeypatch):
+    """A jaxlib without one of the options (jaxlib 0.11 has no `xla_cpu_use_fusion_emitters`)
+    must still compile every entry point: it used to fail with "No such compile option"."""
+    from fourierjax import _jit
+
+    known = dict(_jit.CPU_COMPILER_OPTIONS)
+    monkeypatch.setattr(_jit, "CPU_COMPILER_OPTIONS", {**known, "xla_cpu_no_such_option_here": True})
+    _jit._cpu_options.cache_clear()
+    try:
+        f = jit(lambda x: x * 3.0)
+        assert float(f(jnp.float32(2.0))) == 6.0
+        if jax.default_backend() == "cpu":
+            assert _jit._cpu_options() == known  # the known option is still passed
+    finally:
+        _jit._cpu_options.cache_clear()
+
+
+def _dots(text: str) -> list[str]:
+    return [line for line in text.splitlines() if "stablehlo.dot_general" in line]
+
+
+def test_fourierjax_products_name_full_precision():
+    """Every matrix product fourierjax writes asks for full precision, also when a user jits the
+    function themselves: XLA's default on TensorFloat-32 GPUs rounds float32 operands to 10
+    mantissa bits (measured on an H100: `synthesize` off by up to 2.5e-4 from the elementwise
+    `synthesize_batch`). On CPU the numbers are the same either way."""
+    from fourierjax import fourier as F
+
+    x = jnp.asarray(np.random.default_rng(0).normal(size=(48, 5)), jnp.float32)
+    model = F.fit(x, 1 / 30, 2).model
+    t = jnp.arange(48, dtype=jnp.float32) / 30
+    texts = {
+        "synthesize": jax.jit(F.synthesize).lower(model, t),
+        "fit": jax.jit(lambda v: F.fit(v, 1 / 30, 2).model).lower(x),
+        "fit_batch": jax.jit(lambda v: F.fit_batch(v, jnp.full(3, 1 / 30), 3).model).lower(jnp.stack([x] * 3)),
+        "variance_explained": jax.jit(F.variance_explained).lower(x, x + 1),
+        "rms_error": jax.jit(F.rms_error).lower(model, x, t),
+    }
+    for name, lowered in texts.items():
+        dots = _dots(lowered.as_text())
+        assert dots, name
+        assert all("precision = [HIGHEST, HIGHEST]" in d for d in dots), (name, dots)
+
+
+def test_entry_points_run_third_party_products_at_full_precision(monkeypatch):
+    """On a backend whose default precision is lower (a GPU), the products inside an entry
+    point that are not fourierjax's (optimistix's BFGS, lineax) are traced at full precision
+    too, unless the user chose a precision."""
+    from fourierjax import _jit
+    from fourierjax.stance.shape_sets import get_shape_set
+    from fourierjax.stance.skeleton48 import make_body
+    from fourierjax.stance.solver import solve_stance
+
+    problem = get_shape_set("posture").problem(make_body(), 0.5)
+
+    def dots():  # a fresh entry point each time (a jitted one keeps its first trace)
+        return _dots(filter_jit(solve_stance.__wrapped__).lower(problem).as_text())
+
+    monkeypatch.setattr(_jit, "_products_are_full_precision", lambda: True)  # as on CPU
+    assert any("HIGHEST" not in d for d in dots())  # optimistix's own products
+    monkeypatch.setattr(_jit, "_products_are_full_precision", lambda: False)  # as on a GPU
+    full = dots()
+    assert full and all("precision = [HIGHEST, HIGHEST]" in d for d in full)
+    with jax.default_matmul_precision("tensorfloat32"):  # the user's choice is kept
+        assert any("HIGHEST" not in d for d in dots())

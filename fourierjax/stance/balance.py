@@ -9,6 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._linalg import matmul
 from fourierjax.stance import _util as u
 from fourierjax.stance.ik import Feet
 from fourierjax.stance.skeleton48 import LEFT, RIGHT, Body
@@ -125,7 +126,7 @@ def newton_2d_with_tangents(
     def step(_, carry):
         x = carry[0]
         (r, aux), (dr, daux) = evaluate(x)
-        x_new = x - u.clip(inverse_2x2(dr[m:].T) @ r, -max_step, max_step)
+        x_new = x - u.clip(matmul(inverse_2x2(dr[m:].T), r), -max_step, max_step)
         return x_new, x, ((r, aux), (dr, daux))
 
     primal = jax.eval_shape(fn, a, x0) if out_like is None else out_like

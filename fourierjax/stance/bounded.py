@@ -10,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax._jit import filter_jit
+from fourierjax._linalg import matmul
 from fourierjax.errors import UserError
 from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem, balanced_rotations
 from fourierjax.stance.solver import (
@@ -60,7 +61,7 @@ def _bounded_optimum_jvp(tol, maxiter, primals, tangents):
     at_lo, at_hi = y <= lower + 1e-6 * span, y >= upper - 1e-6 * span
     active = at_lo | at_hi
     dy_active = jnp.where(at_lo, dlo, jnp.where(at_hi, dhi, 0.0))
-    rhs = mixed + H @ dy_active
+    rhs = mixed + matmul(H, dy_active)
     mask = active[:, None] | active[None, :]
     M = jnp.where(mask, jnp.eye(y.shape[0], dtype=y.dtype), H)
     dy = -_solve_spd(M, jnp.where(active, 0.0, rhs)) + dy_active

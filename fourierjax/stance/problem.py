@@ -10,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._linalg import PRECISION, matmul
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.arms import arm_free, arm_to_target
@@ -415,8 +416,8 @@ def balanced_rotations_with_tangents(
         amplitudes, b0, directions, BALANCE_EVALUATIONS,
         out_like=_build_output_like(amplitudes.dtype),
     )
-    db = -(inverse_2x2(dr[m:].T) @ dr[:m].T).T  # [m, 2]
-    dout = jax.tree.map(lambda t: t[:m] + jnp.tensordot(db, t[m:], axes=1), dout)
+    db = -matmul(inverse_2x2(dr[m:].T), dr[:m].T).T  # [m, 2]
+    dout = jax.tree.map(lambda t: t[:m] + jnp.tensordot(db, t[m:], axes=1, precision=PRECISION), dout)
     return BalancedBuild(b, *out), BalancedBuild(db, *dout)
 
 
@@ -457,8 +458,8 @@ def _balanced_rotations_jvp(primals, tangents):
     zp, za = _zero_tangent(problem), _zero_tangent(amplitudes)
     dr_b, dout_b = jax.vmap(lambda e: lin(zp, za, e))(jnp.eye(2, dtype=b.dtype))
     dr, dout = lin(dp, da, jnp.zeros_like(b))
-    db = -inverse_2x2(dr_b.T) @ dr
-    dout = jax.tree.map(lambda t, tb: t + jnp.tensordot(db, tb, axes=1), dout, dout_b)
+    db = -matmul(inverse_2x2(dr_b.T), dr)
+    dout = jax.tree.map(lambda t, tb: t + jnp.tensordot(db, tb, axes=1, precision=PRECISION), dout, dout_b)
     return BalancedBuild(b, *out), BalancedBuild(db, *dout)
 
 

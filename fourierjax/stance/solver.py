@@ -10,7 +10,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from fourierjax._jit import filter_jit
-from fourierjax._linalg import spd_solve
+from fourierjax._linalg import PRECISION, spd_solve
 from fourierjax.errors import UserError
 from fourierjax.stance.penalties import hermite_penalty
 from fourierjax.stance.problem import (
@@ -59,7 +59,7 @@ def _value_grad_build(y: Float[Array, "6"], problem: StanceProblem):
     value, vjp = jax.vjp(lambda yy, sh: _objective_given_shoulders(yy, problem, sh), y,
                          built.info.shoulders)
     g_y, g_sh = vjp(jnp.ones_like(value))
-    grad = g_y + jnp.einsum("ihx,hx->i", d_built.info.shoulders, g_sh)
+    grad = g_y + jnp.einsum("ihx,hx->i", d_built.info.shoulders, g_sh, precision=PRECISION)
     return value, grad, built
 
 
@@ -72,7 +72,7 @@ def _loop_objective(y: Float[Array, "6"], problem: StanceProblem):
     """
     y_s = jax.lax.stop_gradient(y)
     value, grad, built = _value_grad_build(y_s, jax.lax.stop_gradient(problem))
-    return value + jnp.dot(grad, y - y_s), built
+    return value + jnp.dot(grad, y - y_s, precision=PRECISION), built
 
 
 def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
