@@ -465,11 +465,13 @@ def test_vmap_over_characters_equals_one_by_one():
                                  num_cycle_samples=8)
 
     batched = jax.vmap(one)(stacked, gaits)
+    # XLA:GPU orders the batched float32 sums differently: measured on an H100, 1.7e-5 relative
+    # (8e-5 on a root channel of magnitude ~5-70) where XLA:CPU stays within 1e-5.
+    tol = 1e-5 if jax.default_backend() == "cpu" else 5e-5
     for i, m in enumerate(models):
         single = one(m, gaits[i])
-        np.testing.assert_allclose(batched.root_position[i], single.root_position, rtol=1e-5,
-                                   atol=1e-5)
-        np.testing.assert_allclose(batched.features[i], single.features, rtol=1e-5, atol=1e-5)
+        np.testing.assert_allclose(batched.root_position[i], single.root_position, rtol=tol, atol=tol)
+        np.testing.assert_allclose(batched.features[i], single.features, rtol=tol, atol=tol)
 
 
 def test_synthesize_gait_bad_input():

@@ -136,9 +136,17 @@ def test_characteristic_file_written_before_the_move_still_loads(tmp_path):
     old_z, new_z = _archive(path), _archive(new)
     assert list(new_z) == list(old_z)
     assert json.loads(str(new_z.pop("header"))) == json.loads(str(old_z.pop("header")))
+    # Bit for bit on CPU, where the archive was computed; another backend's sin/arctan2 may
+    # round the float32 characteristic differently (measured on an H100: 1 ulp, 6e-8).
+    import jax
+
+    exact = jax.default_backend() == "cpu"
     for k, v in old_z.items():
         assert new_z[k].dtype == v.dtype == np.float64
-        np.testing.assert_array_equal(new_z[k], v)
+        if exact:
+            np.testing.assert_array_equal(new_z[k], v)
+        else:
+            np.testing.assert_allclose(new_z[k], v, rtol=3e-7, atol=1e-7)
 
 
 def test_characteristic_round_trip_and_typed_errors(tmp_path):
