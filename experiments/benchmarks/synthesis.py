@@ -36,13 +36,15 @@ def variants():
     """Per-character formulations measured under `jit(vmap(...))` (`crowd.py` uses "fused_basis")."""
     import jax.numpy as jnp
 
+    from fourierjax._linalg import matmul
+
     def fused_basis(model, t_s):
         # One [T, 2N] basis and one contraction instead of two matmuls.
         a, b = model.sin_cos()
         n = jnp.arange(1, model.num_harmonics + 1, dtype=t_s.dtype)
         nt = (model.omega * t_s)[:, None] * n
         basis = jnp.concatenate([jnp.sin(nt), jnp.cos(nt)], axis=1)
-        return model.offset + basis @ jnp.concatenate([a, b], axis=1).T
+        return model.offset + matmul(basis, jnp.concatenate([a, b], axis=1).T)
 
     def recurrence_elementwise(model, t_s):
         # sin/cos of theta once, harmonics by the angle-addition recurrence (2 trig calls per
@@ -61,10 +63,15 @@ def variants():
 
 
 def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
-    """Time `fns` round-robin (one call of each per round, results blocked on).
+    """Time `fns` round-robin (per round, each one called once untimed, then once timed; results
+    blocked on).
 
     On a shared machine the load drifts between measurements; comparing calls made in the same
-    round keeps a ratio honest. Returns `({name: stats as _common.timeit}, {name: [seconds]})`.
+    round keeps a ratio honest. The untimed call lets each function start from its own steady
+    state: on a GPU the first kernel after the ~75 ms NumPy baseline waits for the idle device
+    to wake (measured on an H100: synthesize_batch of 1024 characters 813 us right after
+    NumPy, 247 us after itself; whichever function came after NumPy paid ~500 us).
+    Returns `({name: stats as _common.timeit}, {name: [seconds]})`.
     """
     import time
 
@@ -76,6 +83,7 @@ def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
     times: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(max(1, repeats)):
         for k, f in fns.items():
+            jax.block_until_ready(f())
             t0 = time.perf_counter()
             jax.block_until_ready(f())
             times[k].append(time.perf_counter() - t0)
