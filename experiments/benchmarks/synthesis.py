@@ -63,14 +63,15 @@ def variants():
 
 
 def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
-    """Time `fns` round-robin (per round, each one called once untimed, then once timed; results
-    blocked on).
+    """Time `fns` round-robin (one timed call of each per round, results blocked on).
 
     On a shared machine the load drifts between measurements; comparing calls made in the same
-    round keeps a ratio honest. The untimed call lets each function start from its own steady
-    state: on a GPU the first kernel after the ~75 ms NumPy baseline waits for the idle device
-    to wake (measured on an H100: synthesize_batch of 1024 characters 813 us right after
-    NumPy, 247 us after itself; whichever function came after NumPy paid ~500 us).
+    round keeps a ratio honest. Off CPU each timed call follows an untimed one of the same
+    function: on a GPU the first kernel after the ~75 ms NumPy baseline waits for the idle
+    device to wake (measured on an H100: synthesize_batch of 1024 characters 813 us right after
+    NumPy, 247 us after itself). Not on CPU, where an extra call changes which output buffers
+    the allocator hands back, and with them the page faults the write bound is made of (one
+    2-core run: write bound 2.3 G/s instead of ~0.55, ours bimodal between 6 and 26 ms).
     Returns `({name: stats as _common.timeit}, {name: [seconds]})`.
     """
     import time
@@ -80,10 +81,12 @@ def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
     for _ in range(warmup):
         for f in fns.values():
             jax.block_until_ready(f())
+    settle = jax.default_backend() != "cpu"
     times: dict[str, list[float]] = {k: [] for k in fns}
     for _ in range(max(1, repeats)):
         for k, f in fns.items():
-            jax.block_until_ready(f())
+            if settle:
+                jax.block_until_ready(f())
             t0 = time.perf_counter()
             jax.block_until_ready(f())
             times[k].append(time.perf_counter() - t0)
