@@ -164,7 +164,8 @@ def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
     - `skeleton`: the skeleton every character shares (unbatched offsets `[J, 3]`).
     - `models`: a `FourierModel` with a leading character axis (`fourier.stack_models`):
       offset `[B, C]`, amplitude and phase `[B, C, N]`, omega `[B]`, with `C` the skeleton's
-      channel count.
+      channel count. Gait fits (`motion.fit_motions`, models of features) become such models
+      with `motion.channel_model`.
 
     **Returns:** a `Crowd` of `B` characters (arrays in the models' floating dtype).
 

@@ -26,6 +26,7 @@ __all__ = [
     "heading_of",
     "features_from_motion",
     "motion_from_features",
+    "channel_model",
     "make_euler_continuous",
     "local_pose_from_features",
     "root_relative_positions",
@@ -339,6 +340,92 @@ def motion_from_features(
             out[:, base + k] = world[ch[0]]
     return dataclasses.replace(template, channels=out, frame_time_s=float(frame_time_s),
                                source=None)
+
+
+def channel_model(template, model, root_xz=(0.0, 0.0)):
+    """A Fourier model of the template's BVH channels from a gait model: a walker in place.
+
+    ``motion_from_features`` in the frequency domain, for models of ``"euler"`` features (e.g.
+    ``fit_motions(..., "euler")``, ``style.interpolate`` of such fits): the result animates
+    every BVH channel of ``template`` in file order and units, which is what
+    ``crowd.make_crowd`` and ``kinematics.joint_positions`` of its synthesis take. Per channel:
+
+    - joint rotations: the features in degrees (offset and amplitudes times 180/pi, phases
+      unchanged; the root's is relative to the heading frame, so every walker faces +Z);
+    - root X / Z position: the integral of ``root.vx`` / ``root.vz`` without their mean (a
+      treadmill: amplitude A_n / (n omega), phase phi_n - pi/2), swaying about ``root_xz``;
+    - root Y position: ``root.y``; other channels (non-root positions, rotations of joints
+      the features leave out): the template's first frame, constant.
+
+    Exact: the synthesis of the result equals ``motion_from_features`` of the model's synthesis
+    up to that function's trapezoid integration and the dropped drift (tested). Pure ``jnp``:
+    leading batch axes of ``model`` (``fourier.stack_models``) and of ``root_xz`` broadcast, and
+    it runs under ``jit``, ``vmap`` and ``grad``.
+
+    Arguments:
+        template: the Motion whose skeleton and channel layout the result animates (the
+            features' skeleton: ``model.channel_names`` must be its ``channel_names_for``).
+        model: a ``FourierModel`` of ``"euler"`` features, optionally batched ``[..., C, N]``.
+        root_xz: ``[..., 2]`` centre of each walker's root on the ground (file units).
+    Returns:
+        A ``FourierModel`` with ``channel_names = template.topology.flat_channel_names``.
+    Raises:
+        UserError naming ``model`` for expmap features, channel names of another skeleton or a
+        non-positive omega, and ``root_xz`` for a last axis other than 2.
+    """
+    from fourierjax.fourier import FourierModel, wrap_angle
+
+    topo = template.topology
+    if not isinstance(model, FourierModel):
+        raise UserError(f"channel_model: `model` must be a FourierModel, got {type(model).__name__}")
+    rep = _check_names(topo, model.channel_names, "channel_model: `model`")
+    if rep != "euler":
+        raise UserError(
+            "channel_model: `model` has expmap features; BVH channels are Euler angles, which "
+            "are not linear in exponential maps (fit with representation='euler')"
+        )
+    omega = model.omega
+    if not isinstance(omega, jax.core.Tracer) and not bool(np.all(np.asarray(omega) > 0)):
+        raise UserError(f"channel_model: `model` omega must be > 0 (rad/s), got {np.asarray(omega)}")
+    root_xz = jnp.asarray(root_xz, model.offset.dtype)
+    if root_xz.ndim == 0 or root_xz.shape[-1] != 2:
+        raise UserError(f"channel_model: `root_xz` must be [..., 2] (X, Z), got shape {root_xz.shape}")
+    feature = {n: i for i, n in enumerate(model.channel_names)}
+    root = topo.names[0]
+    position = {f"{root}.Xposition": "root.vx", f"{root}.Yposition": "root.y",
+                f"{root}.Zposition": "root.vz"}  # fmt: skip
+    names = topo.flat_channel_names
+    # Per BVH channel: its feature (or -1 for a constant), scale, and whether it is integrated.
+    src = np.array([feature.get(position.get(n, n), -1) for n in names])
+    scale = np.array([180.0 / np.pi if n.endswith("rotation") else 1.0 for n in names])
+    integrated = np.array([n in (f"{root}.Xposition", f"{root}.Zposition") for n in names])
+    constant = src < 0
+    first = template.channels[0] if template.num_frames else np.zeros(len(names))
+    dtype = model.offset.dtype
+    lead = jnp.broadcast_shapes(model.offset.shape[:-1], root_xz.shape[:-1])
+    C, N = len(names), model.amplitude.shape[-1]
+
+    def full(x, shape):  # a constant table at the rank of `shape` (rank promotion is explicit)
+        x = jnp.asarray(x)
+        return jnp.broadcast_to(x.reshape((1,) * (len(shape) - x.ndim) + x.shape), shape)
+
+    per_channel, per_term = lead + (C,), lead + (C, N)
+    take = np.maximum(src, 0)
+    n_omega = full(jnp.arange(1, N + 1, dtype=dtype), per_term) * full(omega[..., None, None], per_term)
+    amp = full(model.amplitude[..., take, :], per_term) * full(jnp.asarray(scale[:, None], dtype), per_term)
+    amp = jnp.where(full(integrated[:, None], per_term), amp / n_omega, amp)
+    phase = full(model.phase[..., take, :], per_term)
+    phase = jnp.where(full(integrated[:, None], per_term), wrap_angle(phase - 0.5 * jnp.pi), phase)
+    offset = full(model.offset[..., take], per_channel) * full(jnp.asarray(scale, dtype), per_channel)
+    for c, n in enumerate(names):
+        axis = {f"{root}.Xposition": 0, f"{root}.Zposition": 1}.get(n)
+        if axis is not None:  # the integral's constant: the walker's spot
+            offset = offset.at[..., c].set(jnp.broadcast_to(root_xz[..., axis], lead))
+    offset = jnp.where(full(constant, per_channel), full(jnp.asarray(first, dtype), per_channel), offset)
+    amp = jnp.where(full(constant[:, None], per_term), 0.0, amp)
+    phase = jnp.where(full(constant[:, None], per_term), 0.0, phase)
+    omega = jnp.broadcast_to(omega, lead)
+    return FourierModel(offset, amp, phase, omega, "euler", names)
 
 
 def _layout_tables(topology, representation):

@@ -303,3 +303,117 @@ Frame Time: 0.1
     assert names == ("Ankle.expmap0", "Ankle.expmap1", "Ankle.expmap2")
     want = Rotation.from_euler("ZXY", m.channels[:, 7:10], degrees=True).as_rotvec()
     np.testing.assert_allclose(x, want, atol=1e-6)
+
+
+def test_channel_model_is_motion_from_features_in_the_frequency_domain(fits, motions):
+    # Reference: the feature model synthesized in the time domain, its mean velocity removed
+    # (a treadmill), written as BVH channels by motion_from_features (trapezoid integration of
+    # the root velocity, Euler degrees), started where the channel model's root is at t = 0.
+    import jax
+
+    walk = motions["07_01"]
+    model = fits[3]["07_01"].model
+    cm = M.channel_model(walk, model, (10.0, -5.0))
+    names = walk.topology.flat_channel_names
+    assert cm.channel_names == names and cm.offset.shape == (len(names),)
+    t = np.arange(240) * walk.frame_time_s
+    ours = np.asarray(fourier.synthesize(cm, jnp.asarray(t)), np.float64)
+    feats = np.asarray(fourier.synthesize(model, jnp.asarray(t)), np.float64)
+    feats[:, :2] -= np.asarray(model.offset[:2])  # root.vx, root.vz without their mean
+    ref = M.motion_from_features(walk, feats, model.channel_names, walk.frame_time_s,
+                                 start_xz=(ours[0, 0], ours[0, 2])).channels
+    rot = np.array([n.endswith("rotation") for n in names])
+    np.testing.assert_allclose(ours[:, rot], ref[:, rot], atol=1e-4)  # degrees, float32
+    # Root X / Z: the sway (about 1 unit here) within the trapezoid rule's error at 120 Hz
+    # (measured 3.4e-4 units); a wrong phase shift of the integral misses by ~2x the sway.
+    sway = np.ptp(ours[:, [0, 2]], axis=0)
+    assert np.all(sway > 0.1), sway
+    np.testing.assert_allclose(ours[:, [0, 2]], ref[:, [0, 2]], atol=2e-3)
+    np.testing.assert_allclose(ours[:, 1], feats[:, 2], rtol=1e-6)  # root Y = root.y
+    np.testing.assert_allclose(ours[:, [0, 2]].mean(0), [10.0, -5.0], atol=0.05)  # sways about root_xz
+    # Under jit and grad: the root centre moves the X offset one for one.
+    g = jax.grad(lambda x: M.channel_model(walk, model, jnp.stack([x, 0.0])).offset[0])(1.0)
+    assert float(g) == 1.0
+
+
+def test_channel_models_make_a_crowd_of_fitted_walkers(fits, motions):
+    import dataclasses
+
+    import jax
+
+    from fourierjax import crowd, style
+
+    walk = motions["07_01"]
+    normal, brisk = fits[3]["07_01"].model, fits[3]["07_12"].model
+    models = jax.vmap(lambda s: style.interpolate(normal, brisk, s))(jnp.linspace(0.0, 1.0, 6))
+    grid = jnp.stack(jnp.meshgrid(jnp.arange(3.0), jnp.arange(2.0)), -1).reshape(-1, 2) * 40.0
+    cms = jax.jit(lambda m, xz: M.channel_model(walk, m, xz))(models, grid)
+    assert cms.offset.shape == (6, walk.topology.num_channels)
+    c = crowd.make_crowd(walk.skeleton(), cms)
+    t = jnp.float32(1.25)
+    pos = np.asarray(crowd.crowd_positions(c, t))
+    for k in (0, 5):  # each character: FK of its own synthesized channels
+        one = jax.tree.map(lambda x, k=k: x[k], cms)
+        ch = fourier.synthesize(one, t[None])
+        ref = M.motion_joint_positions(dataclasses.replace(walk, channels=np.asarray(ch, np.float64)))
+        np.testing.assert_allclose(pos[k], ref[0], atol=2e-3)
+    # The characters stand at their grid spots (root within its sway of the spot).
+    np.testing.assert_allclose(pos[:, 0, [0, 2]], np.asarray(grid), atol=3.0)
+
+
+def test_channel_model_constant_channels_and_bad_input():
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import parse_bvh
+
+    text = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT Chest
+  {
+    OFFSET 0 1 0
+    CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 1 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.1
+0 1 0 0 0 0 0.5 1.5 2.5 10 20 30
+0 1 0 0 0 0 0.7 1.7 2.7 10 20 30
+"""
+    tmpl = parse_bvh(text)
+    names = M.channel_names_for(tmpl.topology, "euler")
+    rng = np.random.default_rng(0)
+    C, N = len(names), 2
+    model = fourier.FourierModel(
+        jnp.asarray(rng.normal(size=C)), jnp.asarray(rng.uniform(0.1, 1.0, (C, N))),
+        jnp.asarray(rng.uniform(-3, 3, (C, N))), jnp.asarray(4.0), "euler", names)
+    cm = M.channel_model(tmpl, model)
+    flat = tmpl.topology.flat_channel_names
+    for k, n in enumerate(flat):
+        if n.startswith("Chest.") and n.endswith("position"):  # the template's first frame
+            assert float(cm.offset[k]) == pytest.approx(tmpl.channels[0, k])
+            assert np.all(np.asarray(cm.amplitude[k]) == 0.0)
+        elif n.endswith("rotation"):  # degrees, same phases
+            i = names.index(n)
+            np.testing.assert_allclose(cm.amplitude[k], np.degrees(model.amplitude[i]), rtol=1e-6)
+            np.testing.assert_allclose(cm.phase[k], model.phase[i])
+    vx = flat.index("Hips.Xposition")  # the integral of root.vx: A / (n omega), phase - pi/2
+    np.testing.assert_allclose(cm.amplitude[vx], model.amplitude[0] / (4.0 * np.arange(1, N + 1)), rtol=1e-6)
+    np.testing.assert_allclose(np.cos(cm.phase[vx]), np.cos(model.phase[0] - np.pi / 2), atol=1e-6)
+    with pytest.raises(UserError, match="expmap"):
+        M.channel_model(tmpl, fourier.FourierModel(
+            model.offset, model.amplitude, model.phase, model.omega, "expmap",
+            M.channel_names_for(tmpl.topology, "expmap")))
+    with pytest.raises(UserError, match="omega"):
+        M.channel_model(tmpl, fourier.FourierModel(
+            model.offset, model.amplitude, model.phase, jnp.asarray(0.0), "euler", names))
+    with pytest.raises(UserError, match="root_xz"):
+        M.channel_model(tmpl, model, (1.0, 2.0, 3.0))
+    with pytest.raises(UserError, match="channel names"):
+        M.channel_model(data.load("07_01"), model)
