@@ -10,7 +10,8 @@
   provides shape sets;
 * ``plots/*.png``: spectrum (Tilmanne & Dutoit Fig. 1), decomposition (their Fig. 3), the
   inter/extrapolation strip (Unuma Fig. 3), the style-space PCA scatter, the hip-rule
-  comparison, the posture range (Neff & Fiume Fig. 5);
+  comparison, the posture range (Neff & Fiume Fig. 5), a crowd of 10,000 fitted walkers of
+  different styles (`motion.channel_model`, `fourierjax.crowd`);
 * ``gifs/*.gif``: animated stick figures of the main results;
 * ``summary.json``: fit metrics per clip, what was written, what was skipped and why.
 
@@ -48,6 +49,7 @@ class DemoConfig:
       09_01 for every part to run; others are skipped with a notice when absent).
     - ``gif_frames``, ``gif_dpi``: size of the animations.
     - ``gifs``, ``stance``: switch those parts off.
+    - ``crowd``: characters in the crowd of fitted walkers (0: no crowd).
     """
 
     harmonics: int = 3
@@ -57,6 +59,7 @@ class DemoConfig:
     gif_dpi: int = 64
     gifs: bool = True
     stance: bool = True
+    crowd: int = 10_000
     noise_deg: float = 2.0
     seed: int = 0
 
@@ -412,6 +415,46 @@ def _plot_hip_rule(st: _State) -> None:
     viz.save_figure(fig, st.path("plots", "hip_rule_variants.png"))
 
 
+def _crowd(st: _State) -> None:
+    """A crowd of fitted walkers, from brisk to tired (Unuma Fig. 3's axis), posed per frame."""
+    import jax
+    import jax.numpy as jnp
+
+    from fourierjax import crowd, viz
+    from fourierjax.motion import channel_model
+
+    n = st.cfg.crowd
+    if n <= 0:
+        raise _Skip("crowd switched off")
+    normal, tired, style = _style_models(st)
+    rng = np.random.default_rng(st.cfg.seed)
+    s = rng.uniform(-0.6, 1.3, n).astype(np.float32)  # s < 0 brisk, s > 1 more tired than tired
+    side = int(np.ceil(np.sqrt(n)))
+    spacing = 40.0  # file units (~2.3 m)
+    row, col = np.divmod(np.arange(n), side)
+    spots = spacing * np.stack([col, row], axis=1) + rng.uniform(-8.0, 8.0, (n, 2))
+    walkers = jax.vmap(lambda si: style.interpolate(normal, tired, si))(jnp.asarray(s))
+    walk = st.motions["07_01"]
+    skeleton = walk.skeleton()
+    people = crowd.make_crowd(skeleton, channel_model(walk, walkers, jnp.asarray(spots, jnp.float32)))
+    t_show = jnp.float32(1.0)
+    pos = jax.block_until_ready(crowd.crowd_positions(people, t_show))  # compiles
+    frames = 60
+    t0 = time.perf_counter()
+    for k in range(frames):  # one second of animation at 60 frames/s
+        out = crowd.crowd_positions(people, jnp.float32(k / frames))
+    jax.block_until_ready(out)
+    fps = frames / (time.perf_counter() - t0)
+    corner = (row < 7) & (col < 7)  # a 7 x 7 corner of the crowd: the poses stay readable
+    fig = viz.plot_crowd(np.asarray(pos)[corner], walk.topology.parents, s[corner],
+                         value_label="style s (< 0 brisk, 0 normal 07_01, 1 tired 07_04)",
+                         title=f"{int(corner.sum())} of {n:,} fitted walkers, each its own style "
+                         f"(all posed at {fps:.0f} frames/s)")
+    viz.save_figure(fig, st.path("plots", "crowd.png"))
+    st.extra["crowd"] = {"characters": n, "frames_per_s": round(fps, 1),
+                         "style_range": [-0.6, 1.3], "spacing_file_units": spacing}
+
+
 # --------------------------------------------------------------------------------------- gifs
 
 
@@ -548,6 +591,7 @@ STEPS: tuple[tuple[str, Callable[[_State], None]], ...] = (
     ("inter/extrapolation strip", _plot_strip),
     ("style-space PCA", _plot_style_space),
     ("hip-rule plot", _plot_hip_rule),
+    ("crowd of fitted walkers", _crowd),
     ("stance gallery", _stance),
     ("animated GIFs", _gifs),
 )
@@ -603,6 +647,7 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
                                                         "run_high_jump")},
         "style_pca_explained_variance_ratio": st.extra.get("pca_explained"),
         "stance": st.extra.get("stance"),
+        "crowd": st.extra.get("crowd"),
         "written": st.written,
         "skipped": st.skipped,
         "timings_s": timings,

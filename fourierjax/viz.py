@@ -37,6 +37,7 @@ __all__ = [
     "plot_stick_strip",
     "plot_hip_rule",
     "plot_posture_range",
+    "plot_crowd",
     "save_figure",
     "save_gif",
 ]
@@ -377,6 +378,51 @@ def plot_posture_range(poses: Sequence, parents: Sequence[int], intensities: Seq
     fig = plot_stick_strip(poses, parents, labels, names=names, azimuth_deg=azimuth_deg,
                            scale=scale, unit=unit,
                            title=title or "Posture range (intensity under each figure)")
+    return fig
+
+
+def plot_crowd(positions, parents: Sequence[int], values, *, value_label: str = "",
+               title: str | None = None, azimuth_deg: float = 25.0, elevation_deg: float = 20.0,
+               scale: float = CMU_UNIT_M, unit: str = "m"):
+    """Many characters at one instant, seen from above at an angle, coloured by a value each.
+
+    Arguments:
+        positions: ``[B, J, 3]`` joint positions (Y up), e.g. ``crowd.crowd_positions``;
+        parents: the skeleton's parent indices; values: ``[B]`` one number per character (e.g.
+        its style parameter), shown by colour with a colour bar labelled ``value_label``;
+        azimuth_deg: turn of the view about the vertical (0: seen from +X, looking along -X);
+        elevation_deg: how far the camera looks down; scale: length unit of the picture.
+    Returns:
+        Figure.
+    """
+    from matplotlib.collections import LineCollection
+
+    p = np.asarray(positions, dtype=np.float64) * scale
+    v = np.asarray(values, dtype=np.float64)
+    if p.ndim != 3 or p.shape[-1] != 3 or v.shape != p.shape[:1]:
+        raise ValueError(f"plot_crowd: positions {p.shape} must be [B, J, 3] with values [B], "
+                         f"got values {v.shape}")
+    _check_skeleton(p, parents)
+    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    depth = x * np.cos(a) + z * np.sin(a)  # toward the camera
+    u = z * np.cos(a) - x * np.sin(a)
+    w = y * np.cos(e) + depth * np.sin(e)
+    q = np.stack([u, w], axis=-1)  # [B, J, 2]
+    bones = [(par, j) for j, par in enumerate(parents) if par >= 0]
+    # Far characters first, so that near ones are drawn over them.
+    order = np.argsort(-depth.mean(axis=1))
+    segs = q[order][:, [b for b, _ in bones]], q[order][:, [c for _, c in bones]]
+    segs = np.stack(segs, axis=2).reshape(-1, 2, 2)
+    fig, ax = plt.subplots(figsize=(8.0, 5.0))
+    lc = LineCollection(segs, array=np.repeat(v[order], len(bones)), cmap="viridis", lw=1.2)
+    ax.add_collection(lc)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_xlabel(f"{unit} (oblique view)")
+    ax.set_yticks([])
+    fig.colorbar(lc, ax=ax, label=value_label, shrink=0.7, pad=0.02)
+    ax.set_title(title or f"{len(v)} characters", fontsize=10)
     return fig
 
 

@@ -17,7 +17,7 @@ BVH = ["walk_normal", "walk_brisk_extrapolated", "walk_tired", "run_brisk_superp
        "walk_slowing_to_stop", "run_flight", "run_high_jump", "run_flight_continuous_rule",
        "walk_shivering"]
 PLOTS = ["spectrum_07_01", "decomposition_07_01_left_knee", "interpolation_strip",
-         "style_space_pca", "hip_rule_variants"]
+         "style_space_pca", "hip_rule_variants", "crowd"]
 STANCE = ["posture_-1.00", "posture_-0.50", "posture_+0.00", "posture_+0.50", "posture_+1.00",
           "strong_recoil_+0.25", "strong_recoil_+1.00", "beauty_line_-1.00", "beauty_line_+1.00"]
 GIFS = ["walk_styles", "run_brisk_superposed", "walk_to_run", "run_flight", "walk_shivering"]
@@ -79,6 +79,7 @@ def test_demo_summary_has_fit_metrics(demo_run):
     assert s["skipped"] == []
     assert len(s["stance"]) == 11 and all(x["converged"] for x in s["stance"])
     assert max(x["com_error_m"] for x in s["stance"]) < 1e-3  # balanced (issue 5)
+    assert s["crowd"]["characters"] == 10_000 and s["crowd"]["frames_per_s"] > 0
     assert "07_01" in r.stdout and "summary.json" in r.stdout
 
 

@@ -131,3 +131,32 @@ def test_gif_has_the_requested_frames_and_is_small(tmp_path):
     assert (tmp_path / "a.gif").stat().st_size < 200_000
     with pytest.raises(ValueError, match="same"):
         viz.save_gif([seq, seq[:5]], PARENTS, tmp_path / "b.gif", frame_time_s=0.1)
+
+
+def test_crowd_draws_every_bone_coloured_by_value(tmp_path):
+    rng = np.random.default_rng(0)
+    crowd = POSE[None] + np.stack([rng.uniform(-20, 20, 5), np.zeros(5), rng.uniform(-20, 20, 5)],
+                                  axis=1)[:, None]  # [5, J, 3]
+    values = np.linspace(-1.0, 1.0, 5)
+    fig = viz.plot_crowd(crowd, PARENTS, values, value_label="style", scale=1.0)
+    (lc,) = fig.axes[0].collections
+    assert len(lc.get_segments()) == 5 * (len(PARENTS) - 1)
+    # Colours follow the values (far characters drawn first, each bone its character's value).
+    assert sorted(set(np.round(lc.get_array(), 6))) == sorted(np.round(values, 6))
+    assert fig.axes[1].get_ylabel() == "style"  # the colour bar
+    # One character: the spine -> head bone (straight up) is vertical in the picture, 4 cos(e)
+    # long; the left hip -> knee bone goes down and along +Z (to the right at azimuth 0).
+    one = viz.plot_crowd(POSE[None], PARENTS, [0.0], scale=1.0, azimuth_deg=0.0, elevation_deg=30.0)
+    segs = np.asarray(one.axes[0].collections[0].get_segments())  # bones of joints 1..6
+    (u0, w0), (u1, w1) = segs[1]
+    assert u0 == pytest.approx(u1) and w1 - w0 == pytest.approx(4 * np.cos(np.radians(30.0)))
+    (u0, w0), (u1, w1) = segs[3]  # [1, 9, 0] -> [1, 1, 1]
+    assert u1 - u0 == pytest.approx(1.0)
+    assert w1 - w0 == pytest.approx(-8 * np.cos(np.radians(30.0)))
+    matplotlib.pyplot.close(one)
+    viz.save_figure(fig, tmp_path / "crowd.png")
+    assert (tmp_path / "crowd.png").stat().st_size > 1000
+    with pytest.raises(ValueError, match="values"):
+        viz.plot_crowd(crowd, PARENTS, values[:3])
+    with pytest.raises(ValueError, match="joints"):
+        viz.plot_crowd(crowd, PARENTS[:-1], values)
