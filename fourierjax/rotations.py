@@ -584,7 +584,7 @@ def quat_power(q: Float[Array, "... 4"], t: Float[Array, "*batch"]) -> Float[Arr
     n_sq = jnp.sum(xyz * xyz, axis=-1)
     small = n_sq <= 1e-12 * w * w
     n = jnp.sqrt(jnp.where(small, 1.0, n_sq))
-    phi = jnp.arctan2(n, w)
+    phi = jnp.where(small, 0.0, jnp.arctan2(n, w))  # not atan2 of the shim's n = 1
     ratio = jnp.where(small, t / jnp.where(w > 0, w, 1.0), jnp.sin(t * phi) / n)
     return jnp.concatenate([jnp.cos(t * phi)[..., None], ratio[..., None] * xyz], axis=-1)
 

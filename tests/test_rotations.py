@@ -273,6 +273,26 @@ def test_axis_angle_and_slerp(x64):
     _assert_same_quat(rot.quat_power(-q0, jnp.asarray(tp)), expected, atol=1e-12)
 
 
+def test_power_and_slerp_at_and_near_the_identity():
+    # The small-angle branch of quat_power: exact at the identity (any norm, any exponent),
+    # continuous into the general formula (scipy's scaled rotation vector), zero slope in t.
+    ident = jnp.array([1.0, 0.0, 0.0, 0.0])
+    for t in (-0.7, 0.0, 0.5, 1.0, 2.0):
+        np.testing.assert_allclose(rot.quat_power(ident, t), ident, atol=1e-15)
+        np.testing.assert_allclose(rot.quat_power(2.5 * ident, t), ident, atol=1e-15)
+    for angle in (1e-9, 1e-7, 1e-5, 1e-3):  # on both sides of the branch (|xyz| <= 1e-6 w)
+        r = Rotation.from_rotvec([angle, -2 * angle, 0.5 * angle])
+        q = jnp.asarray(_wxyz(r.as_quat()))
+        for t in (0.5, 2.0):
+            ref = _wxyz(Rotation.from_rotvec(r.as_rotvec() * t).as_quat())
+            np.testing.assert_allclose(rot.quat_power(q, t), ref, rtol=1e-6, atol=1e-12)  # float32
+    assert float(jax.grad(lambda t: rot.quat_power(ident, t)[0])(0.5)) == 0.0
+    # slerp between equal rotations is that rotation at every t.
+    q = rot.quat_from_axis_angle(jnp.array([0.0, 0.0, 1.0]), 0.7)
+    for t in (0.0, 0.5, 1.0, 1.5):
+        np.testing.assert_allclose(rot.quat_slerp(q, q, t), q, atol=1e-15)
+
+
 # --------------------------------------------------------------------------- continuity
 
 
