@@ -230,6 +230,32 @@ def _fit_floor(h, hz, slow, threshold, iters=3):
     return intercepts, slope
 
 
+def _real(name: str, x, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """``x`` as a finite float, else a UserError naming ``name`` (NaN fails every ``<=`` test,
+    so it is checked for explicitly)."""
+    if isinstance(x, bool | np.bool_):
+        raise UserError(f"{name}: must be a number, got {x!r}")
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise UserError(f"{name}: must be a number, got {x!r}") from None
+    if not np.isfinite(v):
+        raise UserError(f"{name}: must be finite, got {v}")
+    if positive and v <= 0:
+        raise UserError(f"{name}: must be positive, got {v}")
+    if nonnegative and v < 0:
+        raise UserError(f"{name}: must be >= 0, got {v}")
+    return v
+
+
+def _axis(up_axis) -> int:
+    if isinstance(up_axis, bool) or not isinstance(up_axis, int | np.integer) or not (
+        0 <= up_axis <= 2
+    ):
+        raise UserError(f"up_axis: must be the integer 0, 1 or 2, got {up_axis!r}")
+    return int(up_axis)
+
+
 def _runs(mask: np.ndarray):
     """(start, stop) of each run of True in a 1-D bool array."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -275,19 +301,18 @@ def estimate_ground(
     above it (0 if the point goes lower).
     """
     p = _as_points(foot_positions)
-    if frame_time_s <= 0:
-        raise UserError(f"frame_time_s: must be positive, got {frame_time_s}")
-    if up_axis not in (0, 1, 2):
-        raise UserError(f"up_axis: must be 0, 1 or 2, got {up_axis}")
+    frame_time_s = _real("frame_time_s", frame_time_s, positive=True)
+    up_axis = _axis(up_axis)
     scale = _scale(p, up_axis)
-    th = 0.25 * scale if height_threshold is None else float(height_threshold)
-    tv = 6.0 * scale if speed_threshold is None else float(speed_threshold)
-    if th <= 0 or tv <= 0:
-        raise UserError(f"contact thresholds must be positive, got height {th}, speed {tv}")
+    th = (0.25 * scale if height_threshold is None
+          else _real("height_threshold", height_threshold, positive=True))
+    tv = (6.0 * scale if speed_threshold is None
+          else _real("speed_threshold", speed_threshold, positive=True))
     h = p[..., up_axis]
     hz = np.delete(p, up_axis, axis=-1)
     if ground_height is not None:
-        intercepts = np.maximum(np.percentile(h, 2, axis=0), float(ground_height))
+        ground_height = _real("ground_height", ground_height)
+        intercepts = np.maximum(np.percentile(h, 2, axis=0), ground_height)
         return GroundEstimate(intercepts, np.zeros(2), th, tv)
     speed = np.asarray(point_speeds(p, frame_time_s))
     intercepts, slope = _fit_floor(h, hz, speed < tv, th)
@@ -330,9 +355,13 @@ def foot_contacts(
     - `height_threshold`, `speed_threshold`: override the relative defaults.
     - `min_contact_s`, `max_gap_s`: cleanup durations.
 
-    **Returns:** `bool [T, F]`.
+    **Returns:** `bool [T, F]`. Raises `UserError` naming the argument for a non-finite or
+    non-positive `frame_time_s` or threshold, a non-finite `ground_height`, negative or
+    non-finite durations, or an `up_axis` other than the integer 0, 1 or 2.
     """
     p = _as_points(foot_positions)
+    min_contact_s = _real("min_contact_s", min_contact_s, nonnegative=True)
+    max_gap_s = _real("max_gap_s", max_gap_s, nonnegative=True)
     g = estimate_ground(
         p,
         frame_time_s,
@@ -341,6 +370,7 @@ def foot_contacts(
         height_threshold=height_threshold,
         speed_threshold=speed_threshold,
     )
+    frame_time_s, up_axis = float(frame_time_s), int(up_axis)  # checked by estimate_ground
     h = p[..., up_axis]
     hz = np.delete(p, up_axis, axis=-1)
     above = h - g.intercepts - hz @ g.slope
@@ -399,10 +429,11 @@ def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> 
     `statistic`: `"mean"` or `"median"` of the intervals.
 
     **Returns:** seconds. Raises `UserError` when the clip holds fewer than two alternating
-    heel strikes, or for an unknown `statistic`.
+    heel strikes, for an unknown `statistic`, or a non-finite or non-positive `frame_time_s`.
     """
     if statistic not in STEP_STATISTICS:
         raise UserError(f"statistic: {statistic!r} is not one of {STEP_STATISTICS}")
+    frame_time_s = _real("frame_time_s", frame_time_s, positive=True)
     reduce = np.mean if statistic == "mean" else np.median
     ev = step_events(contacts)
     cycles = [np.diff(e) for e in ev if len(e) >= 2]

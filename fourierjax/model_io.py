@@ -26,15 +26,19 @@ same first seven keys plus ``"a"``, ``"b"`` (the sources of A and B) and ``"alig
 c = (A cos φ, A sin φ)), ``log_omega []`` (log ω_A/ω_B), float64. Apply one with
 `fourierjax.style.superpose(base, [characteristic], [weight])`.
 
-Files are read with ``allow_pickle=False``. A file that is not such an archive, has another format
-name, a newer version, or inconsistent shapes raises :class:`ModelFileError` naming the path.
+Files are read with ``allow_pickle=False``. A missing file, a file that is not such an archive, has
+another format name, a newer version, inconsistent shapes, arrays that are not real numbers or not
+finite, ``omega <= 0``, channel names that are not strings, or a skeleton record that does not fit
+its arrays raises :class:`ModelFileError` naming the path.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import errno
 import io
 import json
+import math
 import os
 import zipfile
 
@@ -62,6 +66,18 @@ class ModelFileError(UserError):
         self.path = str(path)
         self.message = message
         super().__init__(f"{self.path}: {message}")
+
+
+class _MissingModelFile(ModelFileError, FileNotFoundError):
+    """No such file: a ModelFileError, and also the FileNotFoundError that ``load_model`` used
+    to raise (so an existing ``except FileNotFoundError`` still works)."""
+
+    def __init__(self, path):
+        super().__init__(path, "no such file")
+        self.errno, self.strerror, self.filename = errno.ENOENT, "no such file", str(path)
+
+    def __str__(self) -> str:  # OSError's would be "[Errno 2] ..."
+        return f"{self.path}: {self.message}"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,7 +160,7 @@ def _read_archive(path: str, format_name: str, format_version: int,
         got = header.get("format") if isinstance(header, dict) else None
         raise ModelFileError(path, f"format is {got!r}, expected {format_name!r}")
     version = header.get("version")
-    if not isinstance(version, int) or version < 1:
+    if isinstance(version, bool) or not isinstance(version, int) or version < 1:
         raise ModelFileError(path, f"bad format version {version!r}")
     if version > format_version:
         raise ModelFileError(
@@ -156,16 +172,37 @@ def _read_archive(path: str, format_name: str, format_version: int,
     return header, data
 
 
+def _check_real(path: str, name: str, a: np.ndarray) -> np.ndarray:
+    """``a`` as float64 if it holds finite real numbers (float or int dtype), else ModelFileError."""
+    if a.dtype.kind not in "fiu":
+        raise ModelFileError(path, f"array {name!r} has dtype {a.dtype}, expected real numbers "
+                                   "(float64)")
+    a = a.astype(np.float64)
+    if not np.isfinite(a).all():
+        raise ModelFileError(path, f"array {name!r} holds NaN or infinite values")
+    return a
+
+
 def _check_arrays(path: str, header: dict, data: dict, trailing: dict) -> tuple[str, ...]:
     """Check the Fourier arrays against the header's C and N; returns the channel names.
 
-    ``trailing``: array name -> its shape with ``"C"`` / ``"N"`` standing for the counts.
+    Also converts every array of ``data`` to float64 in place, after checking that it holds
+    finite real numbers. ``trailing``: array name -> its shape with ``"C"`` / ``"N"`` standing
+    for the counts.
     """
     missing = [k for k in trailing if k not in data]
     if missing:
         raise ModelFileError(path, f"missing array(s) {missing}")
-    names = tuple(header.get("channel_names", ()))
+    for k in data:
+        data[k] = _check_real(path, k, data[k])
+    names = header.get("channel_names", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+        raise ModelFileError(path, f"channel_names must be a list of strings, got {names!r:.80}")
+    names = tuple(names)
     counts = {"C": header.get("num_channels"), "N": header.get("num_harmonics")}
+    for key, n in (("num_channels", counts["C"]), ("num_harmonics", counts["N"])):
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ModelFileError(path, f"{key} must be a non-negative integer, got {n!r}")
     expected = {k: tuple(counts.get(d, d) for d in dims) for k, dims in trailing.items()}
     shapes = {k: data[k].shape for k in trailing}
     if shapes != expected or (names and len(names) != counts["C"]):
@@ -187,9 +224,23 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         so ``synth`` can write BVH), or None; provenance: JSON-able fit details; alignment: the
         phase-alignment event name.
     """
+    provenance = _jsonable(provenance or {})
+    try:
+        json.dumps(provenance)
+    except (TypeError, ValueError) as err:
+        raise UserError(f"save_model: `provenance` must hold only JSON values (dict, list, str, "
+                        f"number, bool, None, NumPy arrays): {err}") from None
     header = _header(FORMAT_NAME, FORMAT_VERSION, model, "model", skeleton=None,
-                     provenance=_jsonable(provenance or {}), alignment=alignment)
+                     provenance=provenance, alignment=alignment)
     arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
+    # What `load_model` refuses is not written in the first place.
+    bad = [k for k, v in arrays.items() if not np.isfinite(np.asarray(v)).all()]
+    if bad:
+        raise UserError(f"save_model: `model` holds NaN or infinite values in {bad}; not written "
+                        f"to {os.fspath(path)}")
+    if not float(np.asarray(model.omega)) > 0:
+        raise UserError(f"save_model: `model` omega must be > 0 rad/s, got "
+                        f"{float(np.asarray(model.omega))}; not written to {os.fspath(path)}")
     if motion is not None:
         topo = motion.topology
         header["skeleton"] = {
@@ -209,14 +260,15 @@ def load_model(path) -> ModelFile:
     """Read a model file written by :func:`save_model`.
 
     Raises:
-        ModelFileError: not an npz archive, not this format, a newer version, bad shapes.
-        FileNotFoundError: no such file.
+        ModelFileError (a ``UserError``, one line naming the path): no such file (this one is
+        also a ``FileNotFoundError``), not an npz archive, not this format, a newer version, bad
+        shapes, non-finite or non-real arrays, ``omega <= 0``, a bad skeleton record.
     """
     from fourierjax.fourier import FourierModel
 
     path = os.fspath(path)
     if not os.path.exists(path):
-        raise FileNotFoundError(2, "No such file", path)
+        raise _MissingModelFile(path)
     header, data = _read_archive(path, FORMAT_NAME, FORMAT_VERSION, "model")
     names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
                                                 "phase": ("C", "N"), "omega": ()})
@@ -225,6 +277,16 @@ def load_model(path) -> ModelFile:
                              header.get("representation", ""), names)
     except (ValueError, TypeError) as err:
         raise ModelFileError(path, str(err)) from None
+    if not data["omega"] > 0:
+        raise ModelFileError(path, f"omega must be > 0 rad/s, got {float(data['omega'])}")
+    provenance = header.get("provenance")
+    provenance = {} if provenance is None else provenance
+    if not isinstance(provenance, dict):
+        raise ModelFileError(path, f"provenance must be a JSON object, got {provenance!r:.80}")
+    alignment = header.get("alignment")
+    alignment = "none" if alignment is None else alignment
+    if not isinstance(alignment, str):
+        raise ModelFileError(path, f"alignment must be a string, got {alignment!r:.80}")
     sk = header.get("skeleton")
     topology = offsets = ends = frame_time = None
     if sk is not None:
@@ -237,13 +299,23 @@ def load_model(path) -> ModelFile:
                 channels=tuple(tuple(c) for c in sk["channels"]),
                 end_site_parents=tuple(int(p) for p in sk["end_site_parents"]),
             )
-            offsets = np.asarray(data["skeleton_offsets"], np.float64)
-            ends = np.asarray(data["skeleton_end_site_offsets"], np.float64)
-            frame_time = float(sk["frame_time_s"])
+            offsets = data["skeleton_offsets"]
+            ends = data["skeleton_end_site_offsets"]
+            frame_time = sk["frame_time_s"]
         except (KeyError, TypeError, ValueError) as err:
             raise ModelFileError(path, f"bad skeleton record: {err}") from None
-    return ModelFile(model, topology, offsets, ends, frame_time,
-                     header.get("provenance", {}), header.get("alignment", "none"))
+        # What `template_motion` builds a Motion from: checked here, where the path is known.
+        for name, a, rows in (("skeleton_offsets", offsets, topology.num_joints),
+                              ("skeleton_end_site_offsets", ends, topology.num_end_sites)):
+            if a.shape != (rows, 3):
+                raise ModelFileError(path, f"bad skeleton record: {name} has shape {a.shape}, "
+                                           f"expected ({rows}, 3) for its {rows} entries")
+        if (isinstance(frame_time, bool) or not isinstance(frame_time, int | float)
+                or not (math.isfinite(frame_time) and frame_time > 0)):
+            raise ModelFileError(path, "bad skeleton record: frame_time_s must be a finite "
+                                       f"number > 0, got {frame_time!r}")
+        frame_time = float(frame_time)
+    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment)
 
 
 def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str = "none") -> None:
@@ -272,7 +344,7 @@ def load_characteristic(path):
 
     path = os.fspath(path)
     if not os.path.exists(path):
-        raise ModelFileError(path, "no such file")
+        raise _MissingModelFile(path)
     header, data = _read_archive(path, CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION,
                                  "characteristic")
     names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),

@@ -142,6 +142,19 @@ def heading_of(motion) -> float:
     return float(np.arctan2(s, c))
 
 
+def _finite(x, name: str, where: str) -> float:
+    """``x`` as a finite float, else a UserError naming ``where`` and the argument ``name``."""
+    if isinstance(x, bool | np.bool_):
+        raise UserError(f"{where}: `{name}` must be a number, got {x!r}")
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        raise UserError(f"{where}: `{name}` must be a number, got {x!r}") from None
+    if not np.isfinite(v):
+        raise UserError(f"{where}: `{name}` must be finite, got {v}")
+    return v
+
+
 def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndarray:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
@@ -160,8 +173,17 @@ def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndar
         valid: optional ``bool [F]``.
     Returns:
         ``[F, ..., 3]`` the same rotations, continuous over the first axis.
+    Raises:
+        UserError: ``order`` not one of ``rotations.EULER_ORDERS``, or ``angles`` not
+        ``[F, ..., 3]``.
     """
+    if not isinstance(order, str) or order not in rotations.EULER_ORDERS:
+        raise UserError(f"make_euler_continuous: `order` must be one of "
+                        f"{', '.join(rotations.EULER_ORDERS)}, got {order!r}")
     a = np.array(angles, dtype=np.float64, copy=True)
+    if a.ndim < 2 or a.shape[-1] != 3:
+        raise UserError(f"make_euler_continuous: `angles` must have shape [F, ..., 3], got "
+                        f"{a.shape}")
     if a.shape[0] < 2:
         return a
     proper = order[0] == order[2]
@@ -210,7 +232,8 @@ def features_from_motion(
     names = channel_names_for(motion.topology, representation)
     if motion.num_frames < 2:
         raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
-    psi = heading_of(motion) if heading_rad is None else float(heading_rad)
+    psi = (heading_of(motion) if heading_rad is None
+           else _finite(heading_rad, "heading_rad", "features_from_motion"))
     pos, q_root = _root_pose(motion)
     c, s = np.cos(psi), np.sin(psi)
     # World -> heading frame: rotate by -psi about +Y.
@@ -307,14 +330,31 @@ def motion_from_features(
         frame_time_s: seconds per frame of the new motion.
     Returns:
         Motion with ``F`` frames.
+    Raises:
+        UserError: channel names or feature shape that do not fit the template, NaN or
+        infinite features, a non-finite ``heading_rad`` or ``start_xz``, or a non-finite or
+        non-positive ``frame_time_s``.
     """
+    where = "motion_from_features"
     topo = template.topology
-    rep = _check_names(topo, channel_names, "motion_from_features")
+    rep = _check_names(topo, channel_names, where)
     x = _np(features)
     if x.ndim != 2 or x.shape[1] != len(channel_names):
         raise UserError(
             f"motion_from_features: features shape {x.shape}, expected [F, {len(channel_names)}]"
         )
+    bad = ~np.isfinite(x)
+    if bad.any():
+        f, c = np.argwhere(bad)[0]
+        raise UserError(f"{where}: `features` holds NaN or infinite values (first at frame {f}, "
+                        f"channel {channel_names[c]!r})")
+    frame_time_s = _finite(frame_time_s, "frame_time_s", where)
+    if frame_time_s <= 0:
+        raise UserError(f"{where}: `frame_time_s` must be positive, got {frame_time_s}")
+    heading_rad = _finite(heading_rad, "heading_rad", where)
+    if np.shape(start_xz) != (2,):
+        raise UserError(f"{where}: `start_xz` must be two numbers (x, z), got {start_xz!r}")
+    start_xz = tuple(_finite(v, "start_xz", where) for v in start_xz)
     F = x.shape[0]
     out = np.empty((F, topo.num_channels), np.float64)
     out[:] = template.channels[:1] if template.num_frames else 0.0

@@ -510,3 +510,45 @@ def test_fuzz_random_input(blob):
     one_joint = "HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 1 Xrotation\n}\n"
     _check(lambda: parse_bvh(one_joint + text))
     _check(lambda: parse_bvh("\n".join(SEED_LINES[:-2]) + "\n" + text))
+
+
+# -- strict numbers (audit item 13): float()'s extra spellings are not BVH numbers ------------
+
+STRICT_NUMBER_ERRORS = [
+    ("underscore value", _edit(20, "1 1_0 2 3 4 5 6 7 8"), 20, "'1_0' is not a number"),
+    ("underscore exponent", _edit(21, "2 1 2 3 4 5 6 7 1e1_0"), 21, "'1e1_0' is not a number"),
+    ("underscore after a bad line", _edit(20, "1 1 2 3 x4 5 6 7 8").replace("2 1 2", "2 1_0 2"),
+     20, "'x4' is not a number"),
+    ("underscore offset", _edit(8, "\t\tOFFSET 1_0 5 0"), 8, "OFFSET: '1_0' is not a number"),
+    ("arabic-indic offset", _edit(8, "\t\tOFFSET \u0661\u0662 5 0"), 8, "is not a number"),
+    ("fullwidth offset", _edit(8, "\t\tOFFSET 0 \uff15 0"), 8, "is not a number"),
+    ("underscore frame time", _edit(18, "Frame Time: 0.0_1"), 18, "'0.0_1' is not a number"),
+    ("arabic-indic frame time", _edit(18, "Frame Time: \u0660.\u0661"), 18, "not a number"),
+    ("subnormal frame time", _edit(18, "Frame Time: 1e-320"), 18, "below the minimum 1e-06 s"),
+    ("tiny frame time", _edit(18, "Frame Time: 9e-7"), 18, "below the minimum 1e-06 s"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", STRICT_NUMBER_ERRORS, ids=[c[0] for c in STRICT_NUMBER_ERRORS])
+def test_lenient_float_spellings_are_rejected(case):
+    test_bad_input_names_file_and_line(case)
+
+
+def test_strict_numbers_still_accept_every_bvh_spelling():
+    from fourierjax.io.bvh import MIN_FRAME_TIME_S
+
+    text = _edit(8, "\t\tOFFSET +1.5E+1 .5 -2.").replace("Frame Time: 0.0333333",
+                                                          f"Frame Time: {MIN_FRAME_TIME_S!r}")
+    text = text.replace("1 1 2 3 4 5 6 7 8", "1 1e1 2. .3 -4E-1 +5 6 7 8")
+    m = parse_bvh(text)
+    np.testing.assert_array_equal(m.offsets[1], [15.0, 0.5, -2.0])
+    np.testing.assert_array_equal(m.channels[1], [1, 10, 2, 0.3, -0.4, 5, 6, 7, 8])
+    assert m.frame_time_s == MIN_FRAME_TIME_S == 1e-6
+
+
+def test_bvh_error_is_a_user_error():
+    from fourierjax.errors import UserError
+
+    assert issubclass(BVHError, UserError) and issubclass(BVHError, ValueError)
+    with pytest.raises(UserError, match="walk.bvh:20"):
+        parse_bvh(_edit(20, "1 1 2 3 x4 5 6 7 8"), source="walk.bvh")

@@ -311,3 +311,53 @@ def test_step_period_median_resists_a_spurious_strike():
         C.step_period_s(c, ft, statistic="mode")
     with pytest.raises(UserError, match="fewer than two"):
         C.step_period_s(np.zeros((10, 2), bool), ft, statistic="median")
+
+
+# -- non-finite and mistyped parameters (audit item 11) ----------------------------------------
+NAN, INF = float("nan"), float("inf")
+BAD_CONTACT_ARGS = [
+    ({"frame_time_s": NAN}, "frame_time_s: must be finite"),
+    ({"frame_time_s": INF}, "frame_time_s: must be finite"),
+    ({"frame_time_s": -0.01}, "frame_time_s: must be positive"),
+    ({"frame_time_s": "0.01x"}, "frame_time_s: must be a number"),
+    ({"height_threshold": NAN}, "height_threshold: must be finite"),
+    ({"height_threshold": 0.0}, "height_threshold: must be positive"),
+    ({"speed_threshold": NAN}, "speed_threshold: must be finite"),
+    ({"speed_threshold": -1.0}, "speed_threshold: must be positive"),
+    ({"ground_height": NAN}, "ground_height: must be finite"),
+    ({"ground_height": -INF}, "ground_height: must be finite"),
+    ({"min_contact_s": NAN}, "min_contact_s: must be finite"),
+    ({"min_contact_s": -0.1}, "min_contact_s: must be >= 0"),
+    ({"max_gap_s": NAN}, "max_gap_s: must be finite"),
+    ({"up_axis": 1.0}, "up_axis: must be the integer 0, 1 or 2, got 1.0"),
+    ({"up_axis": True}, "up_axis: must be the integer"),
+    ({"up_axis": 3}, "up_axis: must be the integer"),
+]
+
+
+@pytest.mark.parametrize("kwargs, message", BAD_CONTACT_ARGS,
+                         ids=[f"{next(iter(k))}={next(iter(k.values()))}" for k, _ in BAD_CONTACT_ARGS])
+def test_foot_contacts_rejects_bad_parameters_by_name(kwargs, message):
+    feet, ft, _ = _synthetic_walk(tilt=0.0)
+    kwargs = {"frame_time_s": ft, **kwargs}
+    with pytest.raises(UserError, match=message.replace("(", r"\(")):
+        C.foot_contacts(feet, **kwargs)
+    if "min_contact_s" not in kwargs and "max_gap_s" not in kwargs:
+        with pytest.raises(UserError, match=message.replace("(", r"\(")):
+            C.estimate_ground(feet, **kwargs)
+
+
+def test_foot_contacts_accepts_numpy_scalar_parameters():
+    feet, ft, truth = _synthetic_walk(tilt=0.0)
+    c = C.foot_contacts(feet, np.float32(ft), up_axis=np.int64(1), min_contact_s=np.float64(0.04))
+    np.testing.assert_array_equal(c, C.foot_contacts(feet, ft))
+    assert (c == truth).mean() > 0.95
+
+
+@pytest.mark.parametrize("frame_time_s", [-1.0, 0.0, NAN, INF])
+def test_step_period_rejects_bad_frame_time(frame_time_s):
+    c = _contacts_from_intervals(100, [(10, 60)], [(70, 95)])
+    with pytest.raises(UserError, match="frame_time_s: must be"):
+        C.step_period_s(c, frame_time_s)
+    with pytest.raises(UserError, match="frame_time_s: must be"):
+        C.mean_step_period_s(c, frame_time_s)

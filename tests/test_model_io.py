@@ -194,3 +194,120 @@ def test_characteristic_round_trip_and_typed_errors(tmp_path):
         model_io.load_characteristic(bad)
     with pytest.raises(UserError, match="one characteristic expected"):
         model_io.save_characteristic(tmp_path / "x.npz", style.stack([char, char]))
+
+
+# -- contents checked at load time (audit item 10) -------------------------------------------
+def _good_archive(tmp_path):
+    """(header, arrays) of a valid model file with a skeleton record."""
+    good = tmp_path / "good.npz"
+    model_io.save_model(good, _model(), motion=data.load("07_01")[:3])
+    arrays = _archive(good)
+    return json.loads(str(arrays.pop("header"))), arrays
+
+
+def _amp(a):
+    return a["amplitude"]
+
+
+BAD_CONTENTS = [
+    ("nan amplitude", {}, {"amplitude": lambda a: np.full_like(_amp(a), np.nan)},
+     "'amplitude' holds NaN or infinite"),
+    ("inf offset", {}, {"offset": lambda a: np.full_like(a["offset"], np.inf)},
+     "'offset' holds NaN or infinite"),
+    ("nan skeleton offsets", {}, {"skeleton_offsets": lambda a: a["skeleton_offsets"] * np.nan},
+     "'skeleton_offsets' holds NaN"),
+    ("negative omega", {}, {"omega": lambda a: np.array(-3.0)}, "omega must be > 0"),
+    ("zero omega", {}, {"omega": lambda a: np.array(0.0)}, "omega must be > 0"),
+    ("complex amplitude", {}, {"amplitude": lambda a: _amp(a).astype(complex)},
+     "'amplitude' has dtype complex128"),
+    ("string amplitude", {}, {"amplitude": lambda a: np.full(_amp(a).shape, "a")},
+     "'amplitude' has dtype <U1"),
+    ("bool phase", {}, {"phase": lambda a: a["phase"] > 0}, "'phase' has dtype bool"),
+    ("version true", {"version": True}, {}, "bad format version True"),
+    ("num_channels true", {"num_channels": True}, {}, "num_channels must be a non-negative"),
+    ("integer channel names", {"channel_names": [0, 1, 2]}, {}, "channel_names must be a list"),
+    ("channel names string", {"channel_names": "abc"}, {}, "channel_names must be a list"),
+    ("provenance list", {"provenance": [1, 2]}, {}, "provenance must be a JSON object"),
+    ("alignment number", {"alignment": 3}, {}, "alignment must be a string"),
+    ("short skeleton offsets", {}, {"skeleton_offsets": lambda a: a["skeleton_offsets"][:3]},
+     "skeleton_offsets has shape (3, 3), expected (31, 3)"),
+    ("end site offsets", {}, {"skeleton_end_site_offsets": lambda a: np.zeros((2, 3))},
+     "skeleton_end_site_offsets has shape (2, 3), expected (7, 3)"),
+    ("negative frame time", {"skeleton": {"frame_time_s": -1.0}}, {}, "frame_time_s must be"),
+    ("zero frame time", {"skeleton": {"frame_time_s": 0}}, {}, "frame_time_s must be"),
+    ("bool frame time", {"skeleton": {"frame_time_s": True}}, {}, "frame_time_s must be"),
+    ("text frame time", {"skeleton": {"frame_time_s": "0.01"}}, {}, "frame_time_s must be"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", BAD_CONTENTS, ids=[c[0] for c in BAD_CONTENTS])
+def test_load_model_rejects_bad_contents_naming_the_path(tmp_path, case):
+    _, header_edit, array_edit, fragment = case
+    header, arrays = _good_archive(tmp_path)
+    for k, v in header_edit.items():
+        header[k] = dict(header[k], **v) if isinstance(v, dict) else v
+    arrays = dict(arrays, **{k: f(arrays) for k, f in array_edit.items()})
+    bad = tmp_path / "bad.npz"
+    _write(bad, header, **arrays)
+    with pytest.raises(model_io.ModelFileError) as e:
+        model_io.load_model(bad)
+    assert e.value.path == str(bad) and str(e.value).startswith(f"{bad}: "), str(e.value)
+    assert fragment in e.value.message, str(e.value)
+
+
+def test_load_model_checks_leave_valid_files_alone(tmp_path):
+    header, arrays = _good_archive(tmp_path)
+    # Integer arrays, a null provenance and an integer frame time are valid JSON/npz spellings.
+    ok = tmp_path / "ok.npz"
+    _write(ok, dict(header, provenance=None, skeleton=dict(header["skeleton"], frame_time_s=1)),
+           **dict(arrays, offset=np.arange(3)))
+    mf = model_io.load_model(ok)
+    assert mf.provenance == {} and mf.frame_time_s == 1.0
+    assert np.asarray(mf.model.offset).dtype == np.float64
+    assert mf.template_motion().num_frames == 1
+
+
+def test_characteristic_arrays_are_checked_too(tmp_path):
+    from fourierjax import style
+
+    path = tmp_path / "c.npz"
+    model_io.save_characteristic(path, style.characteristic(*_gait_pair()))
+    arrays = _archive(path)
+    header = json.loads(str(arrays.pop("header")))
+    _write(path, header, **dict(arrays, log_omega=np.array(np.nan)))
+    with pytest.raises(model_io.ModelFileError, match="c.npz: array 'log_omega' holds NaN"):
+        model_io.load_characteristic(path)
+
+
+def test_save_model_rejects_provenance_that_is_not_json(tmp_path):
+    from fourierjax.errors import UserError
+
+    with pytest.raises(UserError, match="save_model: `provenance` must hold only JSON values"):
+        model_io.save_model(tmp_path / "p.npz", _model(), provenance={"x": object()})
+    assert not (tmp_path / "p.npz").exists()
+
+
+def test_save_model_refuses_what_load_model_would_refuse(tmp_path):
+    from fourierjax.errors import UserError
+
+    m = _model()
+    amp = np.array(m.amplitude)
+    amp[0, 0] = np.nan
+    nan = FourierModel(m.offset, amp, m.phase, m.omega, m.representation, m.channel_names)
+    with pytest.raises(UserError, match=r"NaN or infinite values in \['amplitude'\]"):
+        model_io.save_model(tmp_path / "n.npz", nan)
+    still = FourierModel(m.offset, m.amplitude, m.phase, np.asarray(0.0), m.representation,
+                         m.channel_names)
+    with pytest.raises(UserError, match="omega must be > 0"):
+        model_io.save_model(tmp_path / "s.npz", still)
+    assert not (tmp_path / "n.npz").exists() and not (tmp_path / "s.npz").exists()
+
+
+def test_missing_files_raise_the_same_error_for_models_and_characteristics(tmp_path):
+    for load in (model_io.load_model, model_io.load_characteristic):
+        missing = tmp_path / "nope.npz"
+        with pytest.raises(model_io.ModelFileError) as e:
+            load(missing)
+        assert e.value.path == str(missing) and str(e.value) == f"{missing}: no such file"
+        # Still a FileNotFoundError (what load_model raised before), for existing handlers.
+        assert isinstance(e.value, FileNotFoundError) and e.value.filename == str(missing)

@@ -417,3 +417,78 @@ Frame Time: 0.1
         M.channel_model(tmpl, model, (1.0, 2.0, 3.0))
     with pytest.raises(UserError, match="channel names"):
         M.channel_model(data.load("07_01"), model)
+
+
+# -- NaN and invalid arguments at the NumPy edge (audit item 12) -------------------------------
+_TINY = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation
+  JOINT Chest
+  {
+    OFFSET 0 1 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 1 0
+    }
+  }
+}
+MOTION
+Frames: 3
+Frame Time: 0.1
+0 1 0 0 0 0 10 20 30
+0 1 1 5 0 0 11 21 31
+0 1 2 9 0 0 12 22 32
+"""
+
+
+def test_features_from_motion_rejects_a_non_finite_heading():
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import parse_bvh
+
+    m = parse_bvh(_TINY)
+    for bad in (float("nan"), float("inf"), "north"):
+        with pytest.raises(UserError, match="features_from_motion: `heading_rad` must be"):
+            M.features_from_motion(m, heading_rad=bad)
+    x, _ = M.features_from_motion(m, heading_rad=0.0)
+    assert np.isfinite(x).all()
+
+
+def test_motion_from_features_rejects_non_finite_input():
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import parse_bvh
+
+    m = parse_bvh(_TINY)
+    x, names = M.features_from_motion(m, heading_rad=0.0)
+    back = M.motion_from_features(m, x, names, 0.1)
+    assert np.isfinite(back.channels).all()
+    bad = x.copy()
+    bad[2, 4] = np.nan
+    with pytest.raises(UserError, match=r"`features` holds NaN .*frame 2, channel 'Hips.Yrotation'\)"):
+        M.motion_from_features(m, bad, names, 0.1)
+    with pytest.raises(UserError, match="NaN or infinite"):
+        M.motion_from_features(m, np.full_like(x, np.inf), names, 0.1)
+    for kwargs, arg in (({"heading_rad": float("nan")}, "heading_rad"),
+                        ({"start_xz": (0.0, float("inf"))}, "start_xz"),
+                        ({"start_xz": (0.0, 1.0, 2.0)}, "start_xz")):
+        with pytest.raises(UserError, match=f"motion_from_features: `{arg}` must be"):
+            M.motion_from_features(m, x, names, 0.1, **kwargs)
+    for dt in (0.0, -0.1, float("nan")):
+        with pytest.raises(UserError, match="motion_from_features: `frame_time_s` must be"):
+            M.motion_from_features(m, x, names, dt)
+
+
+def test_make_euler_continuous_rejects_invalid_orders_and_shapes():
+    from fourierjax.errors import UserError
+    from fourierjax.rotations import EULER_ORDERS
+
+    x = np.zeros((3, 3))
+    for order in ("ABC", "zyx", "XXY", "XY", 3):
+        with pytest.raises(UserError, match="make_euler_continuous: `order` must be one of"):
+            M.make_euler_continuous(x, order)
+    for order in EULER_ORDERS:
+        np.testing.assert_array_equal(M.make_euler_continuous(x, order), x)
+    with pytest.raises(UserError, match=r"`angles` must have shape \[F, ..., 3\], got \(3, 2\)"):
+        M.make_euler_continuous(np.zeros((3, 2)), "ZYX")

@@ -12,17 +12,20 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fourierjax.errors import FourierJaxError
+from fourierjax.errors import UserError
 from fourierjax.skeleton import CHANNEL_NAMES, Topology
 
 if TYPE_CHECKING:  # pragma: no cover
     from fourierjax.skeleton import Skeleton
 
-__all__ = ["BVHError", "Motion", "format_bvh", "parse_bvh", "read_bvh", "write_bvh"]
+__all__ = ["BVHError", "MIN_FRAME_TIME_S", "Motion", "format_bvh", "parse_bvh", "read_bvh",
+           "write_bvh"]
 
 
-class BVHError(FourierJaxError, ValueError):
+class BVHError(UserError):
     """A BVH file that cannot be read: names the file, the 1-based line (or None) and the problem.
+
+    A `fourierjax.errors.UserError` (so also a `ValueError`): `except UserError` catches it.
 
     `str(err)` is `"path:line: message"`, or `"path: message"` when no line applies (a missing
     or unreadable file). Attributes: `path` (str), `line` (int | None), `message` (str).
@@ -188,6 +191,16 @@ _CHANNEL_BY_LOWER = {c.lower(): c for c in CHANNEL_NAMES}
 _FRAMES_RE = re.compile(r"\s*frames\s*:\s*(\S*)\s*", re.IGNORECASE | re.ASCII)
 _FRAME_TIME_RE = re.compile(r"\s*frame\s*time\s*:\s*(\S*)\s*", re.IGNORECASE | re.ASCII)
 _INT_RE = re.compile(r"\+?[0-9]{1,9}", re.ASCII)  # counts; int() of 4300+ digits raises
+# What a BVH number may look like: ASCII decimals with an optional exponent, or nan/inf (which
+# are then rejected as non-finite). Python's float() is laxer: it reads "1_0" as 10 and
+# non-ASCII digits ("١٢") as numbers, which no BVH writer produces.
+_FLOAT_RE = re.compile(
+    r"[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|nan|inf|infinity)",
+    re.ASCII | re.IGNORECASE,
+)
+# The shortest frame time accepted (1 MHz). Real capture runs at 10 kHz at most; a smaller value
+# is a corrupt header, and a subnormal one would make `Motion.fps` infinite.
+MIN_FRAME_TIME_S = 1e-6
 
 
 def read_bvh(path: str | os.PathLike) -> Motion:
@@ -202,7 +215,10 @@ def read_bvh(path: str | os.PathLike) -> Motion:
     **Raises:** `BVHError` for anything wrong, naming the file and the 1-based line: a missing
     or unreadable file (line None), bytes that are not UTF-8, a malformed hierarchy, unknown
     channel names, a frame count that does not match the rows, rows with the wrong number of
-    values, non-numeric, NaN or infinite values, zero frames, a non-positive frame time.
+    values, non-numeric, NaN or infinite values, zero frames, a non-positive frame time or
+    one below `MIN_FRAME_TIME_S` (1e-6 s). Numbers (OFFSET, Frame Time, frame data) must be
+    ASCII decimals with an optional exponent: Python's laxer `float()` spellings, such as
+    `1_0` or non-ASCII digits, are errors.
     """
     name = os.fspath(path)
     try:
@@ -250,11 +266,15 @@ def _show(s: str, limit: int = 40) -> str:
     return repr(s if len(s) <= limit else s[:limit] + "...")
 
 
+def _strict_float(tok: str) -> float | None:
+    """`float(tok)` for a token spelled as a BVH number (`_FLOAT_RE`), else None."""
+    return float(tok) if _FLOAT_RE.fullmatch(tok) else None
+
+
 def _number(tok: str, what: str, err) -> float:
-    try:
-        v = float(tok)
-    except ValueError:
-        raise err(f"{what}: {_show(tok)} is not a number") from None
+    v = _strict_float(tok)
+    if v is None:
+        raise err(f"{what}: {_show(tok)} is not a number")
     if not math.isfinite(v):
         raise err(f"{what}: {_show(tok)} is not a finite number")
     return v
@@ -468,12 +488,16 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     m = _FRAME_TIME_RE.fullmatch(l2)
     if m is None:
         raise error(time_line, f"expected 'Frame Time: <seconds>', found {_show(l2.strip())}")
-    try:
-        frame_time = float(m.group(1))
-    except ValueError:
-        raise error(time_line, f"frame time {_show(m.group(1))} is not a number") from None
+    frame_time = _strict_float(m.group(1))
+    if frame_time is None:
+        raise error(time_line, f"frame time {_show(m.group(1))} is not a number")
     if not (math.isfinite(frame_time) and frame_time > 0):
         raise error(time_line, f"frame time must be positive, got {_show(m.group(1))}")
+    if frame_time < MIN_FRAME_TIME_S:
+        raise error(
+            time_line, f"frame time {_show(m.group(1))} s is below the minimum "
+            f"{MIN_FRAME_TIME_S:g} s (1 MHz); the header is probably corrupt"
+        )
 
     # -- the skeleton
     try:
@@ -596,6 +620,8 @@ def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames
     values = None if others else _parse_decimals(data, a, start_pos, end_pos)
     if values is None:
         try:
+            if b"_" in others:  # NumPy, like float(), reads "1_0" as 10: not a BVH number
+                raise ValueError
             values = np.array(data.split(), dtype=np.float64)
         except ValueError:
             lines = data.split(b"\n")
@@ -619,6 +645,8 @@ def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames
 
 
 def _is_float(tok: bytes) -> bool:
+    if b"_" in tok:
+        return False
     try:
         np.array([tok], dtype=np.float64)
     except ValueError:
