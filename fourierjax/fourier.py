@@ -53,6 +53,7 @@ traced solve, so the whole fit is one XLA program of ~60 kernels (~2-3 s to comp
 from __future__ import annotations
 
 import math
+import operator
 
 import equinox as eqx
 import jax
@@ -116,6 +117,117 @@ def _safe_norm_atan2(a: Array, b: Array) -> tuple[Array, Array]:
     return amplitude, phase
 
 
+# ---------------------------------------------------------------------------------- input checks
+# Shape checks read static shapes only (free under jit, vmap and grad). Value checks run only on
+# concrete inputs (a traced value cannot be read), and never in the synthesis hot paths, where
+# reading a device array back to the host would be a sync per call.
+
+
+def _is_traced(*values) -> bool:
+    return any(isinstance(v, jax.core.Tracer) for v in values)
+
+
+def _check_int(fn: str, name: str, value, minimum: int) -> int:
+    """``value`` as a Python int ``>= minimum`` (a static argument), else a UserError."""
+    try:
+        if isinstance(value, bool | np.bool_):
+            raise TypeError
+        n = operator.index(value)
+    except TypeError:
+        raise UserError(
+            f"{fn}: {name} must be an integer >= {minimum}, got {value!r} "
+            f"({type(value).__name__})"
+        ) from None
+    if n < minimum:
+        raise UserError(f"{fn}: {name} must be an integer >= {minimum}, got {n}")
+    return n
+
+
+def _check_real(fn: str, name: str, value) -> float:
+    """``value`` as a float (a static option: a real number, not NaN), else a UserError."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.integer
+                                                             | np.floating):
+        raise UserError(f"{fn}: {name} must be a real number, got {value!r} "
+                        f"({type(value).__name__})")
+    if math.isnan(value):
+        raise UserError(f"{fn}: {name} must be a real number, got NaN")
+    return float(value)
+
+
+def _check_representation(fn: str, representation) -> None:
+    if representation not in REPRESENTATIONS:
+        raise UserError(f"{fn}: representation {representation!r} not in {REPRESENTATIONS}")
+
+
+def _check_frame_time(fn: str, frame_time_s) -> np.ndarray | None:
+    """Frame times (scalar or array) must be positive and finite; skipped when traced.
+    Returns them as a host array (None when traced)."""
+    if _is_traced(frame_time_s):
+        return None
+    try:
+        dt = np.asarray(frame_time_s, float)
+    except (TypeError, ValueError):
+        dt = np.asarray(np.nan)
+    if not (np.isfinite(dt).all() and (dt > 0).all()):
+        bad = int((~(np.isfinite(dt) & (dt > 0))).sum())
+        got = dt.tolist() if dt.size <= 8 else f"{dt.size} values, {bad} of them bad"
+        raise UserError(f"{fn}: frame_time_s must be positive seconds, got {got}")
+    return dt
+
+
+def _as_float_features(fn: str, features):
+    """Real floating features: integer and bool samples are cast to the default float dtype
+    (as ``fourierjax.rotations`` does); complex or non-numeric ones are a UserError."""
+    dtype = np.dtype(features.dtype)
+    if jnp.issubdtype(dtype, jnp.floating):
+        return features
+    if dtype == np.bool_ or jnp.issubdtype(dtype, jnp.integer):
+        return features.astype(jnp.result_type(float))
+    raise UserError(f"{fn}: features must be real numbers, got dtype {dtype}")
+
+
+def _used_frames(mask) -> np.ndarray:
+    """Frames a (concrete) mask uses, per clip: its nonzero entries along the last axis."""
+    return np.sum(np.asarray(mask) != 0, axis=-1)
+
+
+def _check_mask_values(fn: str, mask) -> None:
+    """A concrete mask is booleans, or weights that are finite and >= 0."""
+    m = np.asarray(mask)
+    if m.dtype == np.bool_:
+        return
+    try:
+        m = m.astype(float)
+    except (TypeError, ValueError):
+        raise UserError(f"{fn}: mask must be booleans, got dtype {m.dtype}") from None
+    if not (np.isfinite(m).all() and (m >= 0).all()):
+        raise UserError(f"{fn}: mask must be booleans (or finite weights >= 0); it holds "
+                        f"{int((~(np.isfinite(m) & (m >= 0))).sum())} negative or NaN value(s)")
+
+
+def _check_finite_used(fn: str, features, mask) -> None:
+    """The frames a fit uses must be finite (frames left out by ``mask`` may hold NaN). A JAX
+    array is read back to the host for this (zero-copy on CPU)."""
+    bad = ~np.isfinite(np.asarray(features))
+    if mask is not None:
+        bad &= (np.asarray(mask) != 0)[..., None]
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise UserError(
+            f"{fn}: features hold {int(bad.sum())} NaN or infinite value(s) in frames the fit "
+            f"uses, the first at index {first}; leave such frames out with mask="
+        )
+
+
+def _check_one_model(fn: str, model) -> None:
+    """One (unstacked) model: vmap over stacked ones (static shapes only)."""
+    if model.offset.ndim != 1:
+        raise UserError(
+            f"{fn}: `model` must be one model (offset [C]), got offset shape "
+            f"{model.offset.shape}; vmap over stacked models (or use synthesize_batch)"
+        )
+
+
 class FourierModel(eqx.Module):
     """Per-channel Fourier series with one fundamental (Unuma 1995 eq. 1, sine convention).
 
@@ -135,21 +247,21 @@ class FourierModel(eqx.Module):
         off, amp, ph, om = (jnp.shape(x) for x in (self.offset, self.amplitude, self.phase,
                                                      self.omega))
         if len(amp) < 2 or amp != ph:
-            raise ValueError(
+            raise UserError(
                 f"FourierModel: amplitude {amp} and phase {ph} must both be [..., C, N]"
             )
         if off != amp[:-1]:
-            raise ValueError(f"FourierModel: offset {off} must be [..., C] with C = {amp[-2]}")
+            raise UserError(f"FourierModel: offset {off} must be [..., C] with C = {amp[-2]}")
         if om != off[:-1]:
-            raise ValueError(f"FourierModel: omega {om} must be a scalar (per model)")
+            raise UserError(f"FourierModel: omega {om} must be a scalar (per model)")
         if self.representation not in REPRESENTATIONS:
-            raise ValueError(
+            raise UserError(
                 f"FourierModel: representation {self.representation!r} not in {REPRESENTATIONS}"
             )
         if not isinstance(self.channel_names, tuple):
             raise TypeError("FourierModel: channel_names must be a tuple of str")
         if self.channel_names and len(self.channel_names) != amp[-2]:
-            raise ValueError(
+            raise UserError(
                 f"FourierModel: {len(self.channel_names)} channel_names for {amp[-2]} channels"
             )
 
@@ -198,7 +310,7 @@ class FourierModel(eqx.Module):
         ``convention="cosine"`` gives Tilmanne's phases (eq. 1; 54 x 5 + 1 = 271 numbers).
         """
         if convention not in ("sine", "cosine"):
-            raise ValueError(f"style_vector: convention {convention!r} not 'sine' or 'cosine'")
+            raise UserError(f"style_vector: convention {convention!r} not 'sine' or 'cosine'")
         amp = self.amplitude
         ph = wrap_angle(self.phase - jnp.pi / 2) if convention == "cosine" else self.phase
         pairs = jnp.stack([amp, ph], axis=-1).reshape(*amp.shape[:-1], -1)  # [C, 2N]
@@ -213,7 +325,7 @@ class FourierModel(eqx.Module):
         vector = jnp.asarray(vector)
         expected = num_channels * (2 * num_harmonics + 1) + 1
         if vector.shape != (expected,):
-            raise ValueError(
+            raise UserError(
                 f"from_style_vector: vector shape {vector.shape}, expected ({expected},) for "
                 f"{num_channels} channels x {num_harmonics} harmonics"
             )
@@ -224,7 +336,7 @@ class FourierModel(eqx.Module):
         if convention == "cosine":
             ph = ph + jnp.pi / 2
         elif convention != "sine":
-            raise ValueError(f"from_style_vector: convention {convention!r} not 'sine' or 'cosine'")
+            raise UserError(f"from_style_vector: convention {convention!r} not 'sine' or 'cosine'")
         # Negative amplitudes (e.g. after PCA) are legal points: flip sign into the phase.
         a, b = amp * jnp.cos(ph), amp * jnp.sin(ph)
         return cls.from_sin_cos(offset, a, b, vector[-1], representation, channel_names)
@@ -320,8 +432,13 @@ def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Ar
         phase: ``[T]`` cycle phase theta in radians (any values; 2 pi = one gait cycle).
     Returns:
         ``[T, C]`` channel values (radians for angle channels).
+    Raises:
+        UserError for a stacked ``model`` or a ``phase`` that is not 1-D (static shapes only).
     """
+    _check_one_model("synthesize_phase", model)
     phase = jnp.asarray(phase, dtype=model.amplitude.dtype)
+    if phase.ndim != 1:
+        raise UserError(f"synthesize_phase: phase must be [T] (radians), got shape {phase.shape}")
     a, b = model.sin_cos()
     n = jnp.arange(1, model.num_harmonics + 1, dtype=phase.dtype)
     nt = phase[:, None] * n[None, :]  # T x N trig calls, not T x C x N
@@ -351,8 +468,13 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
         t_s: ``[T]`` times in seconds (any length and frame rate).
     Returns:
         ``[T, C]`` channel values.
+    Raises:
+        UserError for a stacked ``model`` or a ``t_s`` that is not 1-D (static shapes only).
     """
+    _check_one_model("synthesize", model)
     t_s = jnp.asarray(t_s, dtype=model.amplitude.dtype)
+    if t_s.ndim != 1:
+        raise UserError(f"synthesize: t_s must be [T] (seconds), got shape {t_s.shape}")
     return synthesize_phase(model, model.omega * t_s)
 
 
@@ -493,14 +615,52 @@ def fit_linear(
     a whole number of cycles (a plain projection, Tilmanne eq. 3-4, would need that).
 
     Arguments:
-        features: ``[T, C]`` samples; t_s: ``[T]`` sample times (s); omega: rad/s;
-        num_harmonics: N (static); mask: ``[T]`` frames to use (default all).
+        features: ``[T, C]`` samples (frames left out by ``mask`` may hold NaN); t_s: ``[T]``
+        sample times (s); omega: rad/s; num_harmonics: N (static); mask: ``[T]`` frames to
+        use (default all; at least 2N + 1 of them).
     Returns:
         FourierModel with the given omega.
+    Raises:
+        UserError naming the argument for bad shapes, ``num_harmonics`` or ``representation``;
+        and, for concrete (untraced) values, NaN in used frames, non-finite ``t_s`` or
+        ``omega``, or fewer used frames than the 2N + 1 coefficients per channel.
     """
-    features = jnp.asarray(features)
+    fn = "fit_linear"
+    num_harmonics = _check_int(fn, "num_harmonics", num_harmonics, 1)
+    _check_representation(fn, representation)
+    features = _as_float_features(fn, _as_array(features))
+    if features.ndim != 2:
+        raise UserError(f"{fn}: features must be [T, C], got shape {features.shape}")
     T = features.shape[0]
+    if np.shape(t_s) != (T,):
+        raise UserError(f"{fn}: t_s shape {np.shape(t_s)}, expected ({T},) (one time per frame "
+                        f"of features {features.shape})")
+    if mask is not None and np.shape(mask) != (T,):
+        raise UserError(f"{fn}: mask shape {np.shape(mask)}, expected ({T},)")
+    if np.shape(omega) != ():
+        raise UserError(f"{fn}: omega must be a scalar (rad/s), got shape {np.shape(omega)}")
+    need = 2 * num_harmonics + 1
+    if T < need:
+        raise UserError(f"{fn}: features have {T} frame(s), fewer than the {need} coefficients "
+                        f"per channel of {num_harmonics} harmonic(s) (2N + 1)")
+    mask_host = None if mask is None or _is_traced(mask) else np.asarray(mask)
+    if mask_host is not None:
+        _check_mask_values(fn, mask_host)
+        used = int(_used_frames(mask_host))
+        if used < need:
+            raise UserError(f"{fn}: mask leaves {used} used frame(s), fewer than the {need} "
+                            f"coefficients per channel of {num_harmonics} harmonic(s) (2N + 1)")
+    if not _is_traced(features, mask):
+        _check_finite_used(fn, features, mask_host)
+    if not _is_traced(t_s) and not np.isfinite(np.asarray(t_s, float)).all():
+        raise UserError(f"{fn}: t_s holds NaN or infinite times")
+    if not _is_traced(omega) and not np.isfinite(float(omega)):
+        raise UserError(f"{fn}: omega must be finite (rad/s), got {float(omega)}")
+    features = jnp.asarray(features)
     w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
+    if mask is not None:
+        # Frames left out may hold NaN (as in `fit`): 0 * NaN would poison the weighted sums.
+        features = jnp.where(w[:, None] > 0, features, jnp.zeros((), features.dtype))
     mean = _masked_mean(features, w)
     omega = jnp.asarray(omega, features.dtype)
     _, coef, _ = _solve_coefficients(features - mean[None, :], w, omega * jnp.asarray(t_s),
@@ -530,8 +690,25 @@ def spectral_omega(
 
     Returns:
         ``(omega [rad/s], freqs_hz [K], power [K])``.
+    Raises:
+        UserError for features not ``[T, C]``, bad ``mask`` / ``channel_weights`` shapes, an
+        empty band, ``pad_factor < 1`` or (when concrete) a ``frame_time_s`` that is not
+        positive and finite.
     """
+    fn = "spectral_omega"
+    if np.ndim(features) != 2:
+        raise UserError(f"{fn}: features must be [T, C], got shape {np.shape(features)}")
+    features = jnp.asarray(features)
     T, C = features.shape
+    if mask is not None and np.shape(mask) != (T,):
+        raise UserError(f"{fn}: mask shape {np.shape(mask)}, expected ({T},)")
+    if channel_weights is not None and np.shape(channel_weights) != (C,):
+        raise UserError(f"{fn}: channel_weights shape {np.shape(channel_weights)}, expected "
+                        f"({C},)")
+    if not _is_traced(f_min_hz, f_max_hz) and not f_min_hz < f_max_hz:
+        raise UserError(f"{fn}: the band f_min_hz={f_min_hz} .. f_max_hz={f_max_hz} Hz is empty")
+    pad_factor = _check_int(fn, "pad_factor", pad_factor, 1)
+    _check_frame_time(fn, frame_time_s)
     w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
     cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
     n_valid = jnp.sum(w)
@@ -877,6 +1054,15 @@ def fit_batch(
 
     Returns:
         FitResult with a leading batch axis on every leaf.
+    Raises:
+        UserError naming the argument, before any work: features not ``[B, T, C]`` real numbers
+        (integers are cast to float) with ``C >= 1`` and ``T >= 2N + 2``; ``num_harmonics``,
+        ``grid_points`` (>= 2) or ``golden_iterations`` (>= 0) not integers; an unknown
+        ``representation``; an empty band (``f_min_hz >= f_max_hz``, or ``f_min_hz`` at or
+        above Nyquist); ``search_halfwidth <= 0``; bad shapes. For concrete (untraced) values
+        also: ``frame_time_s`` not positive; a mask leaving a clip fewer than 2N + 2 frames
+        (2N + 1 coefficients per channel, plus omega); NaN in used frames; ``omega_steps`` not
+        positive (NaN: unknown); ``channel_weights`` negative, NaN or all zero.
     """
     features = _as_array(features)
     if features.ndim != 3:
@@ -888,6 +1074,33 @@ def fit_batch(
                     golden_iterations=golden_iterations, odd_threshold=odd_threshold)
 
 
+def _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz, search_halfwidth,
+                       grid_points, golden_iterations, odd_threshold) -> dict:
+    """Checks of the static options of `fit` / `fit_batch` (before any work), naming the
+    argument. Returns them normalised (Python ints and floats)."""
+    num_harmonics = _check_int(name, "num_harmonics", num_harmonics, 1)
+    _check_representation(name, representation)
+    f_min_hz = _check_real(name, "f_min_hz", f_min_hz)
+    f_max_hz = _check_real(name, "f_max_hz", f_max_hz)
+    if not (f_min_hz < f_max_hz and f_max_hz > 0):
+        raise UserError(f"{name}: the search band f_min_hz={f_min_hz} .. f_max_hz={f_max_hz} Hz "
+                        "is empty: expected f_min_hz < f_max_hz and f_max_hz > 0")
+    search_halfwidth = _check_real(name, "search_halfwidth", search_halfwidth)
+    if not (0 < search_halfwidth < math.inf):
+        raise UserError(f"{name}: search_halfwidth must be a finite relative half-width > 0 "
+                        f"(0.25: omega within [guess / 1.25, guess * 1.25]), got {search_halfwidth}")
+    return dict(num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
+                search_halfwidth=search_halfwidth,
+                grid_points=_check_int(name, "grid_points", grid_points, 2),
+                golden_iterations=_check_int(name, "golden_iterations", golden_iterations, 0),
+                odd_threshold=_check_real(name, "odd_threshold", odd_threshold))
+
+
+def _min_fit_frames(num_harmonics: int) -> int:
+    """Frames a fit needs: 2N + 1 linear coefficients per channel, plus omega."""
+    return 2 * num_harmonics + 2
+
+
 def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
                     channel_weights):
     """Trace-time checks naming the argument (``shape``: ``[B, T, C]`` or ``[T, C]``).
@@ -896,10 +1109,16 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
     made numpy arrays (JAX arrays, sharded ones included, pass through untouched).
     """
     batch, (T, C) = tuple(shape[:-2]), shape[-2:]
+    if C == 0:
+        raise UserError(f"{name}: features have no channels (shape {tuple(shape)})")
+    need = _min_fit_frames(num_harmonics)
+    if T < need:
+        raise UserError(
+            f"{name}: features have {T} frame(s), fewer than the {need} a fit of "
+            f"{num_harmonics} harmonic(s) needs (2N + 1 coefficients per channel, plus omega)"
+        )
     if channel_names and len(channel_names) != C:
         raise UserError(f"{name}: {len(channel_names)} channel_names for {C} channels")
-    if num_harmonics < 1:
-        raise UserError(f"{name}: num_harmonics must be >= 1, got {num_harmonics}")
     out = []
     for arg, value, expected, exact in (("mask", mask, (*batch, T), True),
                                          ("frame_time_s", frame_time_s, batch, False),
@@ -914,24 +1133,67 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
     return tuple(out)
 
 
-def _check_fit_values(name, features, mask, frame_time_s) -> None:
-    """Value checks where the values are known (not traced): the frames the fit uses must be
-    finite (frames left out by ``mask`` may hold NaN), and frame times positive. A JAX array
-    is read back to the host for this (zero-copy on CPU)."""
-    if any(isinstance(v, jax.core.Tracer) for v in (features, mask, frame_time_s)):
+def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
+                      f_min_hz) -> None:
+    """Value checks where the values are known (not traced), each skipped when its value is
+    traced: frame times positive, with the band's f_min_hz below Nyquist; the mask booleans
+    (or weights >= 0) leaving at least 2N + 2 frames per clip; the frames the fit uses finite
+    (frames left out by ``mask`` may hold NaN); ``omega_steps`` positive or NaN (unknown). A JAX
+    array is read back to the host for this (zero-copy on CPU; small arrays but ``features``)."""
+    dt = _check_frame_time(name, frame_time_s)
+    if dt is not None:
+        nyquist = 0.5 / np.max(dt)
+        if f_min_hz >= nyquist:
+            raise UserError(f"{name}: f_min_hz={f_min_hz} is not below the Nyquist frequency "
+                            f"{nyquist:g} Hz of frame_time_s: the search band holds no frequency")
+    if mask is not None and not _is_traced(mask):
+        mask = np.asarray(mask)  # read back once (JAX arrays: zero-copy on CPU)
+        _check_mask_values(name, mask)
+        used = np.atleast_1d(_used_frames(mask))
+        need = _min_fit_frames(num_harmonics)
+        few = np.flatnonzero(used < need)
+        if few.size:
+            i = int(few[0])
+            where = "" if np.ndim(mask) == 1 else f" in clip {i}" + (
+                f" (and {few.size - 1} other clip(s))" if few.size > 1 else "")
+            raise UserError(
+                f"{name}: mask leaves {int(used[i])} used frame(s){where}, fewer than the {need} "
+                f"a fit of {num_harmonics} harmonic(s) needs (2N + 1 coefficients per channel, "
+                "plus omega)"
+            )
+    if omega_steps is not None and not _is_traced(omega_steps):
+        om = np.asarray(omega_steps, float)
+        bad = ~(np.isnan(om) | (np.isfinite(om) & (om > 0)))
+        if bad.any():
+            raise UserError(
+                f"{name}: omega_steps must be positive rad/s, or NaN where no step events are "
+                f"known; got {float(om[bad].ravel()[0])}"
+                + (f" at index {int(np.flatnonzero(bad.ravel())[0])}" if om.ndim else "")
+            )
+    if not _is_traced(features, mask):  # last: the one check that reads all of the features
+        _check_finite_used(name, features, mask)
+
+
+def _check_channel_weights(name, channel_weights, defaulted: bool) -> None:
+    """Concrete channel weights must be finite, >= 0 and not all zero (they weigh the omega
+    search: all zero, nothing drives it)."""
+    if _is_traced(channel_weights):
         return
-    dt = np.asarray(frame_time_s, float)
-    if not (np.isfinite(dt).all() and (dt > 0).all()):
-        raise UserError(f"{name}: frame_time_s must be positive seconds, got {dt.tolist()}")
-    bad = ~np.isfinite(np.asarray(features))
-    if mask is not None:
-        bad &= np.asarray(mask).astype(bool)[..., None]
+    try:
+        cw = np.asarray(channel_weights, float)
+    except (TypeError, ValueError):
+        raise UserError(f"{name}: channel_weights must be real numbers, got dtype "
+                        f"{np.asarray(channel_weights).dtype}") from None
+    bad = ~(np.isfinite(cw) & (cw >= 0))
     if bad.any():
-        first = tuple(int(i) for i in np.argwhere(bad)[0])
-        raise UserError(
-            f"{name}: features hold {int(bad.sum())} NaN or infinite value(s) in frames the fit "
-            f"uses, the first at index {first}; leave such frames out with mask="
-        )
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{name}: channel_weights must be finite and >= 0, got {float(cw[i])} for "
+                        f"channel {i}")
+    if not (cw > 0).any():
+        hint = (" (by default only rotation channels are weighed, and every channel in "
+                "channel_names is root.*: pass channel_weights=)") if defaulted else ""
+        raise UserError(f"{name}: channel_weights are all zero, so no channel drives the omega "
+                        f"search{hint}")
 
 
 def _broadcasts_to(shape, target) -> bool:
@@ -965,6 +1227,8 @@ def fit(
         num_harmonics: N; mask: ``[T]`` frames to use; omega_steps: ω from step events (rad/s).
     Returns:
         FitResult (no batch axis).
+    Raises:
+        UserError naming the argument, as :func:`fit_batch`.
     """
     features = _as_array(features)
     if features.ndim != 2:
@@ -978,16 +1242,20 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
              f_max_hz=3.0, search_halfwidth=0.25, grid_points=33, golden_iterations=40,
              odd_threshold=0.1) -> FitResult:
     """Check the arguments of `fit` / `fit_batch` (`name`) and run its jitted `program`."""
+    options = _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz,
+                                 search_halfwidth, grid_points, golden_iterations, odd_threshold)
+    num_harmonics = options["num_harmonics"]
+    features = _as_float_features(name, features)
     mask, frame_time_s, omega_steps, channel_weights = _check_fit_args(
         name, features.shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
         channel_weights)
-    _check_fit_values(name, features, mask, frame_time_s)
-    if channel_weights is None:
+    defaulted = channel_weights is None
+    if defaulted:
         channel_weights = _default_channel_weights(channel_names, features.shape[-1])
-    out = program(features, mask, frame_time_s, omega_steps, channel_weights,
-                  num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
-                  search_halfwidth=search_halfwidth, grid_points=grid_points,
-                  golden_iterations=golden_iterations, odd_threshold=odd_threshold)
+    _check_channel_weights(name, channel_weights, defaulted)
+    _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
+                      options["f_min_hz"])
+    out = program(features, mask, frame_time_s, omega_steps, channel_weights, **options)
     return _fit_result(out, representation, channel_names)
 
 
@@ -1028,7 +1296,26 @@ def channel_event_phase(model: FourierModel, channel: int) -> Float[Array, ""]:
     The documented fallback event when no foot contacts are available: with the channel the
     left hip flexion, ``shift_phase(model, channel_event_phase(model, c))`` puts the peak of
     the left hip's fundamental at theta = 0.
+
+    Raises:
+        UserError when ``model`` is stacked, or ``channel`` (when concrete) is not an integer in
+        ``[-C, C)`` (negative indices count from the end, as in Python).
     """
+    fn = "channel_event_phase"
+    if model.phase.ndim != 2:
+        raise UserError(f"{fn}: `model` must be one model (phase [C, N]), got phase shape "
+                        f"{model.phase.shape}")
+    C = model.num_channels
+    if not _is_traced(channel):
+        try:
+            if isinstance(channel, bool | np.bool_):
+                raise TypeError
+            index = operator.index(channel)
+        except TypeError:
+            raise UserError(f"{fn}: channel must be an integer index, got {channel!r}") from None
+        if not -C <= index < C:
+            raise UserError(f"{fn}: channel {index} out of range for a model of {C} channel(s) "
+                            f"(valid: {-C} .. {C - 1})")
     return wrap_angle(jnp.pi / 2 - model.phase[channel, 0])
 
 
@@ -1039,7 +1326,23 @@ def rms_error(
     model: FourierModel, features: Float[Array, "T C"], t_s: Float[Array, " T"],
     mask: Bool[Array, " T"] | None = None,
 ) -> Float[Array, " C"]:
-    """Per-channel RMS of ``features - synthesize(model, t_s)`` over the masked frames."""
+    """Per-channel RMS of ``features - synthesize(model, t_s)`` over the masked frames.
+
+    Raises:
+        UserError when ``features`` is not ``[T, C]`` with the model's C, or ``t_s`` / ``mask``
+        are not ``[T]`` (static shapes only).
+    """
+    fn = "rms_error"
+    _check_one_model(fn, model)
+    shape, C = np.shape(features), model.num_channels
+    if len(shape) != 2 or shape[1] != C:
+        raise UserError(f"{fn}: features shape {shape}, expected [T, {C}] (the model's "
+                        f"{C} channel(s))")
+    if np.shape(t_s) != shape[:1]:
+        raise UserError(f"{fn}: t_s shape {np.shape(t_s)}, expected {shape[:1]} (one time per "
+                        "frame of features)")
+    if mask is not None and np.shape(mask) != shape[:1]:
+        raise UserError(f"{fn}: mask shape {np.shape(mask)}, expected {shape[:1]}")
     r = jnp.asarray(features) - synthesize(model, t_s)
     w = jnp.ones(r.shape[:1], r.dtype) if mask is None else jnp.asarray(mask, r.dtype)
     return jnp.sqrt(_mm(w, r * r) / jnp.maximum(jnp.sum(w), 1.0))
@@ -1049,7 +1352,18 @@ def variance_explained(
     target: Float[Array, "T D"], approx: Float[Array, "T D"],
     mask: Bool[Array, " T"] | None = None,
 ) -> Float[Array, ""]:
-    """``1 - sum |target - approx|^2 / sum |target - mean(target)|^2`` over masked frames."""
+    """``1 - sum |target - approx|^2 / sum |target - mean(target)|^2`` over masked frames.
+
+    Raises:
+        UserError when ``target`` and ``approx`` differ in shape, or ``mask`` is not ``[T]``.
+    """
+    fn = "variance_explained"
+    shape = np.shape(target)
+    if np.shape(approx) != shape or len(shape) < 1:
+        raise UserError(f"{fn}: target shape {shape} and approx shape {np.shape(approx)} must "
+                        "be the same [T, ...]")
+    if mask is not None and np.shape(mask) != shape[:1]:
+        raise UserError(f"{fn}: mask shape {np.shape(mask)}, expected {shape[:1]}")
     target, approx = jnp.asarray(target), jnp.asarray(approx)
     target = target.reshape(target.shape[0], -1)
     approx = approx.reshape(approx.shape[0], -1)
@@ -1071,11 +1385,23 @@ def amplitude_spectrum(
 ) -> tuple[Float[Array, " K"], Float[Array, "K C"]]:
     """Single-sided DFT amplitude spectrum per channel (Tilmanne Fig. 1).
 
-    Returns ``(freqs_hz [K], amplitude [K, C])`` with ``amplitude = 2 |c_k|`` (``|c_0|`` at 0 Hz)
-    so that a sinusoid of amplitude A on a bin shows A.
+    Returns ``(freqs_hz [K], amplitude [K, C])`` with ``amplitude = 2 |c_k|``, but ``|c_k|`` at
+    0 Hz and, for even T, at the Nyquist frequency (bins with no mirror image), so that a
+    sinusoid of amplitude A on a bin shows A.
+    Raises:
+        UserError for an empty ``features`` or (when concrete) a ``frame_time_s`` that is not
+        positive and finite.
     """
+    fn = "amplitude_spectrum"
     x = jnp.asarray(features)
+    if x.ndim < 1 or x.shape[0] < 1:
+        raise UserError(f"{fn}: features must be [T, C] with T >= 1, got shape {x.shape}")
+    _check_frame_time(fn, frame_time_s)
     T = x.shape[0]
     c = jnp.fft.rfft(x, axis=0) / T
-    amp = jnp.abs(c).at[1:].multiply(2.0)
+    k = np.arange(T // 2 + 1)
+    # The 0 Hz bin and (even T) the Nyquist bin are real and not mirrored: no doubling.
+    scale = np.where((k == 0) | (2 * k == T), 1.0, 2.0).reshape((-1,) + (1,) * (x.ndim - 1))
+    amp = jnp.abs(c)
+    amp = amp * scale.astype(amp.dtype)
     return jnp.fft.rfftfreq(T, d=frame_time_s), amp
