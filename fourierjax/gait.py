@@ -44,11 +44,14 @@ synthesized with the rule advance slower than captured (09_01: ~55 vs 63 units/s
 
 from __future__ import annotations
 
+import math
+import operator
 from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax.errors import UserError
@@ -70,6 +73,41 @@ def _safe_sqrt(x):
 def _soft_sqrt(x, eps):
     """√(max(x, 0) + ε) − √ε: smooth, finite slope 1/(2√ε) at 0."""
     return jnp.sqrt(jnp.maximum(x, 0.0) + eps) - jnp.sqrt(eps)
+
+
+def _concrete(x) -> np.ndarray | None:
+    """`x` as a NumPy array, or None when it is traced (values are checked on concrete inputs
+    only: a host copy of a small scalar; under jit/vmap/grad the checks are skipped)."""
+    if isinstance(x, jax.core.Tracer):
+        return None
+    return np.asarray(x)
+
+
+def _check_finite(where: str, name: str, value) -> None:
+    v = _concrete(value)
+    if v is not None and not np.all(np.isfinite(v)):
+        raise UserError(f"{where}: `{name}` must be finite, got {v if v.ndim == 0 else 'non-finite entries'}")
+
+
+def _check_jump(where: str, jump) -> None:
+    # Eq. 5 lifts the hip by jump·√(Lmax − L) in flight: the flight height, so jump ≥ 0 (the
+    # lift is ≥ 0 by construction). A negative jump would push the stance foot into the ground.
+    _check_finite(where, "jump", jump)
+    v = _concrete(jump)
+    if v is not None and np.any(v < 0):
+        raise UserError(f"{where}: `jump` must be >= 0 (the flight height of eq. 5), got {v}")
+
+
+def _check_int(where: str, name: str, value, minimum: int) -> int:
+    """`value` as a Python int; UserError for a non-integer (10.7 is not silently truncated)
+    or a value below `minimum`."""
+    try:
+        n = operator.index(value)
+    except TypeError:
+        raise UserError(f"{where}: `{name}` must be an integer, got {value!r}") from None
+    if n < minimum:
+        raise UserError(f"{where}: `{name}` must be at least {minimum}, got {n}")
+    return n
 
 
 def _check_rule(rule: str) -> str:
@@ -199,20 +237,44 @@ def hip_rule(
     - `width`: smooth rule only: sigmoid width κ of the threshold, in units of N.
 
     **Returns:** a `HipRule`. Gradients are finite everywhere, `L = Lmax` included.
+
+    `N = (Lmax − L)/Lmax` needs `Lmax > 0`: the groins above the feet, true of any standing
+    figure. Concrete input with `Lmax ≤ 0` or non-finite (all-zero legs: the groins level with
+    the lowest foot points, usually wrong groin or foot indices or `up_axis`) raises
+    `UserError`, as do a concrete `jump < 0` or non-finite `gait`/`jump`. Under jit/vmap/grad
+    (no value checks) a degenerate `Lmax ≤ 0` gives `N = 0` (no flight) and finite gradients
+    instead of 0/0.
     """
     _check_rule(rule)
     leg = jnp.asarray(leg)
     if leg.shape[-1] != 2:
         raise UserError(f"hip_rule: `leg` must be [T, 2] (L_L, L_R), got shape {leg.shape}")
+    _check_finite("hip_rule", "gait", gait)
+    _check_jump("hip_rule", jump)
+    # Lmax > 0 for any standing figure; the soft max of the smooth rule is >= max(leg), so
+    # max(leg) > 0 covers every rule (and the default temperature, 0.002 max(leg), needs it).
+    ref = jnp.max(leg) if l_max is None else jnp.asarray(l_max)
+    v = _concrete(ref)
+    if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
+        what = "the largest leg height in `leg`" if l_max is None else "`l_max`"
+        raise UserError(
+            f"hip_rule: Lmax ({what}) must be finite and > 0, got {v}; leg heights are groin "
+            "heights above the lowest foot point, so legs that are all <= 0 mean the groins are not "
+            "above the feet (check the groin and foot indices and `up_axis`)"
+        )
     if rule == "smooth":
         if temperature is None:
-            temperature = 0.002 * jnp.max(leg)
+            t0 = 0.002 * jnp.max(leg)
+            # Shim: a traced all-zero leg would give τ = 0 and 0/0 in the log-sum-exp.
+            temperature = jnp.where(t0 > 0, t0, 1.0)
         L = temperature * jax.nn.logsumexp(leg / temperature, axis=-1)
     else:
         L = jnp.max(leg, axis=-1)
     lmax = jnp.max(L) if l_max is None else jnp.asarray(l_max)
-    # N is only used for the flight decision; Lmax > 0 for any standing figure.
-    N = (lmax - L) / lmax
+    # N is only used for the flight decision. Shim to avoid the 0/0 of a (traced) degenerate
+    # Lmax <= 0, NaN in both value and gradient: N = 0 there (no flight).
+    ok = lmax > 0
+    N = jnp.where(ok, (lmax - L) / jnp.where(ok, lmax, 1.0), 0.0)
     gap = lmax - L
     if rule == "unuma1995":
         flight = (N > gait).astype(L.dtype)
@@ -466,6 +528,31 @@ def _pose_points(skeleton, representation, idx, groins, feat):
     return allp[idx], fk.positions[jnp.asarray(groins)]
 
 
+def _is_index(i, n: int) -> bool:
+    return isinstance(i, int | np.integer) and not isinstance(i, bool) and -n <= i < n
+
+
+def _check_indices(where: str, skeleton, feet, groins) -> tuple[int, int]:
+    """The groin joint indices as non-negative Python ints; UserError for an index outside the
+    skeleton (JAX would clamp it: a wrong joint and a wrong leg length, silently)."""
+    num_joints = skeleton.topology.num_joints
+    groins = tuple(groins)
+    if len(groins) != 2 or not all(_is_index(g, num_joints) for g in groins):
+        raise UserError(
+            f"{where}: `groins`={groins!r}; expected (left, right) joint indices of the skeleton's "
+            f"{num_joints} joints (see `groin_joints`)"
+        )
+    num_points = num_joints + skeleton.topology.num_end_sites
+    for side in ("left", "right"):
+        points = tuple(getattr(feet, side))
+        if not all(_is_index(i, num_points) for i in points):
+            raise UserError(
+                f"{where}: `feet.{side}`={points!r}; expected point indices below {num_points} "
+                f"({num_joints} joints, then End Sites; see `contacts.foot_points`)"
+            )
+    return tuple(int(g) % num_joints for g in groins)
+
+
 def _integrate_trapezoid(v, dt):
     return jnp.concatenate([jnp.zeros((1,), v.dtype), jnp.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
 
@@ -578,20 +665,39 @@ def synthesize_gait(
     - `feet`: `contacts.FootPoints`; `groins`: `(left, right)` joint indices (`groin_joints`).
     - `clearance`: `[2, P]` sole clearances (`contacts.sole_clearance` of the source clip);
       default `None` estimates them from one cycle of the model (`estimate_sole_clearance`).
-    - `step`, `gait`, `jump`: scalars; `speed`: scalar or `[num_frames]` schedule.
+    - `step`, `gait`, `jump`: scalars (`jump ≥ 0`); `speed`: scalar or `[num_frames]` schedule.
     - `rule`: `"unuma1995" | "continuous" | "smooth"`; `width`, `temperature`: `hip_rule`.
     - `phase0`: phase of the first frame (radians).
 
     **Returns:** a `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`,
     `jump` and `clearance`; vmap over characters (models, parameters) at the call site.
+
+    Raises `UserError` for a non-integer `num_frames` (or < 2), a `frame_time_s` that is not
+    finite and > 0, `groins` or foot points out of the skeleton's range, and, when concrete
+    (not traced), a non-finite `step`, `speed`, `gait`, `jump` or `phase0` or a `jump < 0`.
     """
+    where = "synthesize_gait"
     _check_rule(rule)
-    if num_frames < 2:
-        raise UserError(f"synthesize_gait: num_frames must be at least 2, got {num_frames}")
-    if frame_time_s <= 0:
-        raise UserError(f"synthesize_gait: frame_time_s must be positive, got {frame_time_s}")
+    num_frames = _check_int(where, "num_frames", num_frames, 2)
+    num_cycle_samples = _check_int(where, "num_cycle_samples", num_cycle_samples, 1)
+    if isinstance(frame_time_s, jax.core.Tracer):
+        raise UserError(
+            f"{where}: `frame_time_s` sets the (static) frame spacing: pass a concrete number, not a traced value"
+        )
+    try:
+        dt = float(frame_time_s)
+    except TypeError:
+        raise UserError(f"{where}: `frame_time_s` must be a number (seconds), got {frame_time_s!r}") from None
+    if not (math.isfinite(dt) and dt > 0):
+        raise UserError(f"{where}: `frame_time_s` must be finite and > 0 (seconds), got {frame_time_s}")
+    if up_axis not in (0, 1, 2):
+        raise UserError(f"{where}: `up_axis` must be 0, 1 or 2, got {up_axis!r}")
+    groins = _check_indices(where, skeleton, feet, groins)
     if len(feet.left) != len(feet.right):
         raise UserError("synthesize_gait: both feet must have the same number of points")
+    for name, value in (("step", step), ("speed", speed), ("gait", gait), ("phase0", phase0)):
+        _check_finite(where, name, value)
+    _check_jump(where, jump)
     num_points = len(feet.left)
     # The model's float type as JAX holds it (a float64 NumPy model is float32 without x64).
     dtype = jnp.asarray(model.offset).dtype
@@ -608,18 +714,18 @@ def synthesize_gait(
             f"{speed.shape}"
         )
     # One shape for scalar and scheduled speeds: one compilation serves both.
-    speed = jnp.broadcast_to(speed, (int(num_frames),))
+    speed = jnp.broadcast_to(speed, (num_frames,))
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
-    t_eff = ticks * float(frame_time_s)
+    t_eff = ticks * dt
     return _synthesize_gait(
         model, skeleton, clearance,
         jnp.asarray(step, dtype), speed, t_eff, jnp.asarray(gait, dtype),
         jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
-        num_frames=int(num_frames), frame_time_s=float(frame_time_s),
-        feet=feet, groins=tuple(int(g) for g in groins),
+        num_frames=num_frames, frame_time_s=dt,
+        feet=feet, groins=groins,
         rule=rule, width=float(width),
         temperature=None if temperature is None else float(temperature),
-        num_cycle_samples=int(num_cycle_samples), up_axis=int(up_axis),
+        num_cycle_samples=num_cycle_samples, up_axis=int(up_axis),
     )
 
 
@@ -647,8 +753,9 @@ def model_hip_curves(model, skeleton, *, feet, groins, gait, jump, clearance=Non
     **Returns:** `dict`: `"phase"` `[K]` (radians), `"L_L"`, `"L_R"`, and the
     `hip_rule_curves` entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
     """
-    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, tuple(groins),
-                                                  int(num_samples))
+    groins = _check_indices("model_hip_curves", skeleton, feet, groins)
+    num_samples = _check_int("model_hip_curves", "num_samples", num_samples, 1)
+    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples)
     if clearance is None:
         clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
     leg = leg_heights(groin_local, foot_local, jnp.asarray(clearance), up_axis=up_axis)

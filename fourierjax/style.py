@@ -37,6 +37,7 @@ numerically but blend mismatched poses.
 from __future__ import annotations
 
 import functools
+import operator
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
@@ -45,6 +46,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+
+from fourierjax.errors import UserError
 
 if TYPE_CHECKING:  # pragma: no cover
     from fourierjax.fourier import FourierModel
@@ -88,6 +91,66 @@ _EASES = ("smoothstep", "smootherstep", "linear")
 _GL_NODES, _GL_WEIGHTS = (np.asarray(x, dtype=np.float64) for x in np.polynomial.legendre.leggauss(16))
 # Below this squared norm a phasor is treated as zero (amplitude 0, phase 0).
 _TINY = 1e-30
+
+
+# -------------------------------------------------------------------------------------------
+# Input checks (values only on concrete inputs: under jit/vmap/grad they are skipped)
+# -------------------------------------------------------------------------------------------
+
+
+def _concrete(x) -> np.ndarray | None:
+    """`x` as a NumPy array, or None when it is traced: values are checked on concrete inputs
+    only (a small scalar's host copy), shapes always."""
+    if isinstance(x, jax.core.Tracer):
+        return None
+    return np.asarray(x)
+
+
+def _show(value: np.ndarray, bad: np.ndarray) -> str:
+    # The first offending value, short even for a stacked batch of models.
+    if value.ndim == 0:
+        return repr(value.item())
+    first = tuple(int(i) for i in np.argwhere(bad)[0])
+    return f"{value[first].item()!r} at index {first} ({int(np.sum(bad))} of {value.size} bad)"
+
+
+def _check_omega(where: str, name: str, omega) -> None:
+    """UserError unless the fundamental(s) are finite and > 0 rad/s (skipped when traced):
+    log ω (geometric interpolation, characteristics, style vectors) is −inf at 0 and NaN below,
+    and so are their gradients."""
+    value = _concrete(omega)
+    if value is None:
+        return
+    bad = ~(np.isfinite(value) & (value > 0))
+    if np.any(bad):
+        raise UserError(f"{where}: `{name}` must be finite and > 0 (rad/s), got {_show(value, bad)}")
+
+
+def _check_models_omega(where: str, **models) -> None:
+    for name, model in models.items():
+        _check_omega(where, f"{name}.omega", model.omega)
+
+
+def _check_log_omega(where: str, chars) -> None:
+    # A characteristic read from a file may carry log(ω_A/ω_B) = ±inf or NaN.
+    value = _concrete(chars.log_omega)
+    if value is None:
+        return
+    bad = ~np.isfinite(value)
+    if np.any(bad):
+        raise UserError(
+            f"{where}: `characteristics` log_omega must be finite (log of a ratio of two positive ω),"
+            f" got {_show(value, bad)}"
+        )
+
+
+def _check_scalar(where: str, name: str, value, hint: str = "") -> None:
+    """UserError unless `value` is a scalar (always checked) and finite (when concrete)."""
+    if jnp.ndim(value) != 0:
+        raise UserError(f"{where}: `{name}` must be a scalar, got shape {jnp.shape(value)}{hint}")
+    v = _concrete(value)
+    if v is not None and not np.isfinite(v):
+        raise UserError(f"{where}: `{name}` must be finite, got {v.item()!r}")
 
 
 # -------------------------------------------------------------------------------------------
@@ -171,7 +234,7 @@ def pad_harmonics(model, num_harmonics: int):
     """
     n = _num_harmonics(model)
     if num_harmonics < n:
-        raise ValueError(f"pad_harmonics: num_harmonics={num_harmonics} is below the model's {n}")
+        raise UserError(f"pad_harmonics: num_harmonics={num_harmonics} is below the model's {n}")
     if num_harmonics == n:
         return model
     extra = num_harmonics - n
@@ -188,8 +251,8 @@ def pad_harmonics(model, num_harmonics: int):
 
 
 def check_compatible(a, b, names: tuple[str, str] = ("a", "b")) -> None:
-    """Raise `ValueError` naming the argument if two models (or characteristics) cannot be
-    combined: different channel representation, channel names or channel counts.
+    """Raise `UserError` (a `ValueError`) naming the argument if two models (or characteristics)
+    cannot be combined: different channel representation, channel names or channel counts.
 
     **Arguments:** `a`, `b`: FourierModels or Characteristics; `names`: the argument names to
     use in the message.
@@ -197,7 +260,7 @@ def check_compatible(a, b, names: tuple[str, str] = ("a", "b")) -> None:
     na, nb = names
     ra, rb = getattr(a, "representation", None), getattr(b, "representation", None)
     if ra != rb:
-        raise ValueError(
+        raise UserError(
             f"{nb}: representation {rb!r} does not match {na}'s {ra!r}; refit both on the same channel representation"
         )
     ca, cb = tuple(getattr(a, "channel_names", ())), tuple(getattr(b, "channel_names", ()))
@@ -207,9 +270,9 @@ def check_compatible(a, b, names: tuple[str, str] = ("a", "b")) -> None:
         else:
             i = next(i for i, (x, y) in enumerate(zip(ca, cb)) if x != y)
             detail = f"channel {i} is {cb[i]!r}, {na} has {ca[i]!r}"
-        raise ValueError(f"{nb}: channels do not match {na}'s ({detail})")
+        raise UserError(f"{nb}: channels do not match {na}'s ({detail})")
     if a.offset.shape[-1] != b.offset.shape[-1]:
-        raise ValueError(f"{nb}: {b.offset.shape[-1]} channels against {na}'s {a.offset.shape[-1]}")
+        raise UserError(f"{nb}: {b.offset.shape[-1]} channels against {na}'s {a.offset.shape[-1]}")
 
 
 def _common_harmonics(*models):
@@ -217,9 +280,9 @@ def _common_harmonics(*models):
     return tuple(pad_harmonics(m, n) for m in models)
 
 
-def _check_choice(value: str, choices: tuple[str, ...], name: str) -> None:
+def _check_choice(value: str, choices: tuple[str, ...], name: str, where: str) -> None:
     if value not in choices:
-        raise ValueError(f"{name}={value!r}; expected one of {choices}")
+        raise UserError(f"{where}: `{name}`={value!r}; expected one of {choices}")
 
 
 def interpolate_omega(omega_a: ArrayLike, omega_b: ArrayLike, s: ArrayLike, omega: OmegaInterp = "geometric") -> Array:
@@ -229,10 +292,16 @@ def interpolate_omega(omega_a: ArrayLike, omega_b: ArrayLike, s: ArrayLike, omeg
     any shape); `omega`: `"geometric"` (`ω_A^(1−s) ω_B^s`, default, positive for every s) or
     `"linear"` (`(1−s)ω_A + sω_B`).
 
-    **Returns:** ω(s) in rad/s, shape of `s`.
+    **Returns:** ω(s) in rad/s, shape of `s`. Raises `UserError` when a concrete `omega_a` or
+    `omega_b` is not finite and > 0 (the geometric path and its gradient are NaN there).
     """
-    _check_choice(omega, _OMEGA_INTERPS, "omega")
-    s = jnp.asarray(s)
+    _check_choice(omega, _OMEGA_INTERPS, "omega", "interpolate_omega")
+    _check_omega("interpolate_omega", "omega_a", omega_a)
+    _check_omega("interpolate_omega", "omega_b", omega_b)
+    return _omega_at(omega_a, omega_b, jnp.asarray(s), omega)
+
+
+def _omega_at(omega_a, omega_b, s, omega: str) -> Array:
     if omega == "linear":
         return (1 - s) * omega_a + s * omega_b
     return jnp.exp((1 - s) * jnp.log(omega_a) + s * jnp.log(omega_b))
@@ -253,7 +322,7 @@ def _interpolate(a, b, s, method: str, omega: str):
         amplitude, phase = _canonical(amplitude, phase)
     else:
         amplitude, phase = _polar_from_phasor((1 - s) * phasor(a) + s * phasor(b))
-    om = interpolate_omega(a.omega, b.omega, s, omega)
+    om = _omega_at(a.omega, b.omega, s, omega)
     return _replace(a, offset=offset, amplitude=amplitude, phase=phase, omega=om)
 
 
@@ -284,15 +353,22 @@ def interpolate(
     **Arguments:**
 
     - `a`, `b`: FourierModels on the same channels and representation.
-    - `s`: scalar interpolation parameter (traced; vmap over it for a family of models).
+    - `s`: scalar interpolation parameter (traced; vmap over it for a family of models:
+      `jax.vmap(lambda s: interpolate(a, b, s))(s_values)`).
     - `method`: `"polar"` (default, Unuma eq. 3) or `"phasor"`.
     - `omega`: `"geometric"` (default) or `"linear"` interpolation of the fundamental.
 
-    **Returns:** a FourierModel with the static fields of `a`.
+    **Returns:** a FourierModel with the static fields of `a`. Raises `UserError` for a
+    non-scalar `s`, and, when concrete, for a non-finite `s` or a model whose ω is not > 0.
     """
     check_compatible(a, b)
-    _check_choice(method, _METHODS, "method")
-    _check_choice(omega, _OMEGA_INTERPS, "omega")
+    _check_choice(method, _METHODS, "method", "interpolate")
+    _check_choice(omega, _OMEGA_INTERPS, "omega", "interpolate")
+    _check_scalar(
+        "interpolate", "s", s, "; for a family of models vmap over s: "
+        "jax.vmap(lambda s: style.interpolate(a, b, s))(s_values)"
+    )
+    _check_models_omega("interpolate", a=a, b=b)
     a, b = _common_harmonics(a, b)
     return _interpolate(a, b, jnp.asarray(s, dtype=_dtype(a)), method, omega)
 
@@ -318,6 +394,8 @@ def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: Arr
     **Returns:** `[C]` channel values in the models' units.
     """
     check_compatible(a, b)
+    _check_scalar("blend_time_domain", "s", s, "; vmap over s for several weights")
+    _check_scalar("blend_time_domain", "phase", phase, "; vmap over phase for many frames")
     dtype = _dtype(a)
     return _blend(a, b, jnp.asarray(s, dtype=dtype), jnp.asarray(phase, dtype=dtype))
 
@@ -336,7 +414,7 @@ def ease(u: ArrayLike, kind: Ease = "smoothstep") -> Array:
 
     **Returns:** s(u), same shape.
     """
-    _check_choice(kind, _EASES, "ease")
+    _check_choice(kind, _EASES, "kind", "ease")
     u = jnp.clip(jnp.asarray(u), 0.0, 1.0)
     if kind == "linear":
         return u
@@ -352,7 +430,7 @@ def _schedule_one(t, omega_a, omega_b, start, duration, ease_kind, omega):
     nodes = jnp.asarray(_GL_NODES, dtype=u_end.dtype)
     weights = jnp.asarray(_GL_WEIGHTS, dtype=u_end.dtype)
     u = 0.5 * u_end * (nodes + 1)
-    window = duration * 0.5 * u_end * jnp.sum(weights * interpolate_omega(omega_a, omega_b, ease(u, ease_kind), omega))
+    window = duration * 0.5 * u_end * jnp.sum(weights * _omega_at(omega_a, omega_b, ease(u, ease_kind), omega))
     before = omega_a * jnp.minimum(t, start)
     after = omega_b * jnp.maximum(t - (start + duration), 0.0)
     return s, before + window + after
@@ -365,9 +443,22 @@ def _schedule(t_s, omega_a, omega_b, start, duration, ease_kind, omega):
     )
 
 
-def _check_window(duration_s) -> None:
-    if isinstance(duration_s, int | float) and not duration_s > 0:
-        raise ValueError(f"duration_s={duration_s}: a transition needs a positive duration")
+def _check_window(where: str, t_s, start_s, duration_s) -> None:
+    # Shapes always; values when concrete, whatever their type (Python, NumPy or JAX scalar):
+    # a zero duration divides by zero in the schedule and gives NaN frames.
+    if jnp.ndim(t_s) != 1:
+        raise UserError(
+            f"{where}: `t_s` must be [T] sample times in seconds, got shape {jnp.shape(t_s)}; "
+            "flatten a grid of times (t_s.ravel()) and reshape the result"
+        )
+    _check_scalar(where, "start_s", start_s)
+    if jnp.ndim(duration_s) != 0:
+        raise UserError(f"{where}: `duration_s` must be a scalar, got shape {jnp.shape(duration_s)}")
+    d = _concrete(duration_s)
+    if d is not None and not (np.isfinite(d) and d > 0):
+        raise UserError(
+            f"{where}: `duration_s`={d.item()!r}; a transition needs a finite positive duration (seconds)"
+        )
 
 
 def transition_schedule(
@@ -392,11 +483,15 @@ def transition_schedule(
     in seconds (any order, θ(0) = 0); `start_s`, `duration_s`: the window in seconds
     (`duration_s > 0`); `ease`: see `ease`; `omega`: see `interpolate_omega`.
 
-    **Returns:** `(s [T], theta [T])`, theta in radians.
+    **Returns:** `(s [T], theta [T])`, theta in radians. Raises `UserError` for a `t_s` that is
+    not 1-D or a non-scalar window, and, when concrete, for `duration_s ≤ 0`, non-finite window
+    values or an ω that is not > 0.
     """
-    _check_choice(ease, _EASES, "ease")
-    _check_choice(omega, _OMEGA_INTERPS, "omega")
-    _check_window(duration_s)
+    _check_choice(ease, _EASES, "ease", "transition_schedule")
+    _check_choice(omega, _OMEGA_INTERPS, "omega", "transition_schedule")
+    _check_window("transition_schedule", t_s, start_s, duration_s)
+    _check_omega("transition_schedule", "omega_a", omega_a)
+    _check_omega("transition_schedule", "omega_b", omega_b)
     t_s = jnp.asarray(t_s)
     dtype = jnp.result_type(t_s.dtype, jnp.asarray(omega_a).dtype, float)
     f = functools.partial(jnp.asarray, dtype=dtype)
@@ -447,13 +542,15 @@ def transition(
     - `ease`, `method`, `omega`: see `ease`, `interpolate`, `interpolate_omega`.
     - `return_schedule`: also return `(s [T], theta [T])`.
 
-    **Returns:** `[T, C]` channel values (model units), or `(values, s, theta)`.
+    **Returns:** `[T, C]` channel values (model units), or `(values, s, theta)`. Raises
+    `UserError` as `transition_schedule` does (and for a model whose ω is not > 0).
     """
     check_compatible(a, b)
-    _check_choice(ease, _EASES, "ease")
-    _check_choice(method, _METHODS, "method")
-    _check_choice(omega, _OMEGA_INTERPS, "omega")
-    _check_window(duration_s)
+    _check_choice(ease, _EASES, "ease", "transition")
+    _check_choice(method, _METHODS, "method", "transition")
+    _check_choice(omega, _OMEGA_INTERPS, "omega", "transition")
+    _check_window("transition", t_s, start_s, duration_s)
+    _check_models_omega("transition", a=a, b=b)
     a, b = _common_harmonics(a, b)
     dtype = _dtype(a)
     values, s, theta = _transition(
@@ -507,8 +604,11 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
     zero-padded).
 
     **Returns:** a Characteristic; `superpose(b, [it], [1.0])` reproduces `a` (both methods).
+    Raises `UserError` when a concrete model's ω is not finite and > 0 (`log_omega` would be
+    infinite).
     """
     check_compatible(a, b)
+    _check_models_omega("characteristic", a=a, b=b)
     a, b = _common_harmonics(a, b)
     return _characteristic(a, b)
 
@@ -542,7 +642,10 @@ def characteristic_function(char: Characteristic, phase: ArrayLike) -> Float[Arr
     **Returns:** `[C]`.
     """
     if char.offset.ndim != 1:
-        raise ValueError("char: expected one characteristic, got a stacked batch; vmap over it")
+        raise UserError(
+            "characteristic_function: `char` must be one characteristic, got a stacked batch; vmap over it"
+        )
+    _check_scalar("characteristic_function", "phase", phase, "; vmap over phase for many frames")
     return _characteristic_function(char, jnp.asarray(phase, dtype=_dtype(char)))
 
 
@@ -556,7 +659,7 @@ def stack(items: Sequence):
     """
     items = list(items)
     if not items:
-        raise ValueError("stack: needs at least one model")
+        raise UserError("stack: needs at least one model")
     for i, m in enumerate(items[1:], start=1):
         check_compatible(items[0], m, names=("items[0]", f"items[{i}]"))
     items = _common_harmonics(*items)
@@ -571,10 +674,10 @@ def _stacked_characteristics(characteristics) -> Characteristic:
         return characteristics
     characteristics = list(characteristics)
     if not characteristics:
-        raise ValueError("characteristics: empty; pass at least one Characteristic")
+        raise UserError("characteristics: empty; pass at least one Characteristic")
     for i, c in enumerate(characteristics):
         if not isinstance(c, Characteristic):
-            raise ValueError(f"characteristics[{i}]: expected a Characteristic, got {type(c)}")
+            raise UserError(f"characteristics[{i}]: expected a Characteristic, got {type(c)}")
     return stack(characteristics)
 
 
@@ -586,7 +689,9 @@ def _prepare_superposition(base, characteristics, weights):
     if weights.shape == () and k == 1:
         weights = weights[None]
     if weights.shape != (k,):
-        raise ValueError(f"weights: shape {weights.shape}, expected ({k},), one per characteristic")
+        raise UserError(
+            f"superpose: `weights` has shape {weights.shape}, expected ({k},), one per characteristic"
+        )
     n = max(_num_harmonics(base), _num_harmonics(chars))
     return pad_harmonics(base, n), pad_harmonics(chars, n), weights
 
@@ -641,8 +746,10 @@ def superpose(
 
     **Returns:** a FourierModel with the static fields of `base`.
     """
-    _check_choice(method, _METHODS, "method")
+    _check_choice(method, _METHODS, "method", "superpose")
+    _check_models_omega("superpose", base=base)
     base, chars, weights = _prepare_superposition(base, characteristics, weights)
+    _check_log_omega("superpose", chars)
     return _superpose(base, chars, weights, method, bool(include_omega))
 
 
@@ -690,22 +797,39 @@ def add_noise(
     **Returns:** a FourierModel with `max(harmonics)` harmonics (unused ones at zero).
     """
     n = _num_harmonics(model)
-    if isinstance(harmonics, int | np.integer):
-        if harmonics < 1:
-            raise ValueError(f"harmonics={harmonics}: add at least one harmonic")
-        harmonics = tuple(range(n + 1, n + 1 + int(harmonics)))
+    bad = UserError(
+        f"add_noise: `harmonics`={harmonics!r}; expected an int K or a sequence of int harmonic "
+        "numbers (a float such as 2.0 is not a count)"
+    )
+    if isinstance(harmonics, bool | str):
+        raise bad
+    try:
+        count = operator.index(harmonics)  # ints and NumPy integers, never floats
+    except TypeError:
+        count = None
+    if count is not None:
+        if count < 1:
+            raise UserError(f"add_noise: `harmonics`={count}; add at least one harmonic")
+        harmonics = tuple(range(n + 1, n + 1 + count))
     else:
-        harmonics = tuple(int(h) for h in harmonics)
+        try:
+            harmonics = tuple(operator.index(h) for h in harmonics)
+        except TypeError:
+            raise bad from None
         if not harmonics:
-            raise ValueError("harmonics: empty")
+            raise UserError("add_noise: `harmonics` is empty; give at least one harmonic number")
         if min(harmonics) <= n:
-            raise ValueError(f"harmonics={harmonics}: noise harmonics must be above the model's N={n}")
+            raise UserError(
+                f"add_noise: `harmonics`={harmonics}: noise harmonics must be above the model's N={n}"
+            )
         if len(set(harmonics)) != len(harmonics):
-            raise ValueError(f"harmonics={harmonics}: repeated harmonic")
+            raise UserError(f"add_noise: `harmonics`={harmonics}: repeated harmonic")
     amplitude = jnp.asarray(amplitude, dtype=_dtype(model))
     c = model.offset.shape[-1]
     if amplitude.shape not in ((), (c,), (c, len(harmonics))):
-        raise ValueError(f"amplitude: shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})")
+        raise UserError(
+            f"add_noise: `amplitude` has shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})"
+        )
     return _add_noise(model, key, amplitude, harmonics)
 
 
@@ -735,8 +859,10 @@ def style_vector(model: FourierModel) -> Float[Array, " dim"]:
 
     **Arguments:** `model`: FourierModel with `C` channels and `N` harmonics.
 
-    **Returns:** `[C (1 + 2N) + 1]`.
+    **Returns:** `[C (1 + 2N) + 1]`. Raises `UserError` when a concrete `model.omega` is not
+    finite and > 0 (`log ω` would be −inf or NaN).
     """
+    _check_models_omega("style_vector", model=model)
     return _style_vector(model)
 
 
@@ -752,8 +878,9 @@ def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel
     c, n = like.amplitude.shape
     vector = jnp.asarray(vector, dtype=_dtype(like))
     if vector.shape != (c * (1 + 2 * n) + 1,):
-        raise ValueError(
-            f"vector: shape {vector.shape}, expected ({c * (1 + 2 * n) + 1},) for {c} channels and {n} harmonics"
+        raise UserError(
+            f"model_from_style_vector: `vector` has shape {vector.shape}, expected "
+            f"({c * (1 + 2 * n) + 1},) for {c} channels and {n} harmonics"
         )
     return _model_from_style_vector(vector, like)
 
@@ -776,6 +903,7 @@ def style_matrix(models) -> Float[Array, "models dim"]:
     """
     if isinstance(models, Sequence):
         models = stack(models)
+    _check_models_omega("style_matrix", models=models)
     return eqx.filter_vmap(_style_vector)(models)
 
 
@@ -805,11 +933,11 @@ def style_pca(matrix: Float[ArrayLike, "models dim"], num_components: int | None
     """
     matrix = jnp.asarray(matrix)
     if matrix.ndim != 2 or matrix.shape[0] < 2:
-        raise ValueError(f"matrix: shape {matrix.shape}; need [M, D] with at least 2 rows")
+        raise UserError(f"style_pca: `matrix` has shape {matrix.shape}; need [M, D] with at least 2 rows")
     m, d = matrix.shape
     k = min(m - 1, d) if num_components is None else int(num_components)
     if not 1 <= k <= min(m, d):
-        raise ValueError(f"num_components={num_components}: must be in 1..{min(m, d)}")
+        raise UserError(f"style_pca: `num_components`={num_components}; must be in 1..{min(m, d)}")
     return _style_pca(matrix, k)
 
 
@@ -838,6 +966,12 @@ def pca_project(pca: StylePCA, vectors: Float[ArrayLike, "*batch dim"]) -> Float
     **Returns:** `[..., K]`.
     """
     vectors = jnp.asarray(vectors)
+    d = pca.mean.shape[-1]
+    if vectors.ndim < 1 or vectors.shape[-1] != d:
+        raise UserError(
+            f"pca_project: `vectors` must be [..., {d}] style vectors (the PCA's dimension), "
+            f"got shape {vectors.shape}"
+        )
     centred = vectors - jnp.broadcast_to(pca.mean, vectors.shape)
     components = jnp.broadcast_to(pca.components, (*vectors.shape[:-1], *pca.components.shape))
     return jnp.sum(centred[..., None, :] * components, axis=-1)
@@ -851,6 +985,12 @@ def pca_reconstruct(pca: StylePCA, coords: Float[ArrayLike, "*batch k"]) -> Floa
     **Returns:** `[..., D]` (map back to a model with `model_from_style_vector`).
     """
     coords = jnp.asarray(coords)
+    k = pca.components.shape[-2]
+    if coords.ndim < 1 or coords.shape[-1] != k:
+        raise UserError(
+            f"pca_reconstruct: `coords` must be [..., {k}] (one per principal component), "
+            f"got shape {coords.shape}"
+        )
     components = jnp.broadcast_to(pca.components, (*coords.shape[:-1], *pca.components.shape))
     combo = jnp.sum(coords[..., :, None] * components, axis=-2)
     return jnp.broadcast_to(pca.mean, combo.shape) + combo
@@ -864,7 +1004,7 @@ def _fit_style_weights(base, chars, target, ridge, include_omega: bool):
     # phasor superposition is linear in w, so least squares is exact and closed form.
     cols = jnp.concatenate([chars.offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2)
     cols = jnp.reshape(cols, (k, -1))
-    residual = style_vector(target)[:-1] - style_vector(base)[:-1]
+    residual = _style_vector(target)[:-1] - _style_vector(base)[:-1]
     if include_omega:
         cols = jnp.concatenate([cols, chars.log_omega[:, None]], axis=1)
         residual = jnp.concatenate([residual, (jnp.log(target.omega) - jnp.log(base.omega))[None]])
@@ -928,6 +1068,8 @@ def fit_style_weights(
     check_compatible(base, target, names=("base", "target"))
     chars = _stacked_characteristics(characteristics)
     check_compatible(base, chars, names=("base", "characteristics"))
+    _check_models_omega("fit_style_weights", base=base, target=target)
+    _check_log_omega("fit_style_weights", chars)
     n = max(_num_harmonics(base), _num_harmonics(chars), _num_harmonics(target))
     base, chars, target = (pad_harmonics(x, n) for x in (base, chars, target))
     ridge = jnp.asarray(ridge, dtype=_dtype(base))

@@ -85,6 +85,31 @@ def test_hip_rule_bad_input():
         G.hip_rule(jnp.ones((4, 3)), 0.5, 1.0)
 
 
+def test_hip_rule_degenerate_legs_error_when_concrete_and_stay_finite_when_traced():
+    # All-zero legs: N = 0/0 = NaN (and NaN lift for the smooth rule), silently.
+    zeros = jnp.zeros((4, 2))
+    for rule in G.RULES:
+        with pytest.raises(UserError, match=r"^hip_rule: Lmax \(the largest leg height in `leg`\)"):
+            G.hip_rule(zeros, 0.1, 1.0, rule=rule)
+    with pytest.raises(UserError, match=r"^hip_rule: Lmax \(`l_max`\) must be finite and > 0"):
+        G.hip_rule(jnp.ones((4, 2)), 0.1, 1.0, l_max=0.0)
+    with pytest.raises(UserError, match=r"^hip_rule: Lmax"):
+        G.hip_rule(jnp.full((4, 2), jnp.nan), 0.1, 1.0)
+    with pytest.raises(UserError, match=r"^hip_rule: `jump` must be >= 0"):
+        G.hip_rule(jnp.ones((4, 2)), 0.1, -1.0)
+    with pytest.raises(UserError, match=r"^hip_rule: `gait` must be finite"):
+        G.hip_rule(jnp.ones((4, 2)), float("nan"), 1.0)
+    # Traced: no value check; N = 0 (no flight), lift 0, finite gradients instead of 0/0.
+    for rule in G.RULES:
+        h = jax.jit(lambda leg, r=rule: G.hip_rule(leg, 0.1, 1.0, rule=r))(zeros)
+        for field in (h.N, h.lift, h.flight, h.L):
+            assert bool(jnp.all(jnp.isfinite(field))), (rule, h)
+        np.testing.assert_array_equal(h.N, 0.0)
+        np.testing.assert_array_equal(h.lift, 0.0)
+        grads = _grad_all(zeros, jnp.float32(0.1), jnp.float32(1.0), rule)
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), rule
+
+
 _grad_all = jax.jit(
     jax.grad(
         lambda leg, gait, jump, rule: jnp.sum(
@@ -486,6 +511,47 @@ def test_synthesize_gait_bad_input():
                           clearance=jnp.zeros((2, 2)))
     with pytest.raises(UserError, match="RightUpLeg"):
         G.groin_joints(_Topo(("Hips", "LeftUpLeg"), ()))
+
+
+def test_synthesize_gait_rejects_bad_numbers_and_indices():
+    sk, fp, groins, _ = toy()
+    model = toy_model(0)
+
+    def run(num_frames=12, frame_time_s=1 / 30, **kw):
+        kw.setdefault("groins", groins)
+        kw.setdefault("feet", fp)
+        return G.synthesize_gait(model, sk, num_frames, frame_time_s, num_cycle_samples=8, **kw)
+
+    # NaN/inf passed the `<= 0` check and gave an all-NaN root path.
+    for dt in (float("nan"), float("inf"), np.float32("nan"), 0.0, -1 / 30):
+        with pytest.raises(UserError, match=r"^synthesize_gait: `frame_time_s` must be finite and > 0"):
+            run(frame_time_s=dt)
+    # Out-of-range indices were clamped by JAX: a wrong joint, a wrong leg length.
+    with pytest.raises(UserError, match=r"^synthesize_gait: `groins`=\(50, 51\).* 9 joints"):
+        run(groins=(50, 51))
+    with pytest.raises(UserError, match=r"^synthesize_gait: `groins`"):
+        run(groins=(1,))
+    with pytest.raises(UserError, match=r"^synthesize_gait: `groins`"):
+        run(groins=(1.0, 5.0))
+    with pytest.raises(UserError, match=r"^synthesize_gait: `feet.right`"):
+        run(feet=C.FootPoints(fp.left, (7, 8, 40), fp.names))
+    # The docs (and eq. 5: jump is the flight height) say jump >= 0; a negative jump pushed the
+    # stance foot into the ground.
+    with pytest.raises(UserError, match=r"^synthesize_gait: `jump` must be >= 0"):
+        run(jump=-5.0, gait=0.0)
+    # 10.7 frames was truncated to 10.
+    for n in (10.7, 12.0):
+        with pytest.raises(UserError, match=r"^synthesize_gait: `num_frames` must be an integer"):
+            run(num_frames=n)
+    for name in ("step", "speed", "gait", "jump", "phase0"):
+        with pytest.raises(UserError, match=rf"^synthesize_gait: `{name}` must be finite"):
+            run(**{name: float("nan")})
+    with pytest.raises(UserError, match=r"^synthesize_gait: `up_axis`"):
+        run(up_axis=5)
+    # NumPy integers and Python-style negative joint indices are fine (same compiled function).
+    ref = run()
+    same = run(num_frames=np.int64(12), groins=(groins[0] - 9, groins[1] - 9))
+    np.testing.assert_array_equal(same.root_position, ref.root_position)
 
 
 def test_estimated_sole_clearance_matches_the_real_floor_fit():

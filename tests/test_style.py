@@ -8,6 +8,7 @@ import pytest
 from jax.flatten_util import ravel_pytree
 
 from fourierjax import style
+from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel, synthesize_phase
 
 
@@ -562,3 +563,142 @@ def test_float64_numpy_models_work_without_x64():
         style.characteristic_function(char, 1.0),
     ]
     assert all(o.dtype == jnp.float32 and np.all(np.isfinite(o)) for o in outputs)
+
+
+# ------------------------------------------------------------------------------ input checks
+
+
+@pytest.mark.parametrize("bad", [0.0, -6.0, float("nan"), float("inf")])
+def test_non_positive_or_non_finite_omega_is_rejected_naming_the_model(bad):
+    # log ω is -inf at 0 and NaN below: NaN gradients in s, inf style vectors, inf characteristics.
+    good, other = random_model(0, omega=6.0), random_model(1, omega=8.0)
+    m0 = random_model(2, omega=bad)
+    t = jnp.linspace(0.0, 2.0, 5)
+    with pytest.raises(UserError, match=r"^interpolate_omega: `omega_a` must be finite and > 0"):
+        style.interpolate_omega(bad, 6.0, 0.5)
+    with pytest.raises(UserError, match=r"^interpolate_omega: `omega_b`"):
+        style.interpolate_omega(6.0, jnp.asarray(bad), 0.5, omega="linear")
+    with pytest.raises(UserError, match=r"^interpolate: `a.omega`"):
+        style.interpolate(m0, good, 0.5)
+    with pytest.raises(UserError, match=r"^interpolate: `b.omega`"):
+        jax.grad(lambda s: style.interpolate(good, m0, s).omega)(0.5)
+    with pytest.raises(UserError, match=r"^style_vector: `model.omega`"):
+        style.style_vector(m0)
+    with pytest.raises(UserError, match=r"^style_matrix: `models.omega`.* at index \(1,\)"):
+        style.style_matrix([good, m0])
+    with pytest.raises(UserError, match=r"^characteristic: `b.omega`"):
+        style.characteristic(good, m0)
+    with pytest.raises(UserError, match=r"^transition: `a.omega`"):
+        style.transition(m0, good, t, 1.0, 0.5)
+    with pytest.raises(UserError, match=r"^transition_schedule: `omega_b`"):
+        style.transition_schedule(6.0, bad, t, 1.0, 0.5)
+    char = style.characteristic(good, other)
+    with pytest.raises(UserError, match=r"^superpose: `base.omega`"):
+        style.superpose(m0, char, 1.0)
+    with pytest.raises(UserError, match=r"^fit_style_weights: `target.omega`"):
+        style.fit_style_weights(good, char, m0)
+    if not np.isfinite(bad):  # a characteristic file may hold log(ω_A/ω_B) = inf or NaN
+        bad_char = eqx.tree_at(lambda c: c.log_omega, char, jnp.asarray(bad))
+        with pytest.raises(UserError, match=r"^superpose: `characteristics` log_omega must be finite"):
+            style.superpose(good, bad_char, 1.0)
+        with pytest.raises(UserError, match=r"^fit_style_weights: `characteristics` log_omega"):
+            style.fit_style_weights(good, bad_char, other)
+
+
+def test_omega_checks_keep_jit_vmap_and_gradients_in_s_working(x64):
+    a, b = random_model(3, omega=5.0), random_model(4, omega=9.0)
+    ss = jnp.linspace(-0.5, 1.5, 5)
+    models = jax.vmap(lambda s: style.interpolate(a, b, s))(ss)
+    np.testing.assert_allclose(models.omega, 5.0 ** (1 - ss) * 9.0**ss, rtol=1e-12)
+    g = jax.vmap(jax.grad(lambda s: style.interpolate(a, b, s).omega))(ss)
+    np.testing.assert_allclose(g, np.log(9.0 / 5.0) * models.omega, rtol=1e-12)
+    g = jax.grad(lambda s: style.interpolate_omega(5.0, 9.0, s))(0.0)
+    assert float(g) == pytest.approx(5.0 * np.log(9.0 / 5.0))
+    # Traced models are not value-checked (no host sync inside jit or vmap over models).
+    stacked = style.stack([a, b])
+    vecs = jax.vmap(style.style_vector)(stacked)
+    np.testing.assert_allclose(vecs[1], style.style_vector(b), atol=1e-14)
+    jitted = jax.jit(lambda m: style.characteristic(m, b).log_omega)(a)
+    assert float(jitted) == pytest.approx(np.log(5.0 / 9.0))
+
+
+@pytest.mark.parametrize(
+    "duration", [np.float32(0.0), jnp.asarray(0.0), np.array(-1.0), np.float64(np.inf), jnp.asarray(jnp.nan)]
+)
+def test_transition_rejects_a_bad_duration_of_any_scalar_type(duration):
+    # NumPy and JAX scalars used to skip the check and give NaN frames.
+    a, b = random_model(5), random_model(6)
+    t = jnp.linspace(0.0, 2.0, 5)
+    with pytest.raises(UserError, match=r"^transition: `duration_s`=.*finite positive duration"):
+        style.transition(a, b, t, 1.0, duration)
+    with pytest.raises(UserError, match=r"^transition_schedule: `duration_s`"):
+        style.transition_schedule(a.omega, b.omega, t, 1.0, duration)
+
+
+def test_transition_shape_errors_are_clear():
+    a, b = random_model(5), random_model(6)
+    with pytest.raises(UserError, match=r"^transition: `t_s` must be \[T\] .* got shape \(2, 3\)"):
+        style.transition(a, b, jnp.zeros((2, 3)), 1.0, 1.0)
+    with pytest.raises(UserError, match=r"^transition_schedule: `t_s`"):
+        style.transition_schedule(6.0, 7.0, 0.5, 1.0, 1.0)
+    with pytest.raises(UserError, match=r"^transition: `duration_s` must be a scalar"):
+        style.transition(a, b, jnp.zeros(3), 1.0, jnp.ones(2))
+    with pytest.raises(UserError, match=r"^transition: `start_s` must be finite"):
+        style.transition(a, b, jnp.zeros(3), float("nan"), 1.0)
+    # A traced (positive) window is still accepted: jit over the duration.
+    t = jnp.linspace(0.0, 2.0, 5)
+    jitted = jax.jit(lambda d: style.transition(a, b, t, 0.5, d))(0.75)
+    np.testing.assert_allclose(jitted, style.transition(a, b, t, 0.5, 0.75), rtol=1e-6)
+
+
+def test_clear_errors_for_vector_s_float_harmonics_and_wrong_pca_dimension():
+    a, b = random_model(7), random_model(8)
+    with pytest.raises(UserError, match=r"^interpolate: `s` must be a scalar, got shape \(2,\).*jax\.vmap"):
+        style.interpolate(a, b, jnp.asarray([0.0, 1.0]))
+    with pytest.raises(UserError, match=r"^interpolate: `s` must be finite"):
+        style.interpolate(a, b, float("nan"))
+    with pytest.raises(UserError, match=r"^blend_time_domain: `phase` must be a scalar"):
+        style.blend_time_domain(a, b, 0.5, jnp.zeros(3))
+    with pytest.raises(UserError, match=r"^characteristic_function: `phase` must be a scalar"):
+        style.characteristic_function(style.characteristic(a, b), jnp.zeros(3))
+    key = jax.random.key(0)
+    with pytest.raises(UserError, match=r"^add_noise: `harmonics`=2\.0; expected an int"):
+        style.add_noise(a, key, 0.1, harmonics=2.0)
+    with pytest.raises(UserError, match=r"^add_noise: `harmonics`"):
+        style.add_noise(a, key, 0.1, harmonics=(5.0, 6.5))
+    # Integer types other than int still work.
+    assert style.add_noise(a, key, 0.1, harmonics=np.int64(2)).amplitude.shape == (4, 5)
+    assert style.add_noise(a, key, 0.1, harmonics=np.array([5, 7])).amplitude.shape == (4, 7)
+    pca = style.style_pca(style.style_matrix([random_model(10 + i) for i in range(4)]))
+    d, k = pca.mean.shape[0], pca.components.shape[0]
+    with pytest.raises(UserError, match=rf"^pca_project: `vectors` must be \[\.\.\., {d}\].*got shape \(5,\)"):
+        style.pca_project(pca, jnp.zeros(5))
+    with pytest.raises(UserError, match=rf"^pca_reconstruct: `coords` must be \[\.\.\., {k}\]"):
+        style.pca_reconstruct(pca, jnp.zeros(k + 1))
+
+
+def test_every_style_check_raises_user_error():
+    # UserError is a ValueError, so `except ValueError` keeps working.
+    a = random_model(0, c=4)
+    char = style.characteristic(a, random_model(1))
+    calls = [
+        lambda: style.check_compatible(a, random_model(1, c=5)),
+        lambda: style.check_compatible(a, random_model(1, representation="expmap")),
+        lambda: style.interpolate(a, a, 0.5, method="cubic"),
+        lambda: style.ease(0.5, "bouncy"),
+        lambda: style.transition(a, a, jnp.zeros(3), 0.0, 0.0),
+        lambda: style.pad_harmonics(a, 1),
+        lambda: style.stack([]),
+        lambda: style.superpose(a, [], 1.0),
+        lambda: style.superpose(a, [char] * 2, [1.0]),
+        lambda: style.characteristic_function(style.stack([char, char]), 0.0),
+        lambda: style.add_noise(a, jax.random.key(0), jnp.zeros(3)),
+        lambda: style.add_noise(a, jax.random.key(0), 0.1, harmonics=0),
+        lambda: style.add_noise(a, jax.random.key(0), 0.1, harmonics=(5, 5)),
+        lambda: style.model_from_style_vector(jnp.zeros(3), a),
+        lambda: style.style_pca(jnp.zeros((1, 3))),
+        lambda: style.style_pca(jnp.zeros((4, 3)), num_components=9),
+    ]
+    for i, call in enumerate(calls):
+        with pytest.raises(UserError):
+            call()
