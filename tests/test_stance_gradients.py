@@ -44,3 +44,27 @@ def test_solved_pose_derivatives_match_finite_differences(x64):
     np.testing.assert_allclose(jac / scale, fd / scale, atol=2e-5)
     # Not trivially zero: the intensity moves the spine, the target the arm (and the torso).
     assert np.abs(jac[..., 0]).max() > 0.1 and np.abs(jac[..., 1]).max() > 0.1
+
+
+def test_reverse_mode_through_the_solvers_traces():
+    # The implicit JVP rules must be linear in the tangents in a form JAX can transpose:
+    # `jax.grad` through `solve_stance` once failed ("AssertionError: ValAccum ...") because
+    # the 6x6 solve eliminated on [H | tangent] in one loop. Tracing the reverse pass is
+    # enough to catch that (compiling it takes ~100 s on 2 cores, as for jacfwd); the values
+    # equal forward mode's (the same linear map, transposed).
+    from fourierjax.stance.bounded import solve_stance_bounded
+
+    body = make_body(1.75)
+    posture = get_shape_set("posture")
+
+    def f(i, target):
+        sol = solve_stance(posture.problem(body, i, target_right=target))
+        return sol.objective + jnp.sum(sol.pose.root_position)
+
+    def g(i):
+        lo, hi = jnp.full(6, -0.4), jnp.full(6, 0.4)
+        return solve_stance_bounded(posture.problem(body, i), lo, hi).objective
+
+    target = jnp.array([-0.3, 1.2, 0.4])
+    jax.make_jaxpr(jax.grad(f, argnums=(0, 1)))(0.5, target)
+    jax.make_jaxpr(jax.grad(g))(0.5)

@@ -10,7 +10,7 @@ import optimistix as optx
 from jaxtyping import Array, Float, Int
 
 from fourierjax._jit import filter_jit
-from fourierjax._linalg import PRECISION, spd_solve
+from fourierjax._linalg import PRECISION, matmul, spd_solve
 from fourierjax.errors import UserError
 from fourierjax.stance.penalties import hermite_penalty
 from fourierjax.stance.problem import (
@@ -138,9 +138,16 @@ def _finish(problem: StanceProblem, y, steps, ok, built: BalancedBuild) -> Stanc
 
 def _solve_spd(H: Float[Array, "n n"], rhs: Float[Array, " n"]) -> Float[Array, " n"]:
     """Solve H x = rhs for the small SPD Hessian (`_linalg.spd_solve`, no LAPACK), with a relative
-    ridge of 1e-10 against a singular pivot."""
+    ridge of 1e-10 against a singular pivot.
+
+    The inverse is formed from H alone and applied to `rhs` by a product. In the implicit JVP
+    rules H holds primal values and `rhs` is a tangent: the result is then visibly linear in
+    the tangent, which reverse mode must transpose. Eliminating on `[H | rhs]` put both in one
+    loop carry, and `jax.grad` through a solve failed to transpose it.
+    """
+    eye = jnp.eye(H.shape[0], dtype=H.dtype)
     ridge = 1e-10 * (jnp.max(jnp.abs(jnp.diagonal(H))) + 1e-30)
-    return spd_solve(H + ridge * jnp.eye(H.shape[0], dtype=H.dtype), rhs[:, None])[:, 0]
+    return matmul(spd_solve(H + ridge * eye, eye), rhs[:, None])[:, 0]
 
 
 #: At most this many BFGS runs per solve (each from the previous answer, with a fresh
