@@ -1,5 +1,7 @@
 """Solved stance poses (or an eased animation between them) as a BVH `Motion` for Blender."""
 
+import os
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -28,8 +30,9 @@ def animate(poses: list[StancePose], frames_per_transition: int = 30) -> StanceP
     """
     if len(poses) < 2:
         raise UserError("animate: give at least two poses")
-    if frames_per_transition < 1:
-        raise UserError("animate: frames_per_transition must be >= 1")
+    n = frames_per_transition
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise UserError(f"animate: frames_per_transition must be a whole number >= 1, got {n!r}")
     t = ease_in_out(jnp.arange(frames_per_transition) / frames_per_transition)
     roots, quats = [], []
     for a, b in zip(poses[:-1], poses[1:]):
@@ -65,7 +68,16 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
 
 
 def write_stance_bvh(path, body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0):
-    """Write a pose or an animation (see `pose_to_motion`) to a BVH file that opens in Blender."""
+    """Write a pose or an animation (see `pose_to_motion`) to a BVH file that opens in Blender.
+
+    Raises:
+        UserError: the pose holds NaN, or the file cannot be written (e.g. its directory does
+            not exist: it is not created, as with `io.bvh.write_bvh`).
+    """
     if not np.isfinite(np.asarray(poses.quats)).all():
         raise UserError("write_stance_bvh: the pose holds NaN values")
-    write_bvh(pose_to_motion(body, poses, frame_time_s), path)
+    motion = pose_to_motion(body, poses, frame_time_s)
+    try:
+        write_bvh(motion, path)
+    except OSError as err:
+        raise UserError(f"write_stance_bvh: cannot write {os.fspath(path)}: {err.strerror or err}") from None

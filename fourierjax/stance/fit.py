@@ -9,6 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.skeleton48 import SHOULDER, Body
 from fourierjax.stance.torso import COLLAR_STATES, SHAPE_CLASSES, class_weights, collar_quats, spine_quats
@@ -61,7 +62,6 @@ class TorsoFit(eqx.Module):
         }  # fmt: skip
 
 
-@eqx.filter_jit
 def fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
     """Which spine classes, collar states and amplitudes explain a target torso best.
 
@@ -75,7 +75,39 @@ def fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
 
     Returns:
         `TorsoFit` (`describe()` names the winning classes).
+
+    Raises:
+        UserError: `target_dirs` is not `[6, 3]` numbers or (when its values are known, i.e.
+            not traced) holds NaN, infinity or directions that are not unit vectors.
     """
+    dirs = target_dirs
+    if not isinstance(dirs, jax.Array):  # checked as numpy: under an outer jit jnp would trace it
+        try:
+            dirs = np.asarray(dirs, np.float64)
+        except (TypeError, ValueError) as err:
+            raise UserError(f"fit_torso: target_dirs must be numbers, got {target_dirs!r} ({err})") from None
+    if dirs.shape != (len(SEGMENTS), 3):
+        raise UserError(f"fit_torso: target_dirs must have shape ({len(SEGMENTS)}, 3), one direction "
+                        f"per segment {SEGMENTS}, got shape {dirs.shape}")  # fmt: skip
+    if not isinstance(dirs, jax.core.Tracer):
+        d = np.asarray(dirs, np.float64)
+        bad = [SEGMENTS[k] for k in range(len(SEGMENTS)) if not np.isfinite(d[k]).all()]
+        if bad:
+            raise UserError(f"fit_torso: target_dirs holds NaN or infinite values for {bad}")
+        norms = np.linalg.norm(d, axis=-1)
+        bad = [f"{SEGMENTS[k]} ({norms[k]:.4g})" for k in range(len(SEGMENTS)) if abs(norms[k] - 1.0) > 1e-3]
+        if bad:
+            raise UserError(f"fit_torso: target_dirs must be unit directions; normalise them. Not "
+                            f"unit: {', '.join(bad)}")  # fmt: skip
+    dirs = jnp.asarray(dirs)
+    if not jnp.issubdtype(dirs.dtype, jnp.floating):
+        dirs = dirs.astype(float)
+    return _fit_torso(body, dirs)
+
+
+@eqx.filter_jit
+def _fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
+    """`fit_torso` on checked input."""
     sag, cor, sig = _combo_arrays()
 
     def residual(y, args):

@@ -2,7 +2,9 @@
 
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
@@ -37,28 +39,58 @@ def make_feet(
 
     Arguments:
         body: the character.
-        stance_width_m: distance between the ankle joints (default: the hip-joint spread).
+        stance_width_m: distance between the ankle joints, >= 0 (default: the hip-joint
+            spread). The right foot is at -X, the character's right (a negative width would
+            cross the feet, and the pelvis, square to the ankle line, would turn around).
         turn_out_rad: each foot's toes turned outward by this yaw (rad).
         stagger_m: the left foot this far ahead of the right along Z (m; split evenly).
 
     Returns:
         `Feet`.
+
+    Raises:
+        UserError: an argument is not a single finite number, or the width is negative
+            (checked when the values are known, i.e. not traced).
     """
     off = body.offsets
     hip_spread = off[HIP[LEFT], 0] - off[HIP[RIGHT], 0]
-    width = hip_spread if stance_width_m is None else jnp.asarray(stance_width_m, off.dtype)
+    if stance_width_m is None:
+        width = hip_spread
+    else:
+        width = _scalar(stance_width_m, "stance_width_m", off.dtype)
+        if not isinstance(width, jax.core.Tracer) and float(width) < 0.0:
+            raise UserError(
+                f"make_feet: stance_width_m must be >= 0 (the distance between the ankles, the "
+                f"right foot on the character's right), got {float(width):.6g}: crossed feet turn "
+                "the body around (the pelvis faces square to the right->left ankle line)"
+            )
+    stagger = _scalar(stagger_m, "stagger_m", off.dtype)
+    t = _scalar(turn_out_rad, "turn_out_rad", off.dtype)
     ankle_h = off[0, 1] + off[KNEE[RIGHT], 1] + off[ANKLE[RIGHT], 1]
-    half = 0.5 * jnp.asarray(stagger_m, off.dtype)
+    half = 0.5 * stagger
     pos = jnp.stack(
         [
             jnp.stack([-0.5 * width, ankle_h, -half]),
             jnp.stack([0.5 * width, ankle_h, half]),
         ]
     )
-    t = jnp.asarray(turn_out_rad, off.dtype)
     # Turning the right foot's toes outward (toward -X) is a negative yaw about +Y.
     quats = jnp.stack([u.quat_axis(1, -t), u.quat_axis(1, t)])
     return Feet(positions=pos, quats=quats)
+
+
+def _scalar(x, name: str, dtype) -> Float[Array, ""]:
+    """`x` as a scalar array, or a `UserError` naming `make_feet`'s argument `name` if it is not
+    one number or (when its value is known, i.e. not traced) not finite."""
+    try:
+        a = jnp.asarray(x, dtype)
+    except (TypeError, ValueError) as err:
+        raise UserError(f"make_feet: {name} must be a number, got {x!r} ({err})") from None
+    if a.shape != ():
+        raise UserError(f"make_feet: {name} must be a single number, got shape {a.shape}")
+    if not isinstance(a, jax.core.Tracer) and not np.isfinite(np.asarray(a)):
+        raise UserError(f"make_feet: {name} must be finite, got {float(a)}")
+    return a
 
 
 class LowerBody(eqx.Module):

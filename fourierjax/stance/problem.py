@@ -16,8 +16,13 @@ from fourierjax.stance import _util as u
 from fourierjax.stance.arms import arm_free, arm_to_target
 from fourierjax.stance.balance import balance_point, inverse_2x2, newton_2d_with_tangents
 from fourierjax.stance.gaze import gaze_rotation
-from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
-from fourierjax.stance.penalties import HermitePenalty, quadratic_penalty, reach_penalty
+from fourierjax.stance.ik import Feet, lower_body_ik, make_feet, pelvis_frame_desired
+from fourierjax.stance.penalties import (
+    HermitePenalty,
+    check_penalty,
+    quadratic_penalty,
+    reach_penalty,
+)
 from fourierjax.stance.skeleton48 import (
     ANKLE,
     COLLAR,
@@ -130,17 +135,26 @@ def make_problem(
         abdomen_offset: let the solver move the abdomen X offset.
         target_right, target_left: `[3]` world wrist targets (m) or None.
         gaze_point: `[3]` world point to look at (default: 2 m ahead at eye height).
-        amplitude_scale: rad; the amplitude penalties are ((a - desired)/scale)^2 near the
-            desired point.
-        reach_weight: weight of each reach penalty in eq. 5.
+        amplitude_scale: rad, > 0; the amplitude penalties are ((a - desired)/scale)^2 near
+            the desired point.
+        reach_weight: weight of each reach penalty in eq. 5, >= 0 (0: the torso does not
+            help the arms reach; the arm IK still aims at the targets).
         dominant: "right" or "left".
 
     Returns:
         A `StanceProblem`.
+
+    Raises:
+        UserError: a bad argument. Values are checked when they are known (not traced): NaN
+            or infinity anywhere, `amplitude_scale <= 0`, `reach_weight < 0`, foot quaternions
+            that are not unit, or crossed feet: the right foot not to the right of the left one
+            for the direction the toes point (the pelvis would face away from the toes).
     """
     if dominant not in ("right", "left"):
         raise UserError(f"dominant must be 'right' or 'left', got {dominant!r}")
     dtype = body.offsets.dtype
+    amplitude_scale = _positive_scalar(amplitude_scale, "amplitude_scale", dtype, allow_zero=False)
+    reach_weight = _positive_scalar(reach_weight, "reach_weight", dtype, allow_zero=True)
     if shape is None:
         vec = jnp.zeros(len(SHAPE_PARAMS), dtype)
     elif isinstance(shape, dict):
@@ -158,6 +172,8 @@ def make_problem(
             raise UserError(f"shape must have {len(SHAPE_PARAMS)} values, got shape {vec.shape}")
     if feet is None:
         feet = make_feet(body)
+    else:
+        _check_feet(feet)
     targets, active = [], []
     for hand, t in (("right", target_right), ("left", target_left)):
         if t is None:
@@ -176,6 +192,13 @@ def make_problem(
         raise UserError(f"gaze_point must be 3 coordinates, got shape {gaze_point.shape}")
     arm = arm_lengths(body)
     free = jnp.array([1.0] * 5 + [1.0 if abdomen_offset else 0.0], dtype)
+    amplitude_penalty = quadratic_penalty(jnp.zeros(NUM_AMPLITUDES), amplitude_scale)
+    if not isinstance(amplitude_scale, jax.core.Tracer):
+        # A tiny scale passes the check above but its slopes (2 / scale) overflow. Evaluated
+        # eagerly: under an outer jit the penalty built above is traced even for a known scale.
+        with jax.ensure_compile_time_eval():
+            check_penalty(quadratic_penalty(jnp.zeros(NUM_AMPLITUDES), amplitude_scale),
+                          f"make_problem: amplitude_scale={float(amplitude_scale):.6g}")
     reach = reach_penalty(arm[0])
     reach = HermitePenalty(*(jnp.stack([x, x]) for x in (reach.desired, reach.widths,
                                                           reach.values, reach.slopes)))  # fmt: skip
@@ -187,7 +210,7 @@ def make_problem(
         coronal_weights=class_weights("coronal", coronal_class),
         collar_signs=jnp.array([collar_sign(collar_y), collar_sign(collar_z)], dtype),
         free=free,
-        amplitude_penalty=quadratic_penalty(jnp.zeros(NUM_AMPLITUDES), amplitude_scale),
+        amplitude_penalty=amplitude_penalty,
         amplitude_weights=jnp.ones(NUM_AMPLITUDES, dtype),
         targets=jnp.stack(targets),
         target_active=jnp.array(active, dtype),
@@ -196,6 +219,70 @@ def make_problem(
         gaze_point=gaze_point,
         dominant=dominant,
     )
+
+
+def _positive_scalar(x, name: str, dtype, allow_zero: bool) -> Array:
+    """`make_problem`'s argument `name` as a scalar, checked finite and > 0 (>= 0 with
+    `allow_zero`) when its value is known."""
+    a = as_finite(x, f"make_problem: {name}", dtype)
+    if a.shape != ():
+        raise UserError(f"make_problem: {name} must be a single number, got shape {a.shape}")
+    if not isinstance(a, jax.core.Tracer):
+        v = float(a)
+        if v < 0.0 or (v == 0.0 and not allow_zero):
+            raise UserError(f"make_problem: {name} must be {'>= 0' if allow_zero else '> 0'}, got {v:.6g}")
+    return a
+
+
+def _check_feet(feet: Feet, name: str = "make_problem: feet") -> None:
+    """Raise a `UserError` naming `name` if `feet` is not a `Feet` of `[2, 3]` positions and
+    `[2, 4]` quaternions or, when its values are known (not traced), holds NaN or infinity,
+    quaternions that are not unit, or crossed feet.
+
+    Crossed means the pelvis would face away from the toes. The lower-body IK turns the pelvis
+    square to the right->left ankle line (`pelvis_frame_desired`: facing +Z for a right foot
+    at -X, and +Z when the ankles coincide), so when the right foot is not on the right of the
+    left foot, relative to where the feet point, the body stands turned around on its feet
+    (hips twisted by 180 degrees) and the solve still converges. The direction the feet point
+    is the sum of their toe directions, so feet turned together by any yaw are fine; each
+    foot turned out by more than 90 degrees points behind the body and counts as crossed (it
+    is the same pose as crossed feet, turned by 180 degrees).
+    """
+    if not isinstance(feet, Feet):
+        raise UserError(f"{name} must be a Feet (make_feet), got {type(feet).__name__}")
+    arrays = []
+    for field, shape in (("positions", (2, 3)), ("quats", (2, 4))):
+        a = as_finite(getattr(feet, field), f"{name}.{field}")
+        if a.shape != shape:
+            raise UserError(f"{name}.{field} must have shape {shape}, got {a.shape}")
+        arrays.append(a)
+    positions, quats = arrays
+    if isinstance(positions, jax.core.Tracer) or isinstance(quats, jax.core.Tracer):
+        return
+    # Eagerly: under an outer jit, operations on known feet would be traced.
+    with jax.ensure_compile_time_eval():
+        toes = np.asarray(rotations.matrix_from_quat(quats), np.float64)[:, :, 2]
+        pelvis = pelvis_frame_desired(Feet(positions, quats), jnp.zeros(3, positions.dtype))
+    positions = np.asarray(positions, np.float64)
+    norms = np.linalg.norm(np.asarray(quats, np.float64), axis=-1)
+    if np.abs(norms - 1.0).max() > 1e-3:
+        raise UserError(f"{name}.quats must be unit quaternions (wxyz), got norms {norms.tolist()}")
+    toes = toes.sum(axis=0) * np.array([1.0, 0.0, 1.0])  # horizontal; ~0 when pointing sideways
+    facing = np.asarray(pelvis, np.float64)[:, 2]
+    if facing @ toes < -1e-6:  # the tolerance lets toes turned out by exactly 90 degrees pass
+
+        def show(v, digits=3):
+            return (np.round(np.asarray(v, np.float64), digits) + 0.0).tolist()  # no "-0.0"
+
+        raise UserError(
+            f"{name} are crossed: the right foot (positions[0] = {show(positions[0], 4)}) "
+            f"must be to the right of the left foot ({show(positions[1], 4)}) for the "
+            f"direction the toes point ({show(toes / np.linalg.norm(toes))}); the pelvis turns "
+            "square to the right->left ankle line (+Z when the ankles coincide) and would face "
+            f"{show(facing)}, so the body would stand turned around on its feet. For feet facing "
+            "+Z the right foot is at -X. Uncross the feet, or turn each foot out by less than "
+            "90 degrees"
+        )
 
 
 def _pair(x, joints: tuple[int, int]):

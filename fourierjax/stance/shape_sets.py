@@ -18,9 +18,16 @@ side through the origin). Each side has:
   (the knee bend that only comes near the hunched end of the posture scale).
 
 Values scale with the intensity from the neutral origin (all zeros) and extrapolate beyond
-|intensity| = 1. The class states switch with the sign of the intensity, where all amplitudes
-are zero, so poses stay continuous. Everything after loading is jnp: the intensity and the
-object can be traced (vmap over intensities; differentiate through the solver).
+|intensity| = 1. The class states switch with the sign of the intensity, where all desired
+amplitudes are zero, so poses stay continuous in the intensity when no reach target is
+active. With an active target the solver moves the amplitudes off their desired values, so
+they are not zero at intensity 0 and the class switch shows as a jump in the pose there
+(measured, posture set, right-hand target (-0.35, 1.05, 0.55): objective 25.21 and
+sagittal amplitude 0.215 at intensity -1e-5, 21.13 and 0.366 at +1e-5). Neff & Fiume switch
+the sagittal class "as the sagittal amplitude passes through zero" (sec. 6); switching on
+the solved amplitudes inside the solver is not implemented. Everything after loading is jnp:
+the intensity and the object can be traced (vmap over intensities; differentiate through
+the solver).
 """
 
 import dataclasses
@@ -29,6 +36,7 @@ import tomllib
 from pathlib import Path
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -86,6 +94,9 @@ class ShapeSet:
             `collar_signs` [2], `gaze_object` (0/1 scalar).
         """
         i = jnp.asarray(intensity, float)
+        if i.shape != ():
+            raise UserError(f"shape set {self.name!r}: intensity must be a single number, got "
+                            f"shape {i.shape} (vmap over intensities for a sweep)")
         if object_xyz is None:
             ux, uz = jnp.asarray(0.0), jnp.asarray(1.0)
         else:
@@ -154,6 +165,14 @@ class ShapeSet:
             dominant=dominant,
         )
         ev = self.evaluate(intensity, object_xyz)
+        if not isinstance(ev["shape"], jax.core.Tracer) and not np.isfinite(ev["shape"]).all():
+            # A huge but finite intensity overflows (the "late" curves square it).
+            bad = [n for n, v in zip(SHAPE_PARAMS, np.asarray(ev["shape"])) if not np.isfinite(v)]
+            with_object = "" if object_xyz is None else f" (object_xyz {np.asarray(object_xyz).tolist()})"
+            raise UserError(
+                f"shape set {self.name!r}: intensity {float(intensity):.6g}{with_object} gives a shape "
+                f"vector with infinite or NaN values in {bad}; use a smaller intensity"
+            )
         gaze = base.gaze_point
         if object_xyz is not None:
             gaze = jnp.where(ev["gaze_object"] > 0.5, jnp.asarray(object_xyz, gaze.dtype), gaze)
@@ -321,8 +340,6 @@ def get_shape_set(name_or_path: str) -> ShapeSet:
 def perturb(shape: Float[Array, "20"], key, scale: float = 0.03) -> Float[Array, "20"]:
     """A small random variation of a shape vector (sec. 6: same pose family, not the same
     pose): Gaussian noise of `scale` (rad, or fraction for the shifts) on nonzero entries."""
-    import jax
-
     noise = scale * jax.random.normal(key, shape.shape, shape.dtype)
     return shape + jnp.where(shape != 0.0, noise, 0.0)
 
