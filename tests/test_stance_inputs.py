@@ -284,3 +284,19 @@ def test_animate_accepts_numpy_integers():
     a = rest_pose(BODY)
     b = StancePose(a.root_position + jnp.array([0.0, 0.0, 0.1]), a.quats)
     assert animate([a, b], np.int64(3)).quats.shape[0] == 4
+
+
+def test_stack_problems_names_what_cannot_be_stacked():
+    from fourierjax.stance.problem import make_problem
+    from fourierjax.stance.skeleton48 import make_body
+    from fourierjax.stance.solver import stack_problems
+
+    body = make_body(1.75)
+    right, left = make_problem(body), make_problem(body, dominant="left")
+    assert stack_problems([right, right]).shape.shape == (2, right.shape.shape[0])
+    with pytest.raises(UserError, match="no problems"):
+        stack_problems([])
+    with pytest.raises(UserError, match="problem 1 is a dict"):
+        stack_problems([right, {}])
+    with pytest.raises(UserError, match=r"problem 1 differs .*'left' vs 'right'"):
+        stack_problems([right, left])

@@ -314,5 +314,24 @@ def solve_stances(
 
 
 def stack_problems(problems: list[StanceProblem]) -> StanceProblem:
-    """Stack same-structure problems along a new leading axis (for `solve_stances`)."""
+    """Stack same-structure problems along a new leading axis (for `solve_stances`).
+
+    Raises:
+        UserError: no problems, something that is not a `StanceProblem`, or problems whose
+            static settings (e.g. `dominant`) differ from the first one's.
+    """
+    problems = list(problems)
+    if not problems:
+        raise UserError("stack_problems: no problems to stack")
+    for i, p in enumerate(problems):
+        if not isinstance(p, StanceProblem):
+            raise UserError(f"stack_problems: problem {i} is a {type(p).__name__}, not a StanceProblem")
+    first = jax.tree.structure(problems[0])
+    for i, p in enumerate(problems[1:], 1):
+        if jax.tree.structure(p) != first:
+            raise UserError(
+                f"stack_problems: problem {i} differs from problem 0 in its static settings "
+                f"(dominant foot: {p.dominant!r} vs {problems[0].dominant!r}); solve such problems "
+                "in separate batches"
+            )
     return jax.tree.map(lambda *xs: jnp.stack(xs), *problems)
