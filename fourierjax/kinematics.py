@@ -10,6 +10,7 @@ from jaxtyping import Array, Float
 
 from fourierjax import rotations
 from fourierjax._sincos import sincos as _sincos
+from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
 
 _AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
@@ -85,7 +86,7 @@ def pose_from_channels(
     topology = skeleton.topology
     channels = jnp.asarray(channels)
     if channels.shape != (topology.num_channels,):
-        raise ValueError(
+        raise UserError(
             f"pose_from_channels: `channels` has shape {channels.shape}, expected "
             f"({topology.num_channels},) for one frame of this skeleton"
         )
@@ -129,7 +130,7 @@ def forward_kinematics(
     topology = skeleton.topology
     j = topology.num_joints
     if translations.shape != (j, 3) or quats.shape != (j, 4):
-        raise ValueError(
+        raise UserError(
             f"forward_kinematics: expected translations ({j}, 3) and quats ({j}, 4), got "
             f"{translations.shape} and {quats.shape}"
         )
@@ -237,12 +238,12 @@ def _fk_batch(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     topology = skeleton.topology
     channels = jnp.asarray(channels)
     if channels.ndim < 1 or channels.shape[-1] != topology.num_channels:
-        raise ValueError(
+        raise UserError(
             f"fk_frames: `channels` has shape {channels.shape}, expected (..., "
             f"{topology.num_channels}) for this skeleton"
         )
     if skeleton.offsets.ndim != 2:
-        raise ValueError(
+        raise UserError(
             f"fk_frames: the skeleton's offsets have shape {skeleton.offsets.shape}; for a batch "
             "of skeletons vmap `fk_from_channels` instead"
         )

@@ -10,6 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from fourierjax.errors import UserError
+
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 CHANNEL_NAMES = POSITION_CHANNELS + ROTATION_CHANNELS
@@ -46,30 +48,30 @@ class Topology:
         object.__setattr__(self, "end_site_parents", tuple(int(p) for p in self.end_site_parents))
         n = len(self.names)
         if n == 0:
-            raise ValueError("Topology: `names` is empty; a skeleton needs at least one joint")
+            raise UserError("Topology: `names` is empty; a skeleton needs at least one joint")
         if len(self.parents) != n or len(self.channels) != n:
-            raise ValueError(
+            raise UserError(
                 f"Topology: `names` ({n}), `parents` ({len(self.parents)}) and `channels` "
                 f"({len(self.channels)}) must have the same length"
             )
         if len(set(self.names)) != n:
             dup = sorted({x for x in self.names if self.names.count(x) > 1})
-            raise ValueError(f"Topology: duplicate joint names {dup}")
+            raise UserError(f"Topology: duplicate joint names {dup}")
         for i, p in enumerate(self.parents):
             if not -1 <= p < i:
-                raise ValueError(
+                raise UserError(
                     f"Topology: joint {self.names[i]!r} has parent index {p}; parents must "
                     "come before their children (-1 for a root)"
                 )
         for name, chans in zip(self.names, self.channels):
             for c in chans:
                 if c not in CHANNEL_NAMES:
-                    raise ValueError(f"Topology: joint {name!r} has unknown channel {c!r}")
+                    raise UserError(f"Topology: joint {name!r} has unknown channel {c!r}")
             if len(set(chans)) != len(chans):
-                raise ValueError(f"Topology: joint {name!r} repeats a channel: {chans}")
+                raise UserError(f"Topology: joint {name!r} repeats a channel: {chans}")
         for p in self.end_site_parents:
             if not 0 <= p < n:
-                raise ValueError(f"Topology: End Site parent index {p} out of range")
+                raise UserError(f"Topology: End Site parent index {p} out of range")
 
     # -- counts -------------------------------------------------------------------------
     @property
@@ -166,9 +168,9 @@ class Skeleton(eqx.Module):
     def __check_init__(self):
         j, e = self.topology.num_joints, self.topology.num_end_sites
         if self.offsets.shape[-2:] != (j, 3):
-            raise ValueError(f"Skeleton: `offsets` has shape {self.offsets.shape}, expected (..., {j}, 3)")
+            raise UserError(f"Skeleton: `offsets` has shape {self.offsets.shape}, expected (..., {j}, 3)")
         if self.end_site_offsets.shape[-2:] != (e, 3):
-            raise ValueError(
+            raise UserError(
                 f"Skeleton: `end_site_offsets` has shape {self.end_site_offsets.shape}, "
                 f"expected (..., {e}, 3)"
             )

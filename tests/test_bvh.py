@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fourierjax import data
-from fourierjax.errors import FourierJaxError
+from fourierjax.errors import FourierJaxError, UserError
 from fourierjax.io import BVHError, Motion, format_bvh, parse_bvh, read_bvh, write_bvh
 from fourierjax.skeleton import Skeleton, Topology
 
@@ -235,18 +235,18 @@ def test_end_sites_before_sibling_joints_keep_their_order():
 def test_writer_rejects_what_bvh_cannot_hold():
     topo = Topology(("a", "b", "c", "d"), (-1, 0, 0, 1), (("Xrotation",),) * 4)  # not DFS
     m = Motion(topo, np.zeros((4, 3)), np.zeros((0, 3)), np.zeros((1, 4)), 0.1)
-    with pytest.raises(ValueError, match="depth-first"):
+    with pytest.raises(UserError, match="depth-first"):
         format_bvh(m)
     good = Topology(("a", "b"), (-1, 0), (("Xrotation",),) * 2)
     m = Motion(good, np.zeros((2, 3)), np.zeros((0, 3)), np.zeros((2, 2)), 0.1)
-    with pytest.raises(ValueError, match="no frames"):
+    with pytest.raises(UserError, match="no frames"):
         format_bvh(m[2:])
-    with pytest.raises(ValueError, match="NaN"):
+    with pytest.raises(UserError, match="NaN"):
         format_bvh(m.with_channels(np.full((1, 2), np.nan)))
-    with pytest.raises(ValueError, match="precision"):
+    with pytest.raises(UserError, match="precision"):
         format_bvh(m, precision=-1)
     spaced = Topology(("a", "b  c"), (-1, 0), (("Xrotation",),) * 2)
-    with pytest.raises(ValueError, match="cannot be written"):
+    with pytest.raises(UserError, match="cannot be written"):
         format_bvh(Motion(spaced, np.zeros((2, 3)), np.zeros((0, 3)), np.zeros((1, 2)), 0.1))
 
 
@@ -286,10 +286,12 @@ def test_motion_api():
     new = m.with_channels(np.zeros((5, 96)))
     assert new.num_frames == 5 and new.topology == m.topology
     np.testing.assert_array_equal(new.offsets, m.offsets)
-    with pytest.raises(ValueError, match="96"):
+    with pytest.raises(UserError, match="96"):
         m.with_channels(np.zeros((5, 95)))
-    with pytest.raises(ValueError, match="frame_time_s"):
+    with pytest.raises(UserError, match="frame_time_s"):
         Motion(m.topology, m.offsets, m.end_site_offsets, m.channels, 0.0)
+    with pytest.raises(UserError, match="frame_time_s"):  # as the parser: fps would be inf
+        Motion(m.topology, m.offsets, m.end_site_offsets, m.channels, 1e-320)
     with pytest.raises(ValueError, match="offsets"):
         Motion(m.topology, m.offsets[:3], m.end_site_offsets, m.channels, 0.1)
     with pytest.raises(ValueError):  # frozen, read-only arrays: safe to share and cache

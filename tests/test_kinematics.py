@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from fourierjax import anthropometry, kinematics
+from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
 from tests.helpers import random_topology, reference_fk
 
@@ -101,9 +102,9 @@ def test_joint_positions_does_not_retrace():
 def test_shape_errors_name_the_argument():
     topo, offsets, ends, channels = _random_case(6, num_frames=1)
     skel = Skeleton(topo, offsets, ends)
-    with pytest.raises(ValueError, match="channels"):
+    with pytest.raises(UserError, match="channels"):
         kinematics.pose_from_channels(skel, jnp.zeros(topo.num_channels + 1))
-    with pytest.raises(ValueError, match="offsets"):
+    with pytest.raises(UserError, match="offsets"):
         Skeleton(topo, offsets[:-1], ends)
 
 

@@ -50,9 +50,9 @@ def _frozen_array(x, name: str, ndim: int) -> np.ndarray:
     try:
         a = np.array(x, dtype=np.float64)  # always a private copy
     except (TypeError, ValueError) as err:
-        raise ValueError(f"Motion: `{name}` is not a numeric array ({err})") from None
+        raise UserError(f"Motion: `{name}` is not a numeric array ({err})") from None
     if a.ndim != ndim:
-        raise ValueError(f"Motion: `{name}` must have {ndim} dimensions, got shape {a.shape}")
+        raise UserError(f"Motion: `{name}` must have {ndim} dimensions, got shape {a.shape}")
     a.setflags(write=False)
     return a
 
@@ -98,25 +98,26 @@ class Motion:
         )
         channels = _frozen_array(self.channels, "channels", 2)
         if offsets.shape != (topo.num_joints, 3):
-            raise ValueError(
+            raise UserError(
                 f"Motion: `offsets` has shape {offsets.shape}, expected ({topo.num_joints}, 3)"
             )
         if ends.shape != (topo.num_end_sites, 3):
-            raise ValueError(
+            raise UserError(
                 f"Motion: `end_site_offsets` has shape {ends.shape}, "
                 f"expected ({topo.num_end_sites}, 3)"
             )
         if channels.shape[1] != topo.num_channels:
-            raise ValueError(
+            raise UserError(
                 f"Motion: `channels` has shape {channels.shape}, expected (frames, "
                 f"{topo.num_channels}) for this topology"
             )
         try:
             frame_time_s = float(self.frame_time_s)
         except (TypeError, ValueError):
-            raise ValueError(f"Motion: `frame_time_s` must be a number, got {self.frame_time_s!r}")
-        if not (math.isfinite(frame_time_s) and frame_time_s > 0):
-            raise ValueError(f"Motion: `frame_time_s` must be finite and > 0, got {frame_time_s}")
+            raise UserError(f"Motion: `frame_time_s` must be a number, got {self.frame_time_s!r}")
+        if not (math.isfinite(frame_time_s) and frame_time_s >= MIN_FRAME_TIME_S):
+            raise UserError(f"Motion: `frame_time_s` must be finite and >= {MIN_FRAME_TIME_S:g} s, "
+                            f"got {frame_time_s}")
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "end_site_offsets", ends)
         object.__setattr__(self, "channels", channels)
@@ -664,7 +665,7 @@ def _check_writable(topology: Topology) -> None:
         while path and path[-1] != p:
             path.pop()
         if p >= 0 and not path:
-            raise ValueError(
+            raise UserError(
                 f"format_bvh: joint {topology.names[i]!r} is not in depth-first order "
                 "(BVH lists every joint right after its parent's earlier subtree); reorder "
                 "the topology before writing"
@@ -677,7 +678,7 @@ def _check_writable(topology: Topology) -> None:
             or "{" in name
             or "}" in name
         ):
-            raise ValueError(f"format_bvh: joint name {_show(name)} cannot be written to BVH")
+            raise UserError(f"format_bvh: joint name {_show(name)} cannot be written to BVH")
 
 
 def format_bvh(motion: Motion, precision: int = 6) -> str:
@@ -694,18 +695,18 @@ def format_bvh(motion: Motion, precision: int = 6) -> str:
     if not isinstance(motion, Motion):
         raise TypeError(f"format_bvh expects a Motion, got {type(motion).__name__}")
     if isinstance(precision, bool) or not isinstance(precision, int) or not 0 <= precision <= 17:
-        raise ValueError(f"format_bvh: `precision` must be an int in [0, 17], got {precision!r}")
+        raise UserError(f"format_bvh: `precision` must be an int in [0, 17], got {precision!r}")
     if motion.num_frames == 0:
-        raise ValueError("format_bvh: the motion has no frames (BVH needs at least one)")
+        raise UserError("format_bvh: the motion has no frames (BVH needs at least one)")
     if motion.num_channels == 0:
-        raise ValueError("format_bvh: the topology has no channels")
+        raise UserError("format_bvh: the topology has no channels")
     for what, arr in (
         ("offsets", motion.offsets),
         ("end_site_offsets", motion.end_site_offsets),
         ("channels", motion.channels),
     ):
         if not np.isfinite(arr).all():
-            raise ValueError(f"format_bvh: `{what}` holds NaN or infinite values")
+            raise UserError(f"format_bvh: `{what}` holds NaN or infinite values")
     topo = motion.topology
     _check_writable(topo)
 
@@ -748,7 +749,7 @@ def format_bvh(motion: Motion, precision: int = 6) -> str:
         write_end_sites(j, depths[j] + 1)
         out.append("\t" * depths[j] + "}")
     if next_end != len(ends):
-        raise ValueError(
+        raise UserError(
             "format_bvh: the End Sites are not in file order (each joint's End Sites must "
             "follow the End Sites of the joints written before it)"
         )
