@@ -135,3 +135,50 @@ def test_batch_strategies_agree_and_bad_batch_size_is_refused(solved):
     for bad in (0, -1, 2.5, "fast"):
         with pytest.raises(UserError, match="batch_size"):
             solve_stances(part, batch_size=bad)
+
+
+def test_gaze_straight_up_or_down_keeps_the_balance():
+    # Looking straight up, world up x forward vanishes: the head's twist once jumped with the
+    # tiny head moves of the balance solve, which then missed the goal by 4.3 mm while
+    # reporting converged. The neck's side axis is blended in near vertical.
+    from fourierjax.stance.gaze import gaze_rotation
+    from fourierjax.stance.problem import make_problem
+    from fourierjax.stance.solver import solve_stance
+
+    body = make_body(1.75)
+    head = np.array([0.0, 1.6044, 0.0655])
+    for offset in ([0, 2, 0], [0, 2, 0.001], [0, -2, 0], [0, 2, 0.2]):
+        sol = solve_stance(make_problem(body, {"gaze_weight": 1.0}, gaze_point=head + np.array(offset)))
+        assert bool(sol.converged) and float(sol.com_error_m) < 1e-6, offset
+    # The look-at frame is continuous through vertical: a 1e-4 rad change of the gaze
+    # direction near straight up turns the head by about as much, not by a large twist.
+    R_neck = jnp.eye(3)
+
+    def look(x):
+        return gaze_rotation(jnp.eye(3), R_neck, jnp.zeros(3), jnp.array([x, 1.0, 0.0]), 1.0)
+
+    a, b = look(1e-4), look(-1e-4)
+    assert float(jnp.max(jnp.abs(a - b))) < 1e-3
+    # Away from vertical nothing changes: up to world up, side = up x forward.
+    R = gaze_rotation(jnp.eye(3), R_neck, jnp.zeros(3), jnp.array([1.0, 0.2, 1.0]), 1.0)
+    fwd = np.array([1.0, 0.2, 1.0]) / np.linalg.norm([1.0, 0.2, 1.0])
+    side = np.cross([0.0, 1.0, 0.0], fwd)
+    np.testing.assert_allclose(R[:, 0], side / np.linalg.norm(side), atol=1e-6)
+    np.testing.assert_allclose(R[:, 2], fwd, atol=1e-6)
+
+
+def test_converged_requires_the_balance(monkeypatch):
+    # One Newton evaluation cannot solve the balance of a shifted weight: BFGS may still meet
+    # its tolerances, but the solution must not claim convergence with the COM off its goal.
+    from fourierjax.stance import problem as P
+    from fourierjax.stance import solver as S
+
+    prob = P.make_problem(make_body(1.75), {"weight_shift": 0.6})
+    monkeypatch.setattr(P, "BALANCE_EVALUATIONS", 1)
+    jax.clear_caches()  # inner jits (optimistix's) would reuse a trace with 5 evaluations
+    try:
+        sol = jax.jit(lambda p: S._solve_one(p, 1e-6, 1e-6, 200))(prob)
+    finally:
+        jax.clear_caches()  # and later tests must not reuse this one
+    assert float(sol.com_error_m) > S.COM_TOLERANCE_M
+    assert not bool(sol.converged)

@@ -8,6 +8,7 @@ from fourierjax.stance import _util as u
 
 _EY = jnp.array([0.0, 1.0, 0.0])
 _EZ = jnp.array([0.0, 0.0, 1.0])
+_NEAR_VERTICAL = 0.05  # sin of the angle from vertical below which the neck's side axis helps
 
 
 def gaze_rotation(
@@ -35,7 +36,16 @@ def gaze_rotation(
         `[3, 3]` local head rotation.
     """
     fwd = u.safe_normalize(point - head_position, u.mv(R_parent_world, _EZ))
-    side = u.safe_normalize(u.cross(_EY, fwd), jnp.array([1.0, 0.0, 0.0]))
+    # Side axis: world up x forward. Within ~3 degrees of straight up or down that cross
+    # product turns ever faster with the direction (1 / sin of the angle from vertical), and
+    # the head's twist with it: the neck's own X axis is blended in there (weight 1 at
+    # vertical, 0 from sin = _NEAR_VERTICAL on), so the twist stays continuous and the balance
+    # solve, which moves the head slightly, converges (measured before: COM 4.3 mm off goal).
+    across = u.cross(_EY, fwd)
+    blend = u.clip(1.0 - u.safe_norm(across) / _NEAR_VERTICAL, 0.0, 1.0)
+    hint = R_parent_world[..., 0]  # the neck's X axis in the world
+    hint = hint - u.dot(hint, fwd)[..., None] * fwd
+    side = u.safe_normalize(across + blend[..., None] * hint, jnp.array([1.0, 0.0, 0.0]))
     up = u.cross(fwd, side)
     R_look = u.mm(u.tr(R_parent_world), u.columns(side, up, fwd))
     # slerp(R_a, R_b, w) = R_a (R_a^T R_b)^w, the power taken on the quaternion of R_a^T R_b.

@@ -91,7 +91,8 @@ class StanceSolution(eqx.Module):
 
     - `amplitudes`: `[6]` sagittal, coronal, transverse, collar Y, collar Z, abdomen X.
     - `pose`: the `StancePose`; `balance_xz`: `[2]` dominant-ankle X/Z offsets (rad).
-    - `objective`: eq. 5 at the solution; `iterations`: solver steps; `converged`: bool.
+    - `objective`: eq. 5 at the solution; `iterations`: solver steps; `converged`: bool, BFGS
+      met its tolerances AND the balance was solved (`com_error_m <= COM_TOLERANCE_M`).
     - `com_error_m`: distance of the COM ground projection from the desired point.
     - `reach_error_m`: `[2]` wrist-to-target distance (0 for an inactive hand; see
       `target_active`); `reach_gap_m`: `[2]` how far a target lies beyond the arm.
@@ -111,6 +112,11 @@ class StanceSolution(eqx.Module):
     free_foot_gap_m: Float[Array, ""]
 
 
+#: Largest COM error (m) of a converged solution. Newton's balance solve reaches float32
+#: round-off (worst 1.8e-7 m over the posture sweeps); more means it did not converge.
+COM_TOLERANCE_M = 1e-4
+
+
 def _finish(problem: StanceProblem, y, steps, ok, built: BalancedBuild) -> StanceSolution:
     # `built` is the pose of the solver's last accepted step (`_optimum`), which carries
     # derivatives by the implicit function theorem: the pose is not built again.
@@ -127,7 +133,7 @@ def _finish(problem: StanceProblem, y, steps, ok, built: BalancedBuild) -> Stanc
         balance_xz=b,
         objective=obj,
         iterations=steps,
-        converged=ok,
+        converged=ok & (com_err <= COM_TOLERANCE_M),
         com_error_m=com_err,
         reach_error_m=reach_err,
         reach_gap_m=info.reach_gaps,
