@@ -7,6 +7,7 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from fourierjax._checks import number
 from fourierjax.errors import UserError
 
 # The CMU skeleton's foot joints, ankle first (the heel strike is seen there), toes last.
@@ -230,24 +231,6 @@ def _fit_floor(h, hz, slow, threshold, iters=3):
     return intercepts, slope
 
 
-def _real(name: str, x, *, positive: bool = False, nonnegative: bool = False) -> float:
-    """``x`` as a finite float, else a UserError naming ``name`` (NaN fails every ``<=`` test,
-    so it is checked for explicitly)."""
-    if isinstance(x, bool | np.bool_):
-        raise UserError(f"{name}: must be a number, got {x!r}")
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise UserError(f"{name}: must be a number, got {x!r}") from None
-    if not np.isfinite(v):
-        raise UserError(f"{name}: must be finite, got {v}")
-    if positive and v <= 0:
-        raise UserError(f"{name}: must be positive, got {v}")
-    if nonnegative and v < 0:
-        raise UserError(f"{name}: must be >= 0, got {v}")
-    return v
-
-
 def _axis(up_axis) -> int:
     if isinstance(up_axis, bool) or not isinstance(up_axis, int | np.integer) or not (
         0 <= up_axis <= 2
@@ -301,17 +284,17 @@ def estimate_ground(
     above it (0 if the point goes lower).
     """
     p = _as_points(foot_positions)
-    frame_time_s = _real("frame_time_s", frame_time_s, positive=True)
+    frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
     up_axis = _axis(up_axis)
     scale = _scale(p, up_axis)
     th = (0.25 * scale if height_threshold is None
-          else _real("height_threshold", height_threshold, positive=True))
+          else number(height_threshold, "height_threshold:", positive=True))
     tv = (6.0 * scale if speed_threshold is None
-          else _real("speed_threshold", speed_threshold, positive=True))
+          else number(speed_threshold, "speed_threshold:", positive=True))
     h = p[..., up_axis]
     hz = np.delete(p, up_axis, axis=-1)
     if ground_height is not None:
-        ground_height = _real("ground_height", ground_height)
+        ground_height = number(ground_height, "ground_height:")
         intercepts = np.maximum(np.percentile(h, 2, axis=0), ground_height)
         return GroundEstimate(intercepts, np.zeros(2), th, tv)
     speed = np.asarray(point_speeds(p, frame_time_s))
@@ -360,8 +343,8 @@ def foot_contacts(
     non-finite durations, or an `up_axis` other than the integer 0, 1 or 2.
     """
     p = _as_points(foot_positions)
-    min_contact_s = _real("min_contact_s", min_contact_s, nonnegative=True)
-    max_gap_s = _real("max_gap_s", max_gap_s, nonnegative=True)
+    min_contact_s = number(min_contact_s, "min_contact_s:", nonnegative=True)
+    max_gap_s = number(max_gap_s, "max_gap_s:", nonnegative=True)
     g = estimate_ground(
         p,
         frame_time_s,
@@ -433,7 +416,7 @@ def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> 
     """
     if statistic not in STEP_STATISTICS:
         raise UserError(f"statistic: {statistic!r} is not one of {STEP_STATISTICS}")
-    frame_time_s = _real("frame_time_s", frame_time_s, positive=True)
+    frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
     reduce = np.mean if statistic == "mean" else np.median
     ev = step_events(contacts)
     cycles = [np.diff(e) for e in ev if len(e) >= 2]

@@ -62,6 +62,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from fourierjax import _jit
+from fourierjax._checks import integer
 from fourierjax._linalg import matmul as _mm
 from fourierjax._linalg import spd_solve as _spd_solve
 from fourierjax._sincos import sincos as _sincos
@@ -125,22 +126,6 @@ def _safe_norm_atan2(a: Array, b: Array) -> tuple[Array, Array]:
 
 def _is_traced(*values) -> bool:
     return any(isinstance(v, jax.core.Tracer) for v in values)
-
-
-def _check_int(fn: str, name: str, value, minimum: int) -> int:
-    """``value`` as a Python int ``>= minimum`` (a static argument), else a UserError."""
-    try:
-        if isinstance(value, bool | np.bool_):
-            raise TypeError
-        n = operator.index(value)
-    except TypeError:
-        raise UserError(
-            f"{fn}: {name} must be an integer >= {minimum}, got {value!r} "
-            f"({type(value).__name__})"
-        ) from None
-    if n < minimum:
-        raise UserError(f"{fn}: {name} must be an integer >= {minimum}, got {n}")
-    return n
 
 
 def _check_real(fn: str, name: str, value) -> float:
@@ -626,7 +611,7 @@ def fit_linear(
         ``omega``, or fewer used frames than the 2N + 1 coefficients per channel.
     """
     fn = "fit_linear"
-    num_harmonics = _check_int(fn, "num_harmonics", num_harmonics, 1)
+    num_harmonics = integer(num_harmonics, f"{fn}: num_harmonics", 1)
     _check_representation(fn, representation)
     features = _as_float_features(fn, _as_array(features))
     if features.ndim != 2:
@@ -707,7 +692,7 @@ def spectral_omega(
                         f"({C},)")
     if not _is_traced(f_min_hz, f_max_hz) and not f_min_hz < f_max_hz:
         raise UserError(f"{fn}: the band f_min_hz={f_min_hz} .. f_max_hz={f_max_hz} Hz is empty")
-    pad_factor = _check_int(fn, "pad_factor", pad_factor, 1)
+    pad_factor = integer(pad_factor, f"{fn}: pad_factor", 1)
     _check_frame_time(fn, frame_time_s)
     w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
     cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
@@ -1078,7 +1063,7 @@ def _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz, 
                        grid_points, golden_iterations, odd_threshold) -> dict:
     """Checks of the static options of `fit` / `fit_batch` (before any work), naming the
     argument. Returns them normalised (Python ints and floats)."""
-    num_harmonics = _check_int(name, "num_harmonics", num_harmonics, 1)
+    num_harmonics = integer(num_harmonics, f"{name}: num_harmonics", 1)
     _check_representation(name, representation)
     f_min_hz = _check_real(name, "f_min_hz", f_min_hz)
     f_max_hz = _check_real(name, "f_max_hz", f_max_hz)
@@ -1091,8 +1076,8 @@ def _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz, 
                         f"(0.25: omega within [guess / 1.25, guess * 1.25]), got {search_halfwidth}")
     return dict(num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
                 search_halfwidth=search_halfwidth,
-                grid_points=_check_int(name, "grid_points", grid_points, 2),
-                golden_iterations=_check_int(name, "golden_iterations", golden_iterations, 0),
+                grid_points=integer(grid_points, f"{name}: grid_points", 2),
+                golden_iterations=integer(golden_iterations, f"{name}: golden_iterations", 0),
                 odd_threshold=_check_real(name, "odd_threshold", odd_threshold))
 
 

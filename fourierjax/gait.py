@@ -45,7 +45,6 @@ synthesized with the rule advance slower than captured (09_01: ~55 vs 63 units/s
 from __future__ import annotations
 
 import math
-import operator
 from typing import NamedTuple
 
 import equinox as eqx
@@ -54,6 +53,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from fourierjax._checks import concrete, integer
 from fourierjax.errors import UserError
 
 RULES = ("unuma1995", "continuous", "smooth")
@@ -75,16 +75,8 @@ def _soft_sqrt(x, eps):
     return jnp.sqrt(jnp.maximum(x, 0.0) + eps) - jnp.sqrt(eps)
 
 
-def _concrete(x) -> np.ndarray | None:
-    """`x` as a NumPy array, or None when it is traced (values are checked on concrete inputs
-    only: a host copy of a small scalar; under jit/vmap/grad the checks are skipped)."""
-    if isinstance(x, jax.core.Tracer):
-        return None
-    return np.asarray(x)
-
-
 def _check_finite(where: str, name: str, value) -> None:
-    v = _concrete(value)
+    v = concrete(value)
     if v is not None and not np.all(np.isfinite(v)):
         raise UserError(f"{where}: `{name}` must be finite, got {v if v.ndim == 0 else 'non-finite entries'}")
 
@@ -93,21 +85,9 @@ def _check_jump(where: str, jump) -> None:
     # Eq. 5 lifts the hip by jump·√(Lmax − L) in flight: the flight height, so jump ≥ 0 (the
     # lift is ≥ 0 by construction). A negative jump would push the stance foot into the ground.
     _check_finite(where, "jump", jump)
-    v = _concrete(jump)
+    v = concrete(jump)
     if v is not None and np.any(v < 0):
         raise UserError(f"{where}: `jump` must be >= 0 (the flight height of eq. 5), got {v}")
-
-
-def _check_int(where: str, name: str, value, minimum: int) -> int:
-    """`value` as a Python int; UserError for a non-integer (10.7 is not silently truncated)
-    or a value below `minimum`."""
-    try:
-        n = operator.index(value)
-    except TypeError:
-        raise UserError(f"{where}: `{name}` must be an integer, got {value!r}") from None
-    if n < minimum:
-        raise UserError(f"{where}: `{name}` must be at least {minimum}, got {n}")
-    return n
 
 
 def _check_rule(rule: str) -> str:
@@ -254,7 +234,7 @@ def hip_rule(
     # Lmax > 0 for any standing figure; the soft max of the smooth rule is >= max(leg), so
     # max(leg) > 0 covers every rule (and the default temperature, 0.002 max(leg), needs it).
     ref = jnp.max(leg) if l_max is None else jnp.asarray(l_max)
-    v = _concrete(ref)
+    v = concrete(ref)
     if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
         what = "the largest leg height in `leg`" if l_max is None else "`l_max`"
         raise UserError(
@@ -678,8 +658,8 @@ def synthesize_gait(
     """
     where = "synthesize_gait"
     _check_rule(rule)
-    num_frames = _check_int(where, "num_frames", num_frames, 2)
-    num_cycle_samples = _check_int(where, "num_cycle_samples", num_cycle_samples, 1)
+    num_frames = integer(num_frames, f"{where}: `num_frames`", 2)
+    num_cycle_samples = integer(num_cycle_samples, f"{where}: `num_cycle_samples`", 1)
     if isinstance(frame_time_s, jax.core.Tracer):
         raise UserError(
             f"{where}: `frame_time_s` sets the (static) frame spacing: pass a concrete number, not a traced value"
@@ -754,7 +734,7 @@ def model_hip_curves(model, skeleton, *, feet, groins, gait, jump, clearance=Non
     `hip_rule_curves` entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
     """
     groins = _check_indices("model_hip_curves", skeleton, feet, groins)
-    num_samples = _check_int("model_hip_curves", "num_samples", num_samples, 1)
+    num_samples = integer(num_samples, "model_hip_curves: `num_samples`", 1)
     grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples)
     if clearance is None:
         clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)

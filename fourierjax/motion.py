@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fourierjax import rotations
+from fourierjax._checks import number
 from fourierjax.errors import UserError
 from fourierjax.fourier import REPRESENTATIONS, ROOT_CHANNELS
 
@@ -142,19 +143,6 @@ def heading_of(motion) -> float:
     return float(np.arctan2(s, c))
 
 
-def _finite(x, name: str, where: str) -> float:
-    """``x`` as a finite float, else a UserError naming ``where`` and the argument ``name``."""
-    if isinstance(x, bool | np.bool_):
-        raise UserError(f"{where}: `{name}` must be a number, got {x!r}")
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise UserError(f"{where}: `{name}` must be a number, got {x!r}") from None
-    if not np.isfinite(v):
-        raise UserError(f"{where}: `{name}` must be finite, got {v}")
-    return v
-
-
 def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndarray:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
@@ -233,7 +221,7 @@ def features_from_motion(
     if motion.num_frames < 2:
         raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
     psi = (heading_of(motion) if heading_rad is None
-           else _finite(heading_rad, "heading_rad", "features_from_motion"))
+           else number(heading_rad, "features_from_motion: `heading_rad`"))
     pos, q_root = _root_pose(motion)
     c, s = np.cos(psi), np.sin(psi)
     # World -> heading frame: rotate by -psi about +Y.
@@ -348,13 +336,13 @@ def motion_from_features(
         f, c = np.argwhere(bad)[0]
         raise UserError(f"{where}: `features` holds NaN or infinite values (first at frame {f}, "
                         f"channel {channel_names[c]!r})")
-    frame_time_s = _finite(frame_time_s, "frame_time_s", where)
+    frame_time_s = number(frame_time_s, f"{where}: `frame_time_s`")
     if frame_time_s <= 0:
         raise UserError(f"{where}: `frame_time_s` must be positive, got {frame_time_s}")
-    heading_rad = _finite(heading_rad, "heading_rad", where)
+    heading_rad = number(heading_rad, f"{where}: `heading_rad`")
     if np.shape(start_xz) != (2,):
         raise UserError(f"{where}: `start_xz` must be two numbers (x, z), got {start_xz!r}")
-    start_xz = tuple(_finite(v, "start_xz", where) for v in start_xz)
+    start_xz = tuple(number(v, f"{where}: `start_xz`") for v in start_xz)
     F = x.shape[0]
     out = np.empty((F, topo.num_channels), np.float64)
     out[:] = template.channels[:1] if template.num_frames else 0.0

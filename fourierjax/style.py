@@ -47,6 +47,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
+from fourierjax._checks import concrete
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -98,14 +99,6 @@ _TINY = 1e-30
 # -------------------------------------------------------------------------------------------
 
 
-def _concrete(x) -> np.ndarray | None:
-    """`x` as a NumPy array, or None when it is traced: values are checked on concrete inputs
-    only (a small scalar's host copy), shapes always."""
-    if isinstance(x, jax.core.Tracer):
-        return None
-    return np.asarray(x)
-
-
 def _show(value: np.ndarray, bad: np.ndarray) -> str:
     # The first offending value, short even for a stacked batch of models.
     if value.ndim == 0:
@@ -118,7 +111,7 @@ def _check_omega(where: str, name: str, omega) -> None:
     """UserError unless the fundamental(s) are finite and > 0 rad/s (skipped when traced):
     log ω (geometric interpolation, characteristics, style vectors) is −inf at 0 and NaN below,
     and so are their gradients."""
-    value = _concrete(omega)
+    value = concrete(omega)
     if value is None:
         return
     bad = ~(np.isfinite(value) & (value > 0))
@@ -133,7 +126,7 @@ def _check_models_omega(where: str, **models) -> None:
 
 def _check_log_omega(where: str, chars) -> None:
     # A characteristic read from a file may carry log(ω_A/ω_B) = ±inf or NaN.
-    value = _concrete(chars.log_omega)
+    value = concrete(chars.log_omega)
     if value is None:
         return
     bad = ~np.isfinite(value)
@@ -148,7 +141,7 @@ def _check_scalar(where: str, name: str, value, hint: str = "") -> None:
     """UserError unless `value` is a scalar (always checked) and finite (when concrete)."""
     if jnp.ndim(value) != 0:
         raise UserError(f"{where}: `{name}` must be a scalar, got shape {jnp.shape(value)}{hint}")
-    v = _concrete(value)
+    v = concrete(value)
     if v is not None and not np.isfinite(v):
         raise UserError(f"{where}: `{name}` must be finite, got {v.item()!r}")
 
@@ -454,7 +447,7 @@ def _check_window(where: str, t_s, start_s, duration_s) -> None:
     _check_scalar(where, "start_s", start_s)
     if jnp.ndim(duration_s) != 0:
         raise UserError(f"{where}: `duration_s` must be a scalar, got shape {jnp.shape(duration_s)}")
-    d = _concrete(duration_s)
+    d = concrete(duration_s)
     if d is not None and not (np.isfinite(d) and d > 0):
         raise UserError(
             f"{where}: `duration_s`={d.item()!r}; a transition needs a finite positive duration (seconds)"

@@ -77,21 +77,26 @@ def limb_colors(names: Sequence[str]) -> list[str]:
     return out
 
 
-def project(positions, azimuth_deg: float = 25.0, up_axis: int = 1) -> np.ndarray:
+def project(positions, azimuth_deg: float = 25.0, up_axis: int = 1,
+            elevation_deg: float = 0.0) -> np.ndarray:
     """Oblique orthographic projection of points ``[..., 3]`` to picture coordinates ``[..., 2]``.
 
     The picture's horizontal axis is ``z cos(a) - x sin(a)`` (forward, +Z, seen from the walker's
     left side turned by ``a = azimuth_deg`` towards the front) and its vertical axis is the up
-    axis, so lengths along Z and Y are true lengths when ``a = 0``.
+    axis, so lengths along Z and Y are true lengths when ``a = 0``. With ``elevation_deg = e``
+    the view looks down by ``e``: the vertical axis is ``y cos(e) + d sin(e)``, with
+    ``d = x cos(a) + z sin(a)`` the depth away from the viewer (farther points higher).
     """
     p = np.asarray(positions, dtype=np.float64)
     if p.shape[-1] != 3:
         raise ValueError(f"project: positions must be [..., 3], got shape {p.shape}")
-    a = np.radians(azimuth_deg)
+    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
     x, z = p[..., 0], p[..., 2]
     if up_axis != 1:
         raise ValueError("project: only Y-up positions are supported (up_axis=1)")
-    return np.stack([z * np.cos(a) - x * np.sin(a), p[..., 1]], axis=-1)
+    depth = x * np.cos(a) + z * np.sin(a)
+    up = p[..., 1] if e == 0.0 else p[..., 1] * np.cos(e) + depth * np.sin(e)
+    return np.stack([z * np.cos(a) - x * np.sin(a), up], axis=-1)
 
 
 def _check_skeleton(positions: np.ndarray, parents: Sequence[int]) -> None:
@@ -390,8 +395,8 @@ def plot_crowd(positions, parents: Sequence[int], values, *, value_label: str = 
         positions: ``[B, J, 3]`` joint positions (Y up), e.g. ``crowd.crowd_positions``;
         parents: the skeleton's parent indices; values: ``[B]`` one number per character (e.g.
         its style parameter), shown by colour with a colour bar labelled ``value_label``;
-        azimuth_deg: turn of the view about the vertical (0: seen from +X, looking along -X);
-        elevation_deg: how far the camera looks down; scale: length unit of the picture.
+        azimuth_deg, elevation_deg: the view (`project`: turned about the vertical, looking
+        down); scale: length unit of the picture.
     Returns:
         Figure.
     """
@@ -403,12 +408,9 @@ def plot_crowd(positions, parents: Sequence[int], values, *, value_label: str = 
         raise ValueError(f"plot_crowd: positions {p.shape} must be [B, J, 3] with values [B], "
                          f"got values {v.shape}")
     _check_skeleton(p, parents)
-    a, e = np.radians(azimuth_deg), np.radians(elevation_deg)
-    x, y, z = p[..., 0], p[..., 1], p[..., 2]
-    depth = x * np.cos(a) + z * np.sin(a)  # toward the camera
-    u = z * np.cos(a) - x * np.sin(a)
-    w = y * np.cos(e) + depth * np.sin(e)
-    q = np.stack([u, w], axis=-1)  # [B, J, 2]
+    q = project(p, azimuth_deg, elevation_deg=elevation_deg)  # [B, J, 2]
+    a = np.radians(azimuth_deg)
+    depth = p[..., 0] * np.cos(a) + p[..., 2] * np.sin(a)  # away from the viewer
     bones = [(par, j) for j, par in enumerate(parents) if par >= 0]
     # Far characters first, so that near ones are drawn over them.
     order = np.argsort(-depth.mean(axis=1))
