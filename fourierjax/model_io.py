@@ -67,6 +67,11 @@ class ModelFileError(UserError):
         self.message = message
         super().__init__(f"{self.path}: {message}")
 
+    def __reduce__(self):
+        # The default pickles `args` (the formatted text), which `__init__` cannot take back:
+        # a batch worker's error would not reach its parent process.
+        return type(self), (self.path, self.message)
+
 
 class _MissingModelFile(ModelFileError, FileNotFoundError):
     """No such file: a ModelFileError, and also the FileNotFoundError that ``load_model`` used
@@ -78,6 +83,9 @@ class _MissingModelFile(ModelFileError, FileNotFoundError):
 
     def __str__(self) -> str:  # OSError's would be "[Errno 2] ..."
         return f"{self.path}: {self.message}"
+
+    def __reduce__(self):
+        return type(self), (self.path,)
 
 
 @dataclasses.dataclass(frozen=True)

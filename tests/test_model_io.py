@@ -311,3 +311,22 @@ def test_missing_files_raise_the_same_error_for_models_and_characteristics(tmp_p
         assert e.value.path == str(missing) and str(e.value) == f"{missing}: no such file"
         # Still a FileNotFoundError (what load_model raised before), for existing handlers.
         assert isinstance(e.value, FileNotFoundError) and e.value.filename == str(missing)
+
+
+def test_model_file_errors_survive_pickling(tmp_path):
+    """Errors from batch workers cross process boundaries: they must unpickle with their fields."""
+    import pickle
+
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip")
+    missing = tmp_path / "nope.npz"
+    errors = []
+    for path in (bad, missing):
+        with pytest.raises(model_io.ModelFileError) as e:
+            model_io.load_model(path)
+        errors.append(e.value)
+    for err in errors:
+        back = pickle.loads(pickle.dumps(err))
+        assert type(back) is type(err)
+        assert (back.path, back.message, str(back)) == (err.path, err.message, str(err))
+    assert isinstance(pickle.loads(pickle.dumps(errors[1])), FileNotFoundError)
