@@ -213,6 +213,16 @@ def _check_one_model(fn: str, model) -> None:
         )
 
 
+def _names_tuple(names):
+    """`channel_names` as a tuple (a static field must be hashable) when given as a list, tuple
+    or 1-D NumPy string array; anything else is left for `__check_init__` to refuse."""
+    if isinstance(names, np.ndarray) and names.ndim == 1 and names.dtype.kind == "U":
+        return tuple(str(n) for n in names)
+    if isinstance(names, list | tuple):
+        return tuple(names)
+    return names
+
+
 class FourierModel(eqx.Module):
     """Per-channel Fourier series with one fundamental (Unuma 1995 eq. 1, sine convention).
 
@@ -226,7 +236,7 @@ class FourierModel(eqx.Module):
     phase: Float[Array, "C N"]
     omega: Float[Array, ""]
     representation: str = eqx.field(static=True, default="euler")
-    channel_names: tuple[str, ...] = eqx.field(static=True, default=())
+    channel_names: tuple[str, ...] = eqx.field(static=True, default=(), converter=_names_tuple)
 
     def __check_init__(self):
         off, amp, ph, om = (jnp.shape(x) for x in (self.offset, self.amplitude, self.phase,
@@ -243,8 +253,12 @@ class FourierModel(eqx.Module):
             raise UserError(
                 f"FourierModel: representation {self.representation!r} not in {REPRESENTATIONS}"
             )
-        if not isinstance(self.channel_names, tuple):
-            raise TypeError("FourierModel: channel_names must be a tuple of str")
+        names = self.channel_names
+        if not isinstance(names, tuple) or not all(isinstance(n, str) for n in names):
+            bad = names if not isinstance(names, tuple) else next(n for n in names if not isinstance(n, str))
+            raise UserError(
+                f"FourierModel: channel_names must be a sequence of str (or empty), got {bad!r}"
+            )
         if self.channel_names and len(self.channel_names) != amp[-2]:
             raise UserError(
                 f"FourierModel: {len(self.channel_names)} channel_names for {amp[-2]} channels"

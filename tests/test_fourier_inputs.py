@@ -310,3 +310,20 @@ def test_model_and_style_vector_errors_are_user_errors():
     for make in cases:
         with pytest.raises(UserError):
             make()
+
+
+@pytest.mark.parametrize("names", [5, "ab", ("a", 3), None, [b"a", b"b"]])
+def test_fourier_model_refuses_channel_names_that_are_not_strings(names):
+    m = _model()
+    with pytest.raises(UserError, match="channel_names must be a sequence of str"):
+        F.FourierModel(m.offset, m.amplitude, m.phase, m.omega, channel_names=names)
+
+
+def test_fourier_model_takes_channel_names_as_any_string_sequence():
+    m = _model()
+    for names in (["a", "b"], ("a", "b"), np.array(["a", "b"])):
+        got = F.FourierModel(m.offset, m.amplitude, m.phase, m.omega, channel_names=names)
+        assert got.channel_names == ("a", "b") and all(type(n) is str for n in got.channel_names)
+        hash(got.channel_names)  # a static field: must hash (jit's cache key)
+    with pytest.raises(UserError, match="3 channel_names for 2 channels"):
+        F.FourierModel(m.offset, m.amplitude, m.phase, m.omega, channel_names=["a", "b", "c"])
