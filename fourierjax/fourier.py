@@ -204,6 +204,28 @@ def _check_finite_used(fn: str, features, mask) -> None:
         )
 
 
+def _check_varies(fn: str, features, mask, channel_weights) -> None:
+    """A clip whose weighted channels are all constant over the used frames has no fundamental
+    frequency: the omega search would return an arbitrary value. Refused, naming the clip."""
+    x = np.asarray(features)
+    used = np.ones(x.shape[:-1], bool) if mask is None else np.broadcast_to(
+        np.asarray(mask) != 0, x.shape[:-1])
+    lo = np.where(used[..., None], x, np.inf).min(axis=-2)
+    hi = np.where(used[..., None], x, -np.inf).max(axis=-2)
+    varies = (hi - lo) > 1e-6 * (1.0 + np.maximum(np.abs(hi), np.abs(lo)))
+    weighted = np.asarray(channel_weights, float) > 0
+    flat = np.atleast_1d(~np.any(varies & weighted, axis=-1))
+    if flat.any():
+        i = int(np.flatnonzero(flat)[0])
+        where = "" if x.ndim == 2 else f" in clip {i}" + (
+            f" (and {int(flat.sum()) - 1} other clip(s))" if flat.sum() > 1 else "")
+        raise UserError(
+            f"{fn}: features are constant over the used frames on every weighted channel{where}: "
+            "a motion that does not move has no fundamental frequency to fit; leave it out (or "
+            "build its model directly: FourierModel with zero amplitudes)"
+        )
+
+
 def _check_one_model(fn: str, model) -> None:
     """One (unstacked) model: vmap over stacked ones (static shapes only)."""
     if model.offset.ndim != 1:
@@ -1060,7 +1082,8 @@ def fit_batch(
         ``representation``; an empty band (``f_min_hz >= f_max_hz``, or ``f_min_hz`` at or
         above Nyquist); ``search_halfwidth <= 0``; bad shapes. For concrete (untraced) values
         also: ``frame_time_s`` not positive; a mask leaving a clip fewer than 2N + 2 frames
-        (2N + 1 coefficients per channel, plus omega); NaN in used frames; ``omega_steps`` not
+        (2N + 1 coefficients per channel, plus omega); NaN in used frames; a clip constant over
+        its used frames on every weighted channel (no fundamental to fit); ``omega_steps`` not
         positive (NaN: unknown); ``channel_weights`` negative, NaN or all zero.
     """
     features = _as_array(features)
@@ -1133,11 +1156,12 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
 
 
 def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
-                      f_min_hz) -> None:
+                      f_min_hz, channel_weights) -> None:
     """Value checks where the values are known (not traced), each skipped when its value is
     traced: frame times positive, with the band's f_min_hz below Nyquist; the mask booleans
     (or weights >= 0) leaving at least 2N + 2 frames per clip; the frames the fit uses finite
-    (frames left out by ``mask`` may hold NaN); ``omega_steps`` positive or NaN (unknown). A JAX
+    (frames left out by ``mask`` may hold NaN) and not constant on every weighted channel;
+    ``omega_steps`` positive or NaN (unknown). A JAX
     array is read back to the host for this (zero-copy on CPU; small arrays but ``features``)."""
     dt = _check_frame_time(name, frame_time_s)
     if dt is not None:
@@ -1169,8 +1193,10 @@ def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmo
                 f"known; got {float(om[bad].ravel()[0])}"
                 + (f" at index {int(np.flatnonzero(bad.ravel())[0])}" if om.ndim else "")
             )
-    if not _is_traced(features, mask):  # last: the one check that reads all of the features
+    if not _is_traced(features, mask):  # last: the checks that read all of the features
         _check_finite_used(name, features, mask)
+        if not _is_traced(channel_weights):
+            _check_varies(name, features, mask, channel_weights)
 
 
 def _check_channel_weights(name, channel_weights, defaulted: bool) -> None:
@@ -1253,7 +1279,7 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
         channel_weights = _default_channel_weights(channel_names, features.shape[-1])
     _check_channel_weights(name, channel_weights, defaulted)
     _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
-                      options["f_min_hz"])
+                      options["f_min_hz"], channel_weights)
     out = program(features, mask, frame_time_s, omega_steps, channel_weights, **options)
     return _fit_result(out, representation, channel_names)
 

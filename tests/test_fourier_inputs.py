@@ -327,3 +327,34 @@ def test_fourier_model_takes_channel_names_as_any_string_sequence():
         hash(got.channel_names)  # a static field: must hash (jit's cache key)
     with pytest.raises(UserError, match="3 channel_names for 2 channels"):
         F.FourierModel(m.offset, m.amplitude, m.phase, m.omega, channel_names=["a", "b", "c"])
+
+
+def test_fit_refuses_a_clip_that_does_not_move():
+    """A constant clip has no fundamental: the omega search returned an arbitrary value (1.96
+    rad/s, i.e. a 0.31 Hz "gait", for this one), now a UserError naming the clip."""
+    still = np.full((T, 2), 0.3, np.float32)
+    with pytest.raises(UserError, match="constant over the used frames on every weighted channel"):
+        F.fit(still, DT, N)
+    # Constant on the weighted channels only (the moving one weighs nothing): refused too.
+    half = np.stack([still[:, 0], _features()[:, 0]], -1)
+    with pytest.raises(UserError, match="constant"):
+        F.fit(half, DT, N, channel_weights=np.array([1.0, 0.0], np.float32))
+    assert np.isfinite(float(F.fit(half, DT, N).omega_fit))  # weighted: it moves, it fits
+    # Moving only in frames the mask leaves out: nothing moves in the used frames.
+    masked = still.copy()
+    masked[:10] = _features()[:10]
+    mask = np.arange(T) >= 10
+    with pytest.raises(UserError, match="constant"):
+        F.fit(masked, DT, N, mask=mask)
+    # A batch names the first still clip and counts the others.
+    batch = np.stack([_features(), still, still])
+    with pytest.raises(UserError, match=r"in clip 1 \(and 1 other clip\(s\)\)"):
+        F.fit_batch(batch, DT, N)
+
+
+def test_fit_still_fits_a_small_motion_on_a_large_offset():
+    """The constant test is relative to the values' size, not absolute: a 0.01-degree sway on a
+    90-degree channel still fits its frequency."""
+    x = 90.0 + 0.01 * _features()
+    res = F.fit(x.astype(np.float32), DT, N)
+    assert abs(float(res.omega_fit) - 2 * np.pi) < 0.05
