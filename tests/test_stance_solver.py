@@ -182,3 +182,24 @@ def test_converged_requires_the_balance(monkeypatch):
         jax.clear_caches()  # and later tests must not reuse this one
     assert float(sol.com_error_m) > S.COM_TOLERANCE_M
     assert not bool(sol.converged)
+
+
+def test_balance_margin_by_hand():
+    """`balance_margin_m` against the feet's geometry worked by hand: default flat feet side by
+    side, facing +Z, so the support polygon's heel and toe edges are lines of constant Z."""
+    from fourierjax.stance import balance_margin_m, make_problem
+
+    mon = np.asarray(BODY.monitor_points)  # [foot, heel/heel/toe/toe, xyz] in the foot frame
+    z_heel, z_toe = float(mon[0, 0, 2]), float(mon[0, 2, 2])
+    # Centred: the nearest edges are the heel and toe lines, half a foot away.
+    assert balance_margin_m(make_problem(BODY)) == pytest.approx((z_toe - z_heel) / 2, abs=1e-6)
+    # forward_shift = 3 extrapolates to heel + 2 (toe - heel): a foot length past the toe line.
+    ahead = balance_margin_m(make_problem(BODY, {"forward_shift": 3.0}))
+    assert ahead == pytest.approx(-(z_toe - z_heel), abs=1e-6)
+    # A stacked batch gives one value each, in order; weight_shift = 5 is off to the left.
+    both = balance_margin_m(stack_problems([make_problem(BODY), make_problem(BODY, {"weight_shift": 5.0})]))
+    assert both.shape == (2,) and both[0] > 0 > both[1]
+    # A shape set extrapolated past intensity 1 can leave the feet (weak recoil: 0.044 m inside
+    # at intensity 1, 0.084 m outside at 3).
+    recoil = get_shape_set("weak_recoil")
+    assert balance_margin_m(recoil.problem(BODY, 1.0, OBJECT)) > 0 > balance_margin_m(recoil.problem(BODY, 3.0, OBJECT))

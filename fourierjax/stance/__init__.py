@@ -9,6 +9,7 @@ from fourierjax.stance.problem import (
     SHAPE_PARAMS,
     BalancedBuild,
     StanceProblem,
+    balance_margin_m,
     balance_offsets,
     balanced_pose,
     balanced_rotations,
@@ -47,7 +48,8 @@ from fourierjax.stance.solver import (
 __all__ = [
     "AMPLITUDES", "DOFS", "DOF_NAMES", "SHAPE_PARAMS", "TOPOLOGY", "Body", "Feet",
     "BalancedBuild", "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem", "StanceSolution",
-    "TorsoFit", "animate", "anticipation", "balance_offsets", "balanced_pose", "balanced_rotations", "build_pose",
+    "TorsoFit", "animate", "anticipation", "balance_margin_m", "balance_offsets", "balanced_pose",
+    "balanced_rotations", "build_pose",
     "builtin_shape_sets", "center_of_mass", "cmu_torso_directions", "dof_vector",
     "ease_in_out", "fit_torso", "get_shape_set", "hermite_penalty", "load_shape_set",
     "lower_body_ik", "make_body", "make_feet", "make_problem", "objective", "parse_shape_set",

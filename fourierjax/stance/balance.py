@@ -25,12 +25,15 @@ def monitor_points_world(body: Body, feet: Feet) -> Float[Array, "2 4 3"]:
 def balance_point(
     body: Body, feet: Feet, weight_shift: Float[Array, ""], forward_shift: Float[Array, ""]
 ) -> Float[Array, "2"]:
-    """Desired ground point (X, Z) of the COM projection, always inside the support polygon.
+    """Desired ground point (X, Z) of the COM projection.
 
     Each foot contributes the point between its heel and toe midpoints set by
     `forward_shift` (-1 heel, 0 middle, +1 toe); `weight_shift` moves between the right
     (-1) and left (+1) foot. Both are convex combinations of monitor points, so for values
-    in [-1, 1] the point lies in their convex hull, the support polygon.
+    in [-1, 1] the point lies in their convex hull, the support polygon. Beyond +-1 (a shape
+    set extrapolated past intensity 1, say) they extrapolate and the point can leave the
+    polygon: the solver still puts the COM there, a pose that is not statically balanced.
+    `problem.balance_margin_m` measures it.
 
     Returns:
         `[2]` (x, z) in metres.

@@ -14,7 +14,14 @@ from fourierjax._linalg import PRECISION, matmul
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.arms import arm_free, arm_to_target
-from fourierjax.stance.balance import balance_point, inverse_2x2, newton_2d_with_tangents
+from fourierjax.stance.balance import (
+    balance_point,
+    inside_polygon_margin,
+    inverse_2x2,
+    monitor_points_world,
+    newton_2d_with_tangents,
+    support_polygon,
+)
 from fourierjax.stance.gaze import gaze_rotation
 from fourierjax.stance.ik import Feet, lower_body_ik, make_feet, pelvis_frame_desired
 from fourierjax.stance.penalties import (
@@ -412,6 +419,29 @@ assert [c + i for c in (COLLAR[RIGHT], COLLAR[LEFT]) for i in range(4)] == [
     idx[k] for k in (RIGHT, LEFT) for idx in (COLLAR, SHOULDER, ELBOW, WRIST)
 ] == list(range(COLLAR[RIGHT], COLLAR[RIGHT] + 8))
 assert [idx[k] for k in (RIGHT, LEFT) for idx in (HIP, KNEE, ANKLE)] == list(range(HIP[RIGHT], HIP[RIGHT] + 6))
+
+
+def balance_margin_m(problem: StanceProblem) -> np.ndarray:
+    """How far (m) the desired COM point lies inside the support polygon; < 0: outside.
+
+    The signed distance of `desired_balance_point` from the nearest edge of the convex hull of
+    the feet's monitor points (`balance.support_polygon`). Negative where `weight_shift` or
+    `forward_shift` beyond +-1 (directly or from a shape set past intensity 1) put the point off
+    the feet: such a pose is solved, and its COM placed there, but it is not statically
+    balanced (the paper leaves such poses to the animator). NumPy at the edge, for concrete
+    problems: one problem gives a 0-d array, a stacked batch one value per problem.
+    """
+    batch = problem.shape.shape[:-1]
+    arrays, static = eqx.partition(problem, eqx.is_array)
+
+    def points(a):
+        p = eqx.combine(a, static)
+        return monitor_points_world(p.body, p.feet), desired_balance_point(p)
+
+    flat = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[len(batch):]), arrays)
+    mon, goal = (np.asarray(x, np.float64) for x in jax.vmap(points)(flat))
+    out = [inside_polygon_margin(support_polygon(m[..., [0, 2]]), g) for m, g in zip(mon, goal, strict=True)]
+    return np.asarray(out).reshape(batch)
 
 
 def build_pose(
