@@ -101,13 +101,26 @@ class ModelFile:
     alignment: str = "none"
 
     def template_motion(self):
-        """A one-frame Motion on the stored skeleton (for ``motion_from_features``), or None."""
+        """A one-frame Motion on the stored skeleton (for ``motion_from_features``), or None.
+
+        Its frame is the rest pose: rotations zero and the position channels of non-root
+        joints equal to their OFFSETs. Position channels replace OFFSETs (``Topology``), and
+        ``motion_from_features`` keeps the template's values for them: zeros would collapse
+        every bone of a file that writes positions on all joints (6-channel exports) to length 0.
+        """
         if self.topology is None:
             return None
         from fourierjax.io.bvh import Motion
 
-        return Motion(self.topology, self.offsets, self.end_site_offsets,
-                      np.zeros((1, self.topology.num_channels)), self.frame_time_s or 1 / 120)
+        topo = self.topology
+        frame = np.zeros((1, topo.num_channels))
+        for j, (chans, start) in enumerate(zip(topo.channels, topo.channel_offsets, strict=True)):
+            if topo.parents[j] < 0:
+                continue  # the root's position comes from the model (or stays at the origin)
+            for k, c in enumerate(chans):
+                if c.endswith("position"):
+                    frame[0, start + k] = self.offsets[j]["XYZ".index(c[0])]
+        return Motion(topo, self.offsets, self.end_site_offsets, frame, self.frame_time_s or 1 / 120)
 
 
 def _jsonable(x):

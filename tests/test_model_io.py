@@ -330,3 +330,42 @@ def test_model_file_errors_survive_pickling(tmp_path):
         assert type(back) is type(err)
         assert (back.path, back.message, str(back)) == (err.path, err.message, str(err))
     assert isinstance(pickle.loads(pickle.dumps(errors[1])), FileNotFoundError)
+
+
+def _six_channel(motion):
+    """`motion` rewritten as many exporters write it: X/Y/Z position channels on every joint,
+    holding the OFFSETs (the same skeleton and FK)."""
+    from fourierjax.io.bvh import Motion
+    from fourierjax.skeleton import Topology
+
+    t, starts = motion.topology, motion.topology.channel_offsets
+    chans, cols = [], []
+    for j, ch in enumerate(t.channels):
+        if j:
+            chans.append(("Xposition", "Yposition", "Zposition") + ch)
+            cols.append(np.tile(motion.offsets[j], (motion.num_frames, 1)))
+        else:
+            chans.append(ch)
+        cols.append(motion.channels[:, starts[j]:starts[j] + len(ch)])
+    return Motion(Topology(t.names, t.parents, tuple(chans), t.end_site_parents), motion.offsets,
+                  motion.end_site_offsets, np.concatenate(cols, 1), motion.frame_time_s)
+
+
+def test_template_keeps_the_bones_of_files_with_positions_on_every_joint(tmp_path):
+    """The template of a model fitted on a 6-channel-per-joint file had zeros in the non-root
+    position channels, which replace the OFFSETs: synthesized files had every bone of length 0."""
+    import jax.numpy as jnp
+
+    from fourierjax import kinematics
+
+    walk = data.load("07_01")[:2]
+    six = _six_channel(walk)
+    path = tmp_path / "six.npz"
+    model_io.save_model(path, _model(), motion=six)
+    template = model_io.load_model(path).template_motion()
+    # The template's frame is the rest pose: the same joint positions as the 3-channel original
+    # with every channel zero (FK from its OFFSETs alone).
+    rest = kinematics.joint_positions(walk.skeleton(), jnp.zeros((1, walk.num_channels)))
+    got = kinematics.joint_positions(template.skeleton(), jnp.asarray(template.channels))
+    np.testing.assert_allclose(np.asarray(got), np.asarray(rest), atol=1e-5)
+    assert np.ptp(np.asarray(got)[0, :, 1]) > 10  # a body, not a point (CMU units)
