@@ -211,3 +211,39 @@ def test_feedback_balance_converges_for_animation():
         b = feedback_update(b, err, BODY.offsets[0, 1])
     assert errors[0] > 0.01 and errors[-1] < 1e-3
     assert all(e1 < e0 for e0, e1 in zip(errors, errors[1:]))
+
+
+def _elbow_bent(deg):
+    from fourierjax.stance.skeleton48 import JOINT_NAMES, rest_pose
+
+    p = rest_pose(BODY)
+    h = np.radians(deg) / 2
+    q = p.quats.at[JOINT_NAMES.index("r_elbow")].set(jnp.array([np.cos(h), np.sin(h), 0.0, 0.0]))
+    return StancePose(p.root_position, q)
+
+
+def test_bvh_channels_take_the_small_euler_triple_and_stay_continuous():
+    """An elbow bent past 90 degrees was written (180, -78, 180) in Z X Y, and an animation
+    through 90 degrees jumped by 180 on Z and Y (X going -60 -> -90 -> -60 for a -60 -> -120
+    bend): now (0, -102, 0), and the animation's X runs monotonically with Z = Y = 0."""
+    from fourierjax.kinematics import joint_positions
+    from fourierjax.stance.bvh_export import pose_to_motion
+    from fourierjax.stance.skeleton48 import JOINT_NAMES
+
+    m = pose_to_motion(BODY, _elbow_bent(-102.0))
+    c = m.topology.channel_offsets[JOINT_NAMES.index("r_elbow")]
+    np.testing.assert_allclose(m.channels[0, c:c + 3], [0.0, -102.0, 0.0], atol=1e-3)
+    m = pose_to_motion(BODY, animate([_elbow_bent(-60.0), _elbow_bent(-120.0)], 10))
+    zxy = m.channels[:, c:c + 3]
+    np.testing.assert_allclose(zxy[:, [0, 2]], 0.0, atol=1e-3)
+    assert zxy[0, 1] == pytest.approx(-60.0, abs=1e-3) and zxy[-1, 1] == pytest.approx(-120.0, abs=1e-3)
+    assert (np.diff(zxy[:, 1]) < 0).all()
+    # Any pose: the channels are the same rotations (FK of the BVH channels = the pose's FK).
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(2, len(JOINT_NAMES), 4))
+    poses = StancePose(jnp.tile(BODY.offsets[0], (2, 1)), jnp.asarray(q / np.linalg.norm(q, axis=-1, keepdims=True)))
+    m = pose_to_motion(BODY, poses)
+    got = np.asarray(joint_positions(m.skeleton(), jnp.asarray(m.channels, jnp.float32)))
+    for f in range(2):
+        want = forward_kinematics(BODY.skeleton, BODY.offsets.at[0].set(poses.root_position[f]), poses.quats[f])
+        np.testing.assert_allclose(got[f], np.asarray(want.positions), atol=2e-5)
