@@ -600,6 +600,21 @@ def test_cli_gait_flags():
                                  template, 12, 1 / 30)
     assert motion.num_frames == 12 and "flight" in summary
     assert np.any(motion.channels[:, 2] != motion.channels[0, 2])  # the root moves
+    # The summary gives N's peak, so a --gait that never triggers flight (README once used
+    # 0.5 on a run whose N peaks at 0.086) shows why; flight happens iff --gait is below it.
+    import re
+
+    flights = []
+    for g in ("0.02", "0.9"):
+        _, summary = apply_gait(p.parse_args(["--gait", g, "--jump", "1"]), model, template, 12, 1 / 30)
+        flight = float(re.search(r"flight ([\d.]+)% of frames", summary).group(1))
+        peak = float(re.search(r"N\(t\) peaks at ([\d.]+)", summary).group(1))
+        assert (flight > 0) == (float(g) < peak), summary
+        flights.append(flight)
+    assert flights[0] > 0 == flights[1]
+    # Without root motion no ground is enforced: no flight figure (it said 100% for a walk).
+    _, summary = apply_gait(p.parse_args(["--no-root-motion"]), model, template, 12, 1 / 30)
+    assert "flight not measured" in summary and "% of frames" not in summary
     for bad in (["--gait", "1.5"], ["--jump", "-1"], ["--speed", "-0.1"], ["--step", "nan"]):
         with pytest.raises(UserError, match=bad[0]):
             apply_gait(p.parse_args(bad), model, template, 12, 1 / 30)
