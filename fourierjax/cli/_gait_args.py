@@ -14,7 +14,11 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
         "step constraints (Unuma 1995 §3.1)",
         "The defaults reproduce the model's own joint angles; with root motion (the default) "
         "the root height comes from the hip-height rule and its path from the feet on the "
-        "ground, so the feet do not skate.",
+        "ground: the foot point carrying the body stays put, and slides only briefly where "
+        "the support hands over (heel to toe, foot to foot). The summary's foot skating is the "
+        "mean horizontal speed of foot points within 0.5 units of the floor, which counts "
+        "feet lifting off and landing too: CMU 07_01 synthesized 7.7 units/s, the capture "
+        "itself 9.7.",
     )
     g.add_argument("--step", type=float, default=1.0, metavar="S",
                    help="scale of every harmonic amplitude A_n, n >= 1 (step length; default 1)")
