@@ -1318,9 +1318,10 @@ def align_to_events(
 def channel_event_phase(model: FourierModel, channel: int) -> Float[Array, ""]:
     """Phase (radians) where the fundamental of ``channel`` peaks: ``pi/2 - phase[channel, 0]``.
 
-    The documented fallback event when no foot contacts are available: with the channel the
-    left hip flexion, ``shift_phase(model, channel_event_phase(model, c))`` puts the peak of
-    the left hip's fundamental at theta = 0.
+    ``shift_phase(model, channel_event_phase(model, c))`` puts the peak of the channel's
+    fundamental at theta = 0. Whether a peak is an anatomical event depends on the skeleton's
+    axes: on CMU skeletons the peak of ``LeftUpLeg.Xrotation`` is hip *extension* (flexion
+    is negative); ``motion.fit_motions``' fallback alignment checks the knee's position.
 
     Raises:
         UserError when ``model`` is stacked, or ``channel`` (when concrete) is not an integer in

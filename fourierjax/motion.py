@@ -549,6 +549,27 @@ def model_joint_positions(model, skeleton, phases) -> np.ndarray:
     return p + height[:, None, None] * np.array([0.0, 1.0, 0.0])
 
 
+def _hip_flexion_phase(model, motion, channel: int):
+    """Phase of the left hip's peak flexion: the extreme of the hip channel's fundamental at
+    which the left knee is further forward (+Z in the heading frame) than at the other.
+
+    The channel's peak alone (``fourier.channel_event_phase``) is not enough: whether flexion is
+    its maximum or its minimum depends on the skeleton's axes (on CMU skeletons flexion is
+    negative ``LeftUpLeg.Xrotation``, and the peak is full extension, half a cycle off).
+    """
+    from fourierjax import fourier as fr
+
+    peak = float(fr.channel_event_phase(model, channel))
+    topo = motion.topology
+    hip = topo.index("LeftUpLeg")
+    knees = topo.children(hip)
+    if not knees:
+        return jnp.asarray(peak)
+    p = model_joint_positions(model, motion.skeleton(), np.array([peak, peak + np.pi]))
+    ahead = p[:, knees[0], 2] - p[:, hip, 2]
+    return jnp.asarray(peak if ahead[0] >= ahead[1] else peak + np.pi)
+
+
 def glitch_frames(motion, max_joint_speed_deg_s: float = 5000.0, pad_s: float = 0.1):
     """Capture glitches: ``bool [F]``, True within ``pad_s`` of a frame where some joint turns
     faster than ``max_joint_speed_deg_s`` (CMU 142_02's left arm jumps 60 degrees in one frame
@@ -839,7 +860,7 @@ def fit_motions(
             else:
                 hip = [c for c in ("LeftUpLeg.Xrotation", "LeftUpLeg.expmap0") if c in names]
                 if hip:
-                    delta = fr.channel_event_phase(raw, names.index(hip[0]))
+                    delta = _hip_flexion_phase(raw, sub, names.index(hip[0]))
                     model = fr.shift_phase(raw, delta)
                     alignment = "left_hip_flexion"
                 else:

@@ -492,3 +492,22 @@ def test_make_euler_continuous_rejects_invalid_orders_and_shapes():
         np.testing.assert_array_equal(M.make_euler_continuous(x, order), x)
     with pytest.raises(UserError, match=r"`angles` must have shape \[F, ..., 3\], got \(3, 2\)"):
         M.make_euler_continuous(np.zeros((3, 2)), "ZYX")
+
+
+def test_hip_flexion_fallback_lands_near_the_heel_strike(fits, motions):
+    """Without contacts the fallback puts theta = 0 at peak left hip flexion. It took the peak
+    of LeftUpLeg.Xrotation, which on CMU skeletons is full extension (flexion is negative):
+    half a cycle from the heel-strike alignment (0.50 on 07_01), so models aligned one way and
+    the other blended opposite legs. Peak flexion comes just before heel strike: within 0.05
+    cycle on walks; on runs it comes earlier in the swing (measured 0.15-0.17 cycle)."""
+    names = ("07_01", "02_01", "09_01")
+    fallback = M.fit_motions([motions[n] for n in names], 3, "euler", use_contacts=False)
+    for n, f in zip(names, fallback, strict=True):
+        assert f.alignment == "left_hip_flexion"
+        d = (f.phase_shift - fits[3][n].phase_shift) / (2 * np.pi)
+        d = (d + 0.5) % 1.0 - 0.5
+        assert abs(d) < (0.2 if n == "09_01" else 0.05), (n, d)
+        # At theta = 0 the left knee is ahead of the left hip (+Z, the heading frame).
+        nm = motions[n].topology.names
+        p = M.model_joint_positions(f.model, motions[n].skeleton(), np.zeros(1))
+        assert p[0, nm.index("LeftLeg"), 2] > p[0, nm.index("LeftUpLeg"), 2], n
