@@ -25,7 +25,10 @@ The hip-height rule, as implemented here
   - `"smooth"`: eq. 5 with `max` replaced by a log-sum-exp (temperature `τ`) and the threshold
     by a sigmoid of width `κ` in N, with `√` softened at 0 (`√(x + ε) − √ε`,
     `√ε = 1e-4 Lmax`); differentiable
-    in `gait`, `jump` and the pose, for fitting by gradient.
+    in `gait`, `jump` and the pose, for fitting by gradient. The sigmoid is centred on the
+    threshold, so frames just below it are partly lifted and their stance foot floats (09_01,
+    gait 0.06, jump 5, κ = 0.01: up to 2.44 units where eq. 5 lifts nothing): for synthesis
+    use `"unuma1995"` or `"continuous"`.
 * The root (pelvis) height above the ground is `D(t) + lift(t)` where `D(t)` is the height
   that puts the lowest point of both feet exactly on the ground (`−min` of the lowest points,
   pelvis at the origin). This equals Unuma's `L_run` measured at the pelvis when the two

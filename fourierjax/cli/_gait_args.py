@@ -34,7 +34,9 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
                    "(default 0)")
     g.add_argument("--hip-rule", choices=RULES, default="unuma1995",
                    help="unuma1995 (eq. 5 as written, jumps at the threshold), continuous "
-                   "(no jump) or smooth (differentiable); default unuma1995")
+                   "(no jump) or smooth (differentiable, for fitting gait and jump: its sigmoid "
+                   "also lifts frames just below the threshold, so stance feet float); default "
+                   "unuma1995")
     g.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
                    help="root height from the hip rule and root path from the stance feet "
                    "(default on); --no-root-motion keeps the model's own root channels")
