@@ -297,3 +297,29 @@ def test_agrees_with_numerical_ik(x64):
             assert (ra.inv() * rb).magnitude() < 1e-4, (dominant, s_)
         np.testing.assert_allclose(legs[f][0], np.asarray(lb.hip_positions[f]), atol=1e-5)
         np.testing.assert_allclose(x[12:16], x_ref[12:16], atol=2e-3)  # ankles
+
+
+def test_dof_vector_reads_flexion_past_90_degrees():
+    """ZXY Euler angles keep the middle (X) angle within +-90 degrees: a knee flexed 1.8 rad read
+    as 1.34 with pi on Z and Y, an elbow at -2.0 as -1.14. Of the two Euler triples the one with
+    zero non-DOF components is taken now."""
+    from fourierjax import rotations
+    from fourierjax.stance.skeleton48 import DOF_NAMES, DOFS, JOINT_NAMES, ROTATION_ORDER, StancePose, rest_pose
+
+    def x_rot(a):
+        return jnp.array([np.cos(a / 2), np.sin(a / 2), 0.0, 0.0], jnp.float32)
+
+    p = rest_pose(BODY)
+    q = p.quats.at[JOINT_NAMES.index("r_elbow")].set(x_rot(-2.0)).at[JOINT_NAMES.index("l_knee")].set(x_rot(1.8))
+    # A 3-DOF joint with a large rotation: its three angles must give back the same rotation.
+    shoulder = rotations.quat_from_euler(jnp.array([0.4, 2.2, -0.7]), ROTATION_ORDER)
+    q = q.at[JOINT_NAMES.index("r_shoulder")].set(shoulder)
+    pose = StancePose(p.root_position, q)
+    dv = dict(zip(DOF_NAMES, np.asarray(dof_vector(pose)).tolist(), strict=True))
+    assert dv["r_elbow.Xrotation"] == pytest.approx(-2.0, abs=1e-5)
+    assert dv["l_knee.Xrotation"] == pytest.approx(1.8, abs=1e-5)
+    assert float(jnp.max(jnp.abs(non_dof_components(pose)))) < 1e-5
+    sh = jnp.array([dv[f"r_shoulder.{a}rotation"] for a in ROTATION_ORDER])
+    back = rotations.quat_from_euler(sh, ROTATION_ORDER)
+    assert abs(float(jnp.dot(back, q[JOINT_NAMES.index("r_shoulder")]))) == pytest.approx(1.0, abs=1e-6)
+    assert DOFS["r_shoulder"] == "ZXY"

@@ -9,7 +9,7 @@ import numpy as np
 from fourierjax import rotations
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import Motion, write_bvh
-from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose
+from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose, _dof_euler
 
 
 def ease_in_out(t):
@@ -50,8 +50,8 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
     non-DOF axes), the root also X Y Z positions; offsets in metres, Y up, facing +Z.
 
     Each rotation has two Euler triples, (z, x, y) and (z + 180, 180 - x, y + 180). The first
-    frame takes, per joint, the one with the smaller angles (sum of magnitudes), so an elbow
-    bent past 90 degrees is (0, -102, 0), not (180, -78, 180); later frames follow it
+    frame takes, per joint, the one with the smaller non-DOF angles (`skeleton48._dof_euler`),
+    so an elbow bent past 90 degrees is (0, -102, 0), not (180, -78, 180); later frames follow it
     continuously (`motion.make_euler_continuous`), so an animation never jumps by 180 degrees
     on two axes (which Blender would interpolate as a spin).
     """
@@ -61,9 +61,7 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
     quats = np.asarray(poses.quats, np.float64)
     if root.ndim == 1:
         root, quats = root[None], quats[None]
-    eul = np.asarray(jax.jit(rotations.euler_from_quat, static_argnums=1)(
-        jnp.asarray(quats), ROTATION_ORDER), np.float64)  # fmt: skip
-    eul[0] = _smaller_triple(eul[0])
+    eul = np.asarray(jax.jit(jax.vmap(_dof_euler))(jnp.asarray(quats)), np.float64)
     eul = np.degrees(make_euler_continuous(eul, ROTATION_ORDER))
     frames = root.shape[0]
     channels = np.concatenate([root, eul.reshape(frames, -1)], axis=1)
@@ -75,16 +73,6 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
         frame_time_s=frame_time_s,
         source=None,
     )
-
-
-def _smaller_triple(eul: np.ndarray) -> np.ndarray:
-    """Of each Tait-Bryan triple `[..., 3]` (rad) and its twin (a + pi, pi - b, c + pi), the one
-    with the smaller sum of magnitudes (angles wrapped to (-pi, pi])."""
-    twin = eul + np.array([np.pi, 0.0, np.pi])
-    twin[..., 1] = np.pi - eul[..., 1]
-    twin = np.angle(np.exp(1j * twin))
-    keep = np.abs(eul).sum(-1, keepdims=True) <= np.abs(twin).sum(-1, keepdims=True)
-    return np.where(keep, eul, twin)
 
 
 def write_stance_bvh(path, body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0):

@@ -296,13 +296,34 @@ def center_of_mass(body: Body, fk: FKResult) -> Float[Array, "3"]:
     return jnp.sum(w[:, None] * seg, axis=0)
 
 
+#: `[J, 3]` 1 where a ZXY Euler component is not one of the joint's DOFs.
+_NON_DOF = np.array([[a not in DOFS[name] for a in ROTATION_ORDER] for name in JOINT_NAMES], np.float32)
+
+
+def _dof_euler(quats: Float[Array, "joints 4"]) -> Float[Array, "joints 3"]:
+    """ZXY Euler angles of each joint, of its two triples (z, x, y) and (z + pi, pi - x, y + pi)
+    the one whose non-DOF components are smaller (then the smaller angles): a knee or elbow
+    flexed past 90 degrees is (0, x, 0), not (pi, pi - x, pi) with the flexion read as pi - x."""
+    eul = rotations.euler_from_quat(quats, ROTATION_ORDER)
+    twin = eul + jnp.broadcast_to(jnp.array([jnp.pi, 0.0, jnp.pi], eul.dtype), eul.shape)
+    twin = twin.at[..., 1].set(jnp.pi - eul[..., 1])
+    twin = jnp.arctan2(jnp.sin(twin), jnp.cos(twin))
+    weight = jnp.broadcast_to(jnp.asarray(_NON_DOF, eul.dtype) + 1e-3, eul.shape)
+
+    def cost(e):
+        return jnp.sum(jnp.abs(e) * weight, axis=-1, keepdims=True)
+
+    return jnp.where(cost(twin) < cost(eul), twin, eul)
+
+
 def dof_vector(pose: StancePose) -> Float[Array, "48"]:
     """The 48 DOF values of a pose (metres, radians), named by `DOF_NAMES`.
 
-    Each joint's quaternion is read as BVH "ZXY" Euler angles and its DOF axes are kept; for
-    a pose built by the stance solver the dropped components are zero.
+    Each joint's quaternion is read as BVH "ZXY" Euler angles (of the two triples, the one
+    with the smaller non-DOF components) and its DOF axes are kept; for a pose built by the
+    stance solver the dropped components are zero.
     """
-    eul = rotations.euler_from_quat(pose.quats, ROTATION_ORDER)  # [J, 3] as (z, x, y)
+    eul = _dof_euler(pose.quats)  # [J, 3] as (z, x, y)
     parts = [pose.root_position]
     for j, name in enumerate(JOINT_NAMES):
         parts.append(jnp.stack([eul[j, ROTATION_ORDER.index(a)] for a in DOFS[name]]))
@@ -311,7 +332,7 @@ def dof_vector(pose: StancePose) -> Float[Array, "48"]:
 
 def non_dof_components(pose: StancePose) -> Float[Array, " n"]:
     """The ZXY Euler components that are not DOFs (should be ~0): for tests and reports."""
-    eul = rotations.euler_from_quat(pose.quats, ROTATION_ORDER)
+    eul = _dof_euler(pose.quats)
     out = []
     for j, name in enumerate(JOINT_NAMES):
         for a in ROTATION_ORDER:
