@@ -13,7 +13,7 @@ from fourierjax.stance import _util as u
 from fourierjax.stance.bvh_export import animate, write_stance_bvh
 from fourierjax.stance.fit import fit_torso, torso_directions
 from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
-from fourierjax.stance.problem import SHAPE_PARAMS, make_problem
+from fourierjax.stance.problem import KNEE_MAX_RAD, SHAPE_PARAMS, P, make_problem
 from fourierjax.stance.shape_sets import get_shape_set
 from fourierjax.stance.skeleton48 import StancePose, make_body, rest_pose
 
@@ -217,9 +217,26 @@ def test_huge_intensity_is_refused_when_the_shape_vector_overflows():
     with pytest.raises(UserError, match=r"shape set 'posture': intensity 1e\+30 gives a shape vector "
                                         r"with infinite or NaN values in \['knee_right', 'knee_left'\]"):
         s.problem(BODY, 1e30)
-    assert np.isfinite(np.asarray(s.problem(BODY, 5.0).shape)).all()
+    assert np.isfinite(np.asarray(get_shape_set("beauty_line").problem(BODY, 5.0).shape)).all()
     probs = jax.vmap(lambda i: s.problem(BODY, i))(jnp.array([0.5, 1e30]))  # traced: not checked
     assert probs.shape.shape == (2, len(SHAPE_PARAMS))
+
+
+def test_knee_bends_past_a_knee_range_are_refused():
+    """The posture set's late knee curve grows as the square of the intensity: at 1.8 it asked
+    for 180 degrees (the thighs lay on the shins), at 2.0 for 246 (the IK bent the knee
+    backwards), each solved with converged=True. Refused now, naming the knee and the value."""
+    s = get_shape_set("posture")
+    assert float(s.problem(BODY, 1.5).shape[P["knee_right"]]) < KNEE_MAX_RAD  # 102 degrees: fine
+    with pytest.raises(UserError, match=r"shape set 'posture': intensity 1\.8: knee_right = 3\.150 rad "
+                                        r"\(180 degrees\) is past a knee's range"):
+        s.problem(BODY, 1.8)
+    with pytest.raises(UserError, match=r"make_problem: shape: knee_left = 3\.000 rad"):
+        make_problem(BODY, {"knee_left": 3.0})
+    make_problem(BODY, {"knee_left": KNEE_MAX_RAD})  # the bound itself is allowed
+    # Traced intensities are not checked (no values to read).
+    probs = jax.vmap(lambda i: s.problem(BODY, i))(jnp.array([1.0, 2.0]))
+    assert float(probs.shape[1, P["knee_right"]]) > KNEE_MAX_RAD
 
 
 def test_intensity_must_be_one_number():

@@ -154,8 +154,9 @@ def make_problem(
     Raises:
         UserError: a bad argument. Values are checked when they are known (not traced): NaN
             or infinity anywhere, `amplitude_scale <= 0`, `reach_weight < 0`, foot quaternions
-            that are not unit, or crossed feet: the right foot not to the right of the left one
-            for the direction the toes point (the pelvis would face away from the toes).
+            that are not unit, crossed feet: the right foot not to the right of the left one
+            for the direction the toes point (the pelvis would face away from the toes), or a
+            knee bend past `KNEE_MAX_RAD` (~149 degrees).
     """
     if dominant not in ("right", "left"):
         raise UserError(f"dominant must be 'right' or 'left', got {dominant!r}")
@@ -177,6 +178,7 @@ def make_problem(
         vec = as_finite(shape, "shape", dtype)
         if vec.shape != (len(SHAPE_PARAMS),):
             raise UserError(f"shape must have {len(SHAPE_PARAMS)} values, got shape {vec.shape}")
+    check_knees(vec, "make_problem: shape")
     if feet is None:
         feet = make_feet(body)
     else:
@@ -226,6 +228,27 @@ def make_problem(
         gaze_point=gaze_point,
         dominant=dominant,
     )
+
+
+#: Largest knee bend (rad, ~149 degrees) a problem may ask for: past it the thigh folds onto
+#: and then through the shin (the posture set at intensity 1.8 asked for 180 degrees, at 2.0
+#: for 246, which the IK turned into a knee bent backwards), all with converged=True.
+KNEE_MAX_RAD = 2.6
+
+
+def check_knees(shape, where: str) -> None:
+    """Refuse a concrete shape vector whose knee bends exceed `KNEE_MAX_RAD` (traced: no check)."""
+    if isinstance(shape, jax.core.Tracer):
+        return
+    v = np.asarray(shape, np.float64)
+    for name in ("knee_right", "knee_left"):
+        bend = float(v[P[name]])
+        if bend > KNEE_MAX_RAD:
+            raise UserError(
+                f"{where}: {name} = {bend:.3f} rad ({np.degrees(bend):.0f} degrees) is past a "
+                f"knee's range (at most {KNEE_MAX_RAD} rad, {np.degrees(KNEE_MAX_RAD):.0f} "
+                "degrees): the thigh would fold onto the shin"
+            )
 
 
 def _positive_scalar(x, name: str, dtype, allow_zero: bool) -> Array:

@@ -45,7 +45,7 @@ from jaxtyping import Array, Float
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.ik import Feet
-from fourierjax.stance.problem import SHAPE_PARAMS, StanceProblem, as_finite, make_problem
+from fourierjax.stance.problem import SHAPE_PARAMS, StanceProblem, as_finite, check_knees, make_problem
 from fourierjax.stance.skeleton48 import Body
 from fourierjax.stance.torso import COLLAR_STATES, SHAPE_CLASSES, class_weights, collar_sign
 
@@ -174,6 +174,8 @@ class ShapeSet:
                 f"shape set {self.name!r}: intensity {float(intensity):.6g}{with_object} gives a shape "
                 f"vector with infinite or NaN values in {bad}; use a smaller intensity"
             )
+        if not isinstance(ev["shape"], jax.core.Tracer):  # then the intensity is known too
+            check_knees(ev["shape"], f"shape set {self.name!r}: intensity {float(intensity):.6g}")
         gaze = base.gaze_point
         if object_xyz is not None:
             gaze = jnp.where(ev["gaze_object"] > 0.5, jnp.asarray(object_xyz, gaze.dtype), gaze)
