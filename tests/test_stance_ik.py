@@ -323,3 +323,23 @@ def test_dof_vector_reads_flexion_past_90_degrees():
     back = rotations.quat_from_euler(sh, ROTATION_ORDER)
     assert abs(float(jnp.dot(back, q[JOINT_NAMES.index("r_shoulder")]))) == pytest.approx(1.0, abs=1e-6)
     assert DOFS["r_shoulder"] == "ZXY"
+
+
+@pytest.mark.parametrize("width, stagger", [(0.9, 0.0), (0.6, 0.6)])
+def test_unreachable_free_foot_misses_by_the_reported_gap(width, stagger):
+    """With a plant the free leg cannot reach, its leg must point at it and miss by exactly
+    `free_foot_gap_m`; it was turned ~20 degrees off (441 mm off the plant for a 294 mm gap)."""
+    from fourierjax.stance.ik import make_feet
+    from fourierjax.stance.problem import build_pose, make_problem
+    from fourierjax.stance.skeleton48 import JOINT_NAMES
+
+    feet = make_feet(BODY, width, 0.0, stagger)
+    prob = make_problem(BODY, {"knee_left": 0.8, "weight_shift": -0.5}, feet=feet)
+    pose, info = build_pose(prob, jnp.zeros(6), jnp.zeros(2))
+    p = np.asarray(pose_fk(BODY, pose).positions)
+    plants = np.asarray(feet.positions)
+    gap = float(info.free_foot_gap)
+    assert gap > 0.1
+    miss = np.linalg.norm(p[JOINT_NAMES.index("l_ankle")] - plants[LEFT])
+    assert miss == pytest.approx(gap, abs=1e-4)
+    assert np.linalg.norm(p[JOINT_NAMES.index("r_ankle")] - plants[RIGHT]) < 1e-5  # the root foot stays
