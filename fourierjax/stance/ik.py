@@ -260,15 +260,17 @@ def lower_body_ik(
     W = u.safe_norm(hip_vec_local)
     b_des = u.mv(R_des, hip_vec_local) / W
     w_f = _leg_vector(body, f, knees[f])
-    hip_f, gap = free_hip_position(hip_d, feet.positions[f], W, u.safe_norm(w_f), b_des)
+    leg_f = u.safe_norm(w_f)
+    hip_f, gap = free_hip_position(hip_d, feet.positions[f], W, leg_f, b_des)
 
-    # Free ankle: its angles put the free hip where it must be. A plant the leg cannot reach
-    # (gap > 0) leaves |v| != |w|; the leg then points at the hip, scaled to its length, so
-    # the free foot misses its plant by the reported gap (the unscaled vector turned the leg
-    # ~20 degrees off: 441 mm off the plant for a 294 mm gap).
+    # Free ankle: its angles put the free hip where it must be. The plant->hip vector is
+    # scaled to the leg's length (a no-op up to round-off when the plant is reachable): with
+    # a plant the leg cannot reach (gap > 0) the leg then points at the hip and the free foot
+    # misses its plant by the reported gap (unscaled, the leg turned ~20 degrees off: 441 mm
+    # off the plant for a 294 mm gap).
     v_f = u.mv(u.tr(R_feet[f]), hip_f - feet.positions[f])
-    near = gap <= 0.0
-    v_f = u.where(near, v_f, v_f * (u.safe_norm(w_f) * u.rsqrt_where(u.dot(v_f, v_f), near)))
+    sq = u.dot(v_f, v_f)
+    v_f = v_f * (leg_f * u.rsqrt_where(sq, sq < 1e-12))
     R_ankle_f = _ankle_from_vector(w_f, v_f)
     R_shin_f = u.mm(R_feet[f], u.tr(R_ankle_f))
 
