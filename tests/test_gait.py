@@ -342,7 +342,7 @@ def test_synthesized_run_never_moves_the_pelvis_backwards(kw):
     real = (mot.channels[-1, 2] - mot.channels[0, 2]) / mot.duration_s
     print(f"\nrun 09_01 {kw}: root speed min {vz.min():.1f}, mean {vz.mean():.1f}, captured {real:.1f}")
     assert vz.min() > 0.0
-    assert 0.75 * real < vz.mean() < 1.1 * real
+    assert 0.7 * real < vz.mean() < 1.1 * real
 
 
 def test_neutral_parameters_reproduce_unconstrained_synthesis():
