@@ -174,16 +174,13 @@ def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndar
                         f"{a.shape}")
     if a.shape[0] < 2:
         return a
-    proper = order[0] == order[2]
     two_pi = 2 * np.pi
     ok = np.ones(a.shape[0], bool) if valid is None else np.asarray(valid, bool)
     ref = 0
     for t in range(1, a.shape[0]):
         prev = a[ref] if ok[t] else a[t - 1]
         cur = a[t]
-        alt = np.stack([cur[..., 0] + np.pi,
-                        -cur[..., 1] if proper else np.pi - cur[..., 1],
-                        cur[..., 2] + np.pi], axis=-1)
+        alt = rotations.euler_twin(cur, order)
         best = None
         best_d = None
         for cand in (cur, alt):

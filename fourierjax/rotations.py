@@ -14,6 +14,7 @@ __all__ = [
     "EULER_ORDERS",
     "euler_from_matrix",
     "euler_from_quat",
+    "euler_twin",
     "expmap_from_matrix",
     "expmap_from_quat",
     "make_expmap_continuous",
@@ -455,6 +456,21 @@ def euler_from_matrix(R: Float[Array, "... 3 3"], order: str) -> Float[Array, ".
     order = _check_order(order, "euler_from_matrix")
     R = _mat(R, "R", "euler_from_matrix")
     return euler_from_quat(quat_from_matrix(R), order)
+
+
+def euler_twin(angles, order: str):
+    """The other Euler triple of the same rotations (not wrapped): Tait-Bryan orders
+    ``(a + pi, pi - b, c + pi)``, proper Euler orders ``(a + pi, -b, c + pi)``.
+
+    NumPy in, NumPy out (for per-frame loops at the edges); JAX arrays and tracers stay JAX.
+    """
+    import numpy as np
+
+    order = _check_order(order, "euler_twin")
+    xp = jnp if isinstance(angles, jax.Array) else np
+    a = angles
+    middle = -a[..., 1] if order[0] == order[2] else math.pi - a[..., 1]
+    return xp.stack([a[..., 0] + math.pi, middle, a[..., 2] + math.pi], axis=-1)
 
 
 # ------------------------------------------------------------------------ exponential map

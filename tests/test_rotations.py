@@ -567,3 +567,16 @@ def test_lower_case_order_hint():
 def test_bad_shapes_raise(call, name):
     with pytest.raises(UserError, match=rf"\b{name}\b"):
         call()
+
+
+def test_euler_twin_is_the_same_rotation():
+    """The other triple of every order gives the same rotation (checked with scipy), NumPy in
+    NumPy out, JAX in JAX out."""
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-1.2, 1.2, (5, 3))
+    for order in rot.EULER_ORDERS:
+        twin = rot.euler_twin(a, order)
+        assert isinstance(twin, np.ndarray)
+        np.testing.assert_allclose(Rotation.from_euler(order, twin).as_matrix(),
+                                   Rotation.from_euler(order, a).as_matrix(), atol=1e-12)
+        assert isinstance(rot.euler_twin(jnp.asarray(a, jnp.float32), order), jax.Array)

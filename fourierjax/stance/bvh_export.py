@@ -2,14 +2,13 @@
 
 import os
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from fourierjax import rotations
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import Motion, write_bvh
-from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose, _dof_euler
+from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose, dof_euler_frames
 
 
 def ease_in_out(t):
@@ -61,7 +60,7 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
     quats = np.asarray(poses.quats, np.float64)
     if root.ndim == 1:
         root, quats = root[None], quats[None]
-    eul = np.asarray(jax.jit(jax.vmap(_dof_euler))(jnp.asarray(quats)), np.float64)
+    eul = np.asarray(dof_euler_frames(jnp.asarray(quats)), np.float64)
     eul = np.degrees(make_euler_continuous(eul, ROTATION_ORDER))
     frames = root.shape[0]
     channels = np.concatenate([root, eul.reshape(frames, -1)], axis=1)

@@ -19,8 +19,8 @@ side through the origin). Each side has:
 
 Values scale with the intensity from the neutral origin (all zeros) and extrapolate beyond
 |intensity| = 1 (a weight or forward shift past +-1 can put the balance point off the feet:
-`problem.balance_margin_m` says how far). The class states switch with the sign of the intensity, where all desired
-amplitudes are zero, so poses stay continuous in the intensity when no reach target is
+`problem.balance_margin_m` says how far). The class states switch with the sign of the
+intensity, where all desired amplitudes are zero, so poses stay continuous in the intensity when no reach target is
 active. With an active target the solver moves the amplitudes off their desired values, so
 they are not zero at intensity 0 and the class switch shows as a jump in the pose there
 (measured, posture set, right-hand target (-0.35, 1.05, 0.55): objective 25.21 and

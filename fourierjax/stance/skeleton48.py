@@ -2,6 +2,7 @@
 
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -305,8 +306,7 @@ def _dof_euler(quats: Float[Array, "joints 4"]) -> Float[Array, "joints 3"]:
     the one whose non-DOF components are smaller (then the smaller angles): a knee or elbow
     flexed past 90 degrees is (0, x, 0), not (pi, pi - x, pi) with the flexion read as pi - x."""
     eul = rotations.euler_from_quat(quats, ROTATION_ORDER)
-    twin = eul + jnp.broadcast_to(jnp.array([jnp.pi, 0.0, jnp.pi], eul.dtype), eul.shape)
-    twin = twin.at[..., 1].set(jnp.pi - eul[..., 1])
+    twin = rotations.euler_twin(eul, ROTATION_ORDER)
     twin = jnp.arctan2(jnp.sin(twin), jnp.cos(twin))
     weight = jnp.broadcast_to(jnp.asarray(_NON_DOF, eul.dtype) + 1e-3, eul.shape)
 
@@ -314,6 +314,10 @@ def _dof_euler(quats: Float[Array, "joints 4"]) -> Float[Array, "joints 3"]:
         return jnp.sum(jnp.abs(e) * weight, axis=-1, keepdims=True)
 
     return jnp.where(cost(twin) < cost(eul), twin, eul)
+
+
+#: `_dof_euler` over frames, compiled once (for the BVH export).
+dof_euler_frames = jax.jit(jax.vmap(_dof_euler))
 
 
 def dof_vector(pose: StancePose) -> Float[Array, "48"]:
