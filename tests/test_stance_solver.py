@@ -167,6 +167,45 @@ def test_gaze_straight_up_or_down_keeps_the_balance():
     np.testing.assert_allclose(R[:, 2], fwd, atol=1e-6)
 
 
+def test_balance_newton_damps_a_diverging_step():
+    """Newton on r = arctan(x - a) (a = 2) from 0 diverges undamped (steps unclipped here:
+    0 -> 5.54 -> -11.9 -> ...); the damped solve reaches the root x = a, and its tangents
+    (dr/da = -1, dr/dx = 1 there) describe the point it returns. The second unknown is a
+    decoupled r = y."""
+    from fourierjax.stance.balance import newton_2d_with_tangents
+
+    def fn(a, x):
+        return jnp.stack([jnp.arctan(x[0] - a[0]), x[1]]), x[0] ** 2
+
+    x, (r, aux), (dr, daux) = newton_2d_with_tangents(
+        fn, jnp.array([2.0]), jnp.zeros(2), jnp.eye(1), max_step=100.0
+    )
+    np.testing.assert_allclose(np.asarray(x), [2.0, 0.0], atol=1e-6)
+    assert float(jnp.max(jnp.abs(r))) < 1e-6
+    np.testing.assert_allclose(float(aux), float(x[0]) ** 2, rtol=1e-6)
+    # Rows: along the direction in a, then along x0 and x1.
+    np.testing.assert_allclose(np.asarray(dr), [[-1.0, 0.0], [1.0, 0.0], [0.0, 1.0]], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(daux), [0.0, 2 * float(x[0]), 0.0], rtol=1e-6, atol=1e-7)
+
+
+def test_random_posture_reaches_its_balance():
+    # A random shape vector whose balance root lies past a sign change of the balance
+    # Jacobian: five undamped Newton evaluations left the COM 73 mm off its goal
+    # (converged=False for a feasible pose); the damped solve reaches round-off.
+    from fourierjax.stance.problem import make_problem
+    from fourierjax.stance.solver import solve_stance
+
+    shape = {"sagittal": 0.998, "coronal": 0.907, "transverse": 0.335, "collar_y": -0.389,
+             "collar_z": 0.256, "abdomen_x": -0.304, "knee_right": 1.216, "knee_left": 0.206,
+             "pelvis_x": -0.075, "pelvis_y": 0.682, "pelvis_z": -0.091, "weight_shift": 0.202,
+             "forward_shift": -0.803, "elbow_right": 0.43, "elbow_left": 0.909,
+             "arm_out_right": 0.314, "arm_out_left": -0.27, "swivel_right": 0.034,
+             "swivel_left": 0.55, "gaze_weight": 0.787}  # fmt: skip
+    sol = solve_stance(make_problem(BODY, shape, gaze_point=[-1.047, 1.277, 0.109]))
+    assert bool(sol.converged)
+    assert float(sol.com_error_m) < 1e-6
+
+
 def test_converged_requires_the_balance(monkeypatch):
     # One Newton evaluation cannot solve the balance of a shifted weight: BFGS may still meet
     # its tolerances, but the solution must not claim convergence with the COM off its goal.
