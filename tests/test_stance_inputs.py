@@ -13,7 +13,7 @@ from fourierjax.stance import _util as u
 from fourierjax.stance.bvh_export import animate, write_stance_bvh
 from fourierjax.stance.fit import fit_torso, torso_directions
 from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
-from fourierjax.stance.problem import KNEE_MAX_RAD, SHAPE_PARAMS, P, make_problem
+from fourierjax.stance.problem import BEND_MAX_RAD, BEND_MIN_RAD, SHAPE_PARAMS, P, make_problem
 from fourierjax.stance.shape_sets import get_shape_set
 from fourierjax.stance.skeleton48 import StancePose, make_body, rest_pose
 
@@ -227,16 +227,30 @@ def test_knee_bends_past_a_knee_range_are_refused():
     for 180 degrees (the thighs lay on the shins), at 2.0 for 246 (the IK bent the knee
     backwards), each solved with converged=True. Refused now, naming the knee and the value."""
     s = get_shape_set("posture")
-    assert float(s.problem(BODY, 1.5).shape[P["knee_right"]]) < KNEE_MAX_RAD  # 102 degrees: fine
+    assert float(s.problem(BODY, 1.5).shape[P["knee_right"]]) < BEND_MAX_RAD  # 102 degrees: fine
     with pytest.raises(UserError, match=r"shape set 'posture': intensity 1\.8: knee_right = 3\.150 rad "
                                         r"\(180 degrees\) is past a knee's range"):
         s.problem(BODY, 1.8)
     with pytest.raises(UserError, match=r"make_problem: shape: knee_left = 3\.000 rad"):
         make_problem(BODY, {"knee_left": 3.0})
-    make_problem(BODY, {"knee_left": KNEE_MAX_RAD})  # the bound itself is allowed
+    make_problem(BODY, {"knee_left": BEND_MAX_RAD})  # the bound itself is allowed
     # Traced intensities are not checked (no values to read).
     probs = jax.vmap(lambda i: s.problem(BODY, i))(jnp.array([1.0, 2.0]))
-    assert float(probs.shape[1, P["knee_right"]]) > KNEE_MAX_RAD
+    assert float(probs.shape[1, P["knee_right"]]) > BEND_MAX_RAD
+
+
+def test_joints_bent_backwards_are_refused():
+    """A knee bend of -0.3 was solved as a knee bent 17 degrees backwards and an elbow bend of
+    -0.3 as a 17-degree hyperextension, both converged=True. Refused below BEND_MIN_RAD, and
+    elbows past BEND_MAX_RAD too."""
+    with pytest.raises(UserError, match=r"make_problem: shape: knee_right = -0\.300 rad \(-17 degrees\) is "
+                                        r"past a knee's range \(-0\.1 to 2\.6 rad.*bend backwards"):
+        make_problem(BODY, {"knee_right": -0.3})
+    with pytest.raises(UserError, match=r"elbow_left = -0\.300 rad \(-17 degrees\) is past an elbow's range"):
+        make_problem(BODY, {"elbow_left": -0.3})
+    with pytest.raises(UserError, match=r"elbow_right = 3\.000 rad .*fold onto itself"):
+        make_problem(BODY, {"elbow_right": 3.0})
+    make_problem(BODY, {"knee_right": BEND_MIN_RAD, "elbow_left": BEND_MIN_RAD})  # the bound is allowed
 
 
 def test_intensity_must_be_one_number():

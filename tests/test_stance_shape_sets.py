@@ -9,7 +9,7 @@ from fourierjax.errors import UserError
 from fourierjax.io.bvh import read_bvh
 from fourierjax.kinematics import forward_kinematics
 from fourierjax.stance.bvh_export import animate, ease_in_out, write_stance_bvh
-from fourierjax.stance.problem import SHAPE_PARAMS, P
+from fourierjax.stance.problem import MAGNITUDE_PARAMS, SHAPE_PARAMS, P
 from fourierjax.stance.shape_sets import (
     anticipation,
     builtin_shape_sets,
@@ -23,10 +23,12 @@ from fourierjax.stance.skeleton48 import (
     StancePose,
     center_of_mass,
     center_of_mass_matrices,
+    dof_vector,
     fk_matrices,
     make_body,
     pose_fk,
 )
+from fourierjax.stance.solver import solve_stance
 from fourierjax.stance.torso import CORONAL_WEIGHTS, SAGITTAL_WEIGHTS
 
 BODY = make_body(1.75)
@@ -171,7 +173,34 @@ def test_perturb_and_anticipation():
     w = perturb(v, jax.random.PRNGKey(1), 0.02)
     assert 0 < float(jnp.max(jnp.abs(w - v))) < 0.1
     np.testing.assert_array_equal(w[v == 0], 0.0)
-    np.testing.assert_allclose(anticipation(v, 0.3), -0.3 * v)
+    # The wind-up negates the directions and keeps the bends and the gaze weight.
+    a = np.asarray(anticipation(v, 0.3))
+    for name, x in zip(SHAPE_PARAMS, np.asarray(v)):
+        sign = 1.0 if name in MAGNITUDE_PARAMS else -1.0
+        assert a[P[name]] == pytest.approx(sign * 0.3 * x, abs=1e-7), name
+    assert v[P["sagittal"]] != 0 and v[P["elbow_right"]] > 0  # both kinds are exercised
+
+
+def test_object_sets_point_the_other_way_below_zero():
+    """Sets without a [negative] table (the recoils, interest) negate their directions below
+    zero and keep their bends and gaze: strong_recoil at -1 leans towards the object with the
+    elbows bent and the eyes on it. Negating everything had hyperextended the elbows by 34
+    degrees (solved, converged) and turned the head away."""
+    obj = jnp.array([0.35, 1.3, 0.55])
+    for name in ("strong_recoil", "weak_recoil", "interest"):
+        s = get_shape_set(name)
+        assert s.negative is None
+        pos, neg = (np.asarray(s.evaluate(i, obj)["shape"]) for i in (1.0, -1.0))
+        for k, param in enumerate(SHAPE_PARAMS):
+            sign = 1.0 if param in MAGNITUDE_PARAMS else -1.0
+            assert neg[k] == pytest.approx(sign * pos[k], abs=1e-7), (name, param)
+        assert neg[P["elbow_right"]] > 0 and neg[P["gaze_weight"]] > 0
+    sol = solve_stance(get_shape_set("strong_recoil").problem(BODY, -1.0, obj))
+    assert bool(sol.converged)
+    dof = dict(zip(DOF_NAMES, np.asarray(dof_vector(sol.pose))))
+    # An elbow flexion is a negative X rotation in this skeleton (0.6 rad asked for).
+    for side in ("r", "l"):
+        assert dof[f"{side}_elbow.Xrotation"] == pytest.approx(-0.6, abs=1e-4)
 
 
 def test_bvh_roundtrip_and_eased_animation(tmp_path):

@@ -156,7 +156,7 @@ def make_problem(
             or infinity anywhere, `amplitude_scale <= 0`, `reach_weight < 0`, foot quaternions
             that are not unit, crossed feet: the right foot not to the right of the left one
             for the direction the toes point (the pelvis would face away from the toes), or a
-            knee bend past `KNEE_MAX_RAD` (~149 degrees).
+            knee or elbow bend outside [`BEND_MIN_RAD`, `BEND_MAX_RAD`] (-6 to 149 degrees).
     """
     if dominant not in ("right", "left"):
         raise UserError(f"dominant must be 'right' or 'left', got {dominant!r}")
@@ -178,7 +178,7 @@ def make_problem(
         vec = as_finite(shape, "shape", dtype)
         if vec.shape != (len(SHAPE_PARAMS),):
             raise UserError(f"shape must have {len(SHAPE_PARAMS)} values, got shape {vec.shape}")
-    check_knees(vec, "make_problem: shape")
+    check_bends(vec, "make_problem: shape")
     if feet is None:
         feet = make_feet(body)
     else:
@@ -230,24 +230,47 @@ def make_problem(
     )
 
 
-#: Largest knee bend (rad, ~149 degrees) a problem may ask for: past it the thigh folds onto
-#: and then through the shin (the posture set at intensity 1.8 asked for 180 degrees, at 2.0
-#: for 246, which the IK turned into a knee bent backwards), all with converged=True.
-KNEE_MAX_RAD = 2.6
+#: Range of the knee and elbow bends (rad) a problem may ask for. Past the top (~149 degrees)
+#: the thigh folds onto and then through the shin (the posture set at intensity 1.8 asked
+#: for 180 degrees, at 2.0 for 246, which the IK turned into a knee bent backwards); below
+#: the bottom (-6 degrees) the joint bends backwards (a knee bend of -0.3 was solved as a knee
+#: bent 17 degrees the wrong way, an elbow as a 17-degree hyperextension), all with
+#: converged=True.
+BEND_MIN_RAD = -0.1
+BEND_MAX_RAD = 2.6
+_BENDS = (("knee_right", "knee"), ("knee_left", "knee"), ("elbow_right", "elbow"), ("elbow_left", "elbow"))
+
+#: Shape parameters that are sizes, not directions: the joint bends and the gaze blend.
+#: `negate_directions` (a wind-up; the negative side of a shape set without a [negative]
+#: table) keeps their sign: a recoil's wind-up leans towards the object with the elbows
+#: still bent and the eyes still on it, where negating every value hyperextended the elbows
+#: (34 degrees at strong_recoil -1) and turned the head away.
+MAGNITUDE_PARAMS: tuple[str, ...] = ("knee_right", "knee_left", "elbow_right", "elbow_left", "gaze_weight")
+_DIRECTION_SIGNS = np.array([1.0 if n in MAGNITUDE_PARAMS else -1.0 for n in SHAPE_PARAMS], np.float32)
 
 
-def check_knees(shape, where: str) -> None:
-    """Refuse a concrete shape vector whose knee bends exceed `KNEE_MAX_RAD` (traced: no check)."""
+def negate_directions(shape: Float[Array, "20"]) -> Float[Array, "20"]:
+    """The shape vector pointing the other way: directions (leans, twists, shifts, arm
+    directions) negated, `MAGNITUDE_PARAMS` kept."""
+    return jnp.asarray(_DIRECTION_SIGNS, jnp.result_type(shape)) * shape
+
+
+def check_bends(shape, where: str) -> None:
+    """Refuse a concrete shape vector whose knee or elbow bends leave [`BEND_MIN_RAD`,
+    `BEND_MAX_RAD`] (traced: no check)."""
     if isinstance(shape, jax.core.Tracer):
         return
     v = np.asarray(shape, np.float64)
-    for name in ("knee_right", "knee_left"):
+    for name, joint in _BENDS:
         bend = float(v[P[name]])
-        if bend > KNEE_MAX_RAD:
+        if not BEND_MIN_RAD - 1e-6 <= bend <= BEND_MAX_RAD + 1e-6:  # the bounds in float32 pass
+            why = ("the joint would bend backwards" if bend < BEND_MIN_RAD else
+                   "the limb would fold onto itself")
+            article = "an" if joint == "elbow" else "a"
             raise UserError(
-                f"{where}: {name} = {bend:.3f} rad ({np.degrees(bend):.0f} degrees) is past a "
-                f"knee's range (at most {KNEE_MAX_RAD} rad, {np.degrees(KNEE_MAX_RAD):.0f} "
-                "degrees): the thigh would fold onto the shin"
+                f"{where}: {name} = {bend:.3f} rad ({np.degrees(bend):.0f} degrees) is past "
+                f"{article} {joint}'s range ({BEND_MIN_RAD} to {BEND_MAX_RAD} rad, "
+                f"{np.degrees(BEND_MIN_RAD):.0f} to {np.degrees(BEND_MAX_RAD):.0f} degrees): {why}"
             )
 
 

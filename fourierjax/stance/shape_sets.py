@@ -3,8 +3,9 @@
 Format (see `fourierjax/stance/shape_sets/*.toml`; `configs/shape_sets/slouch.toml` is a user
 example loaded by path). Top level: `name`, `description`, `object` ("none", "optional" or
 "required"). Then a `[positive]` table (used for intensity >= 0) and an optional
-`[negative]` table (intensity < 0; without it negative intensities extrapolate the positive
-side through the origin). Each side has:
+`[negative]` table (intensity < 0; without it negative intensities point the positive side
+the other way: its directions negated, its knee and elbow bends and gaze weight kept, see
+`problem.MAGNITUDE_PARAMS`). Each side has:
 
 - states: `sagittal_class`, `coronal_class` (`torso.SHAPE_CLASSES`), `collar_y`, `collar_z`
   ("aligned"/"opposed"), optional `gaze = "object"` (look at the object) and
@@ -45,7 +46,14 @@ from jaxtyping import Array, Float
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.ik import Feet
-from fourierjax.stance.problem import SHAPE_PARAMS, StanceProblem, as_finite, check_knees, make_problem
+from fourierjax.stance.problem import (
+    SHAPE_PARAMS,
+    StanceProblem,
+    as_finite,
+    check_bends,
+    make_problem,
+    negate_directions,
+)
 from fourierjax.stance.skeleton48 import Body
 from fourierjax.stance.torso import COLLAR_STATES, SHAPE_CLASSES, class_weights, collar_sign
 
@@ -117,8 +125,9 @@ class ShapeSet:
 
         pos, pos_states = side_values(self.positive, jnp.abs(i))
         if self.negative is None:
-            # No negative side: extrapolate through the origin (a negated vector).
-            neg, neg_states = -side_values(self.positive, jnp.abs(i))[0], pos_states
+            # No negative side: the positive one pointing the other way (directions negated,
+            # bends and the gaze weight kept: `problem.negate_directions`).
+            neg, neg_states = negate_directions(pos), pos_states
         else:
             neg, neg_states = side_values(self.negative, jnp.abs(i))
         use_pos = i >= 0.0
@@ -175,7 +184,7 @@ class ShapeSet:
                 f"vector with infinite or NaN values in {bad}; use a smaller intensity"
             )
         if not isinstance(ev["shape"], jax.core.Tracer):  # then the intensity is known too
-            check_knees(ev["shape"], f"shape set {self.name!r}: intensity {float(intensity):.6g}")
+            check_bends(ev["shape"], f"shape set {self.name!r}: intensity {float(intensity):.6g}")
         gaze = base.gaze_point
         if object_xyz is not None:
             gaze = jnp.where(ev["gaze_object"] > 0.5, jnp.asarray(object_xyz, gaze.dtype), gaze)
@@ -348,5 +357,7 @@ def perturb(shape: Float[Array, "20"], key, scale: float = 0.03) -> Float[Array,
 
 
 def anticipation(shape: Float[Array, "20"], fraction: float = 0.3) -> Float[Array, "20"]:
-    """The wind-up before a move (sec. 6): the shape vector negated and reduced."""
-    return -fraction * shape
+    """The wind-up before a move (sec. 6: "negating and reducing the amplitude of a shape
+    vector allows a character to move backwards"): the shape vector times `fraction`, its
+    directions negated and its bends and gaze weight kept (`problem.negate_directions`)."""
+    return fraction * negate_directions(shape)
