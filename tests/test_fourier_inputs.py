@@ -124,7 +124,10 @@ def test_fit_casts_integer_features_and_accepts_the_legal_edge_cases():
     for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(ref), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     np.testing.assert_allclose(float(got.omega_fit), 2 * np.pi, rtol=1e-4)
-    edge = F.fit(x, DT, N, **dict(kw, mask=_MASK8))
+    # 2N + 2 frames spread over the clip (8 consecutive ones cover 0.13 s: less than a cycle,
+    # refused since `MIN_CYCLES`).
+    spread = np.isin(np.arange(T), np.linspace(0, T - 1, 2 * N + 2).round().astype(int))
+    edge = F.fit(x, DT, N, **dict(kw, mask=spread))
     assert int(edge.num_frames) == 2 * N + 2
 
 
@@ -358,3 +361,50 @@ def test_fit_still_fits_a_small_motion_on_a_large_offset():
     x = 90.0 + 0.01 * _features()
     res = F.fit(x.astype(np.float32), DT, N)
     assert abs(float(res.omega_fit) - 2 * np.pi) < 0.05
+
+
+def test_fit_refuses_a_clip_shorter_than_one_cycle():
+    """With less than one period in view the fundamental is not determined: a third of a
+    cycle was fitted at a wrong frequency with nearly all of the variance explained (a 0.9 Hz
+    signal cut to 0.37 cycle: 1.85 Hz, 0.9999). Refused, naming the clip; one whole cycle
+    fits."""
+    x = _features(T=20)  # 1 Hz at 60 fps: a third of a cycle
+    with pytest.raises(UserError, match=r"^fit: the used frames cover 0\.\d\d cycle\(s\) of the fitted fundamental"):
+        F.fit(x, DT, N)
+    one = F.fit(_features(T=60), DT, N)  # exactly one cycle
+    assert abs(float(one.omega_fit) - 2 * np.pi) < 1e-3
+    batch = np.stack([_features(), np.concatenate([_features(T=20), np.zeros((100, 2), np.float32)])])
+    mask = np.stack([np.ones(T, bool), np.arange(T) < 20])
+    with pytest.raises(UserError, match=r"^fit_batch: clip 1: the used frames cover"):
+        F.fit_batch(batch, DT, N, mask=mask)
+
+
+def test_fit_refuses_the_first_half_second_of_a_real_walk():
+    # 07_01 fits at 0.93 Hz; its first 0.5 s alone fitted at 1.58 Hz with rms 1.05 degrees.
+    from fourierjax import data, motion
+
+    m = data.load("07_01")
+    with pytest.raises(UserError, match=r"clip 1: the used frames cover 0\.\d\d cycle"):
+        motion.fit_motions([m, m[:60]], 3, "euler")
+
+
+def test_spectral_omega_windows_the_used_frames():
+    """A mask that leaves out the start of a clip: the Hann window spans the used frames (it
+    was laid over frames 0..n-1, on frames the mask leaves out: 1.80 Hz for this 0.9 Hz
+    signal), so the spectrum equals that of the used frames cut out."""
+    t = np.arange(600) / 120
+    x = np.stack([np.sin(2 * np.pi * 0.9 * t + k) + 0.3 * np.sin(4 * np.pi * 0.9 * t + 2 * k)
+                  for k in range(4)], -1).astype(np.float32)
+    used = np.arange(600) >= 420
+    masked, _, _ = F.spectral_omega(x, 1 / 120, mask=used)
+    cut, _, _ = F.spectral_omega(x[420:], 1 / 120)
+    assert float(masked) == pytest.approx(float(cut), rel=1e-3)
+    assert float(F.fit(x, 1 / 120, N, mask=used).omega_fit) == pytest.approx(2 * np.pi * 0.9, rel=1e-4)
+
+
+def test_fit_float32_clips_under_x64(x64):
+    # jnp.fft.rfftfreq is float64 under x64 and made the omega search's loop carry change
+    # dtype (TypeError deep in lax.fori_loop): a float32 clip fits in float32.
+    res = F.fit(_features(), DT, N)
+    assert res.omega_fit.dtype == jnp.float32
+    assert abs(float(res.omega_fit) - 2 * np.pi) < 1e-3

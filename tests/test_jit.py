@@ -57,7 +57,9 @@ def test_fourierjax_products_name_full_precision():
     `synthesize_batch`). On CPU the numbers are the same either way."""
     from fourierjax import fourier as F
 
-    x = jnp.asarray(np.random.default_rng(0).normal(size=(48, 5)), jnp.float32)
+    t48 = np.arange(48)[:, None] / 30  # 1.6 s of a 1.5 Hz gait-like signal with noise
+    x = np.sin(2 * np.pi * 1.5 * t48 + np.arange(5)) + 0.1 * np.random.default_rng(0).normal(size=(48, 5))
+    x = jnp.asarray(x, jnp.float32)
     model = F.fit(x, 1 / 30, 2).model
     t = jnp.arange(48, dtype=jnp.float32) / 30
     texts = {
