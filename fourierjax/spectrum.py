@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fourierjax._checks import number
 from fourierjax.errors import UserError
 
 __all__ = ["windowed_amplitude_spectrum"]
@@ -31,8 +32,11 @@ def windowed_amplitude_spectrum(x, frame_time_s: float,
         x = x[:, None]
     if x.ndim != 2 or x.shape[0] < 2:
         raise UserError(f"windowed_amplitude_spectrum: x must be [T >= 2, C], got {x.shape}")
-    if not frame_time_s > 0:
-        raise UserError(f"frame_time_s: must be positive, got {frame_time_s}")
+    frame_time_s = number(frame_time_s, "windowed_amplitude_spectrum: frame_time_s", positive=True)
+    if not np.isfinite(x).all():
+        bad = np.argwhere(~np.isfinite(x))[0]
+        raise UserError(f"windowed_amplitude_spectrum: x holds NaN or infinite values (first at "
+                        f"sample {int(bad[0])}, channel {int(bad[1])})")
     if int(pad_factor) != pad_factor or pad_factor < 1:
         raise UserError(f"pad_factor: must be a whole number >= 1, got {pad_factor}")
     T = x.shape[0]

@@ -226,6 +226,12 @@ def pad_harmonics(model, num_harmonics: int):
     **Returns:** the same kind of object with `num_harmonics` harmonics.
     """
     n = _num_harmonics(model)
+    if isinstance(num_harmonics, bool):
+        raise UserError(f"pad_harmonics: num_harmonics must be an int, got {num_harmonics!r}")
+    try:
+        num_harmonics = operator.index(num_harmonics)  # ints and NumPy integers, never floats
+    except TypeError:
+        raise UserError(f"pad_harmonics: num_harmonics must be an int, got {num_harmonics!r}") from None
     if num_harmonics < n:
         raise UserError(f"pad_harmonics: num_harmonics={num_harmonics} is below the model's {n}")
     if num_harmonics == n:
@@ -291,7 +297,25 @@ def interpolate_omega(omega_a: ArrayLike, omega_b: ArrayLike, s: ArrayLike, omeg
     _check_choice(omega, _OMEGA_INTERPS, "omega", "interpolate_omega")
     _check_omega("interpolate_omega", "omega_a", omega_a)
     _check_omega("interpolate_omega", "omega_b", omega_b)
+    _check_linear_omega("interpolate_omega", omega_a, omega_b, s, omega)
     return _omega_at(omega_a, omega_b, jnp.asarray(s), omega)
+
+
+def _check_linear_omega(where: str, omega_a, omega_b, s, omega: str) -> None:
+    """Linear ω extrapolated far enough crosses zero (ω_A = 5, ω_B = 7 at s = −3: −1 rad/s): a
+    model no function accepts back. Refused when the values are concrete."""
+    if omega != "linear":
+        return
+    a, b, sv = concrete(omega_a), concrete(omega_b), concrete(s)
+    if a is None or b is None or sv is None:
+        return
+    om = (1 - sv) * a + sv * b
+    bad = ~(om > 0)
+    if np.any(bad):
+        raise UserError(
+            f"{where}: linear ω interpolation gives {_show(np.asarray(om), bad)} rad/s at this `s`, "
+            "not > 0; use omega=\"geometric\" (positive for every s) or a smaller extrapolation"
+        )
 
 
 def _omega_at(omega_a, omega_b, s, omega: str) -> Array:
@@ -362,6 +386,7 @@ def interpolate(
         "jax.vmap(lambda s: style.interpolate(a, b, s))(s_values)"
     )
     _check_models_omega("interpolate", a=a, b=b)
+    _check_linear_omega("interpolate", a.omega, b.omega, s, omega)
     a, b = _common_harmonics(a, b)
     return _interpolate(a, b, jnp.asarray(s, dtype=_dtype(a)), method, omega)
 
@@ -417,7 +442,15 @@ def ease(u: ArrayLike, kind: Ease = "smoothstep") -> Array:
 
 
 def _schedule_one(t, omega_a, omega_b, start, duration, ease_kind, omega):
-    # s(t) and the integrated cycle phase θ(t) = ∫_0^t ω(s(τ)) dτ at one time t.
+    # s(t) and the integrated cycle phase θ(t) = ∫_0^t ω(s(τ)) dτ at one time t: F(t) − F(0)
+    # for the antiderivative F below (F(0) = 0 unless the window starts before t = 0, where
+    # F alone gave θ(0) = 0.30 rad for a window from −0.5 s).
+    s, f_t = _phase_antiderivative(t, omega_a, omega_b, start, duration, ease_kind, omega)
+    _, f_0 = _phase_antiderivative(jnp.zeros_like(t), omega_a, omega_b, start, duration, ease_kind, omega)
+    return s, f_t - f_0
+
+
+def _phase_antiderivative(t, omega_a, omega_b, start, duration, ease_kind, omega):
     u_end = jnp.clip((t - start) / duration, 0.0, 1.0)
     s = ease(u_end, ease_kind)
     nodes = jnp.asarray(_GL_NODES, dtype=u_end.dtype)
@@ -685,6 +718,9 @@ def _prepare_superposition(base, characteristics, weights):
         raise UserError(
             f"superpose: `weights` has shape {weights.shape}, expected ({k},), one per characteristic"
         )
+    w = concrete(weights)
+    if w is not None and not np.isfinite(w).all():
+        raise UserError(f"superpose: `weights` must be finite, got {_show(w, ~np.isfinite(w))}")
     n = max(_num_harmonics(base), _num_harmonics(chars))
     return pad_harmonics(base, n), pad_harmonics(chars, n), weights
 
@@ -823,6 +859,9 @@ def add_noise(
         raise UserError(
             f"add_noise: `amplitude` has shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})"
         )
+    a = concrete(amplitude)
+    if a is not None and not np.isfinite(a).all():
+        raise UserError(f"add_noise: `amplitude` must be finite, got {_show(a, ~np.isfinite(a))}")
     return _add_noise(model, key, amplitude, harmonics)
 
 
@@ -1065,5 +1104,9 @@ def fit_style_weights(
     _check_log_omega("fit_style_weights", chars)
     n = max(_num_harmonics(base), _num_harmonics(chars), _num_harmonics(target))
     base, chars, target = (pad_harmonics(x, n) for x in (base, chars, target))
+    _check_scalar("fit_style_weights", "ridge", ridge)
+    r = concrete(ridge)
+    if r is not None and r < 0:
+        raise UserError(f"fit_style_weights: `ridge` must be >= 0 (a Tikhonov weight), got {r.item()!r}")
     ridge = jnp.asarray(ridge, dtype=_dtype(base))
     return _fit_style_weights(base, chars, target, ridge, bool(include_omega))

@@ -43,6 +43,8 @@ def test_matches_a_direct_windowed_dft():
     ((np.zeros((1, 2)), 0.01), "T >= 2"),
     ((np.zeros((4, 2, 2)), 0.01), "x must be"),
     ((np.zeros((4, 2)), 0.0), "frame_time_s"),
+    ((np.zeros((4, 2)), float("inf")), "frame_time_s must be finite"),
+    ((np.array([[0.0], [np.nan], [1.0]]), 0.01), r"NaN or infinite values \(first at sample 1, channel 0\)"),
     ((np.zeros((4, 2)), 0.01, 0), "pad_factor"),
     ((np.zeros((4, 2)), 0.01, 2.5), "pad_factor"),
 ])

@@ -132,6 +132,11 @@ def test_linear_omega_option(x64):
     assert float(style.interpolate(a, b, 0.5).omega) == pytest.approx(np.sqrt(45.0))
     # geometric stays positive where linear would not
     assert float(style.interpolate(a, b, -2.0).omega) > 0
+    # linear extrapolated through zero (5 - 3 (9 - 5) = -7 rad/s) is refused, not returned
+    with pytest.raises(UserError, match=r"^interpolate: linear ω interpolation gives -7\.0 rad/s"):
+        style.interpolate(a, b, -3.0, omega="linear")
+    with pytest.raises(UserError, match=r"^interpolate_omega: linear ω"):
+        style.interpolate_omega(5.0, 9.0, jnp.asarray([0.0, -3.0]), omega="linear")
 
 
 def test_phasor_interpolation_is_the_time_domain_blend(x64):
@@ -224,6 +229,17 @@ def test_transition_phase_is_the_integral_of_omega(x64):
     dtheta = jax.vmap(jax.grad(lambda x: style.transition_schedule(wa, wb, x[None], start, dur)[1][0]))(tt)
     s_tt, _ = style.transition_schedule(wa, wb, tt, start, dur)
     np.testing.assert_allclose(dtheta, wa ** (1 - s_tt) * wb**s_tt, rtol=1e-10)
+
+
+def test_transition_window_starting_before_zero_keeps_theta_0_at_zero(x64):
+    # The phase integrates from t = 0 whatever the window: a window from -0.5 s gave
+    # theta(0) = 0.30 rad (the integral over [-0.5, 0] added in).
+    wa, wb, start, dur = 5.0, 9.0, -0.5, 1.0
+    t = jnp.asarray([0.0, 0.25, 0.5, 1.0])
+    _, theta = style.transition_schedule(wa, wb, t, start, dur)
+    assert float(theta[0]) == 0.0
+    for ti, th in zip(np.asarray(t), np.asarray(theta)):
+        assert th == pytest.approx(_reference_phase(ti, wa, wb, start, dur), abs=1e-8)
 
 
 def test_transition_plays_a_then_b(x64):
@@ -698,6 +714,15 @@ def test_every_style_check_raises_user_error():
         lambda: style.model_from_style_vector(jnp.zeros(3), a),
         lambda: style.style_pca(jnp.zeros((1, 3))),
         lambda: style.style_pca(jnp.zeros((4, 3)), num_components=9),
+    ]
+    # Non-finite or out-of-range numbers that used to give NaN, inf or 1e38 results.
+    calls += [
+        lambda: style.superpose(a, [char], [float("nan")]),
+        lambda: style.superpose(a, [char], [float("inf")]),
+        lambda: style.fit_style_weights(a, [char], a, ridge=-1e3),
+        lambda: style.fit_style_weights(a, [char], a, ridge=float("nan")),
+        lambda: style.add_noise(a, jax.random.key(0), float("nan")),
+        lambda: style.pad_harmonics(a, 4.5),
     ]
     for i, call in enumerate(calls):
         with pytest.raises(UserError):
