@@ -31,6 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from fourierjax.errors import UserError
+from fourierjax.io.atomic import write_bytes_atomic
 
 __all__ = ["DemoConfig", "run_demo", "WALKS", "RUNS"]
 
@@ -653,7 +654,7 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
         "timings_s": timings,
         "total_s": round(time.perf_counter() - t_all, 2),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    write_bytes_atomic(out / "summary.json", json.dumps(summary, indent=2, default=_json_default).encode())
     return summary
 
 

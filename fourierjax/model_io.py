@@ -45,6 +45,7 @@ import zipfile
 import numpy as np
 
 from fourierjax.errors import UserError
+from fourierjax.io.atomic import write_bytes_atomic
 
 FORMAT_NAME = "fourierjax.fourier_model"
 FORMAT_VERSION = 1
@@ -159,8 +160,22 @@ def _write_archive(path, header: dict, arrays: dict) -> None:
     arrays["header"] = np.array(json.dumps(header))
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    with open(path, "wb") as f:
-        f.write(buf.getvalue())
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def _not_npz_reason(path, err) -> str:
+    """Why `np.load` failed, in words: a BVH clip passed for a model, a text file, or NumPy's
+    message (whose advice about `allow_pickle` does not apply to a file that is not ours)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(64).lstrip()
+    except OSError:
+        return str(err)
+    if head.upper().startswith(b"HIERARCHY"):
+        return "it is a BVH motion file; fit a model to it first (fourierjax fit)"
+    if not head.startswith(b"PK"):
+        return "it is not an .npz archive"
+    return str(err)
 
 
 def _read_archive(path: str, format_name: str, format_version: int,
@@ -170,7 +185,7 @@ def _read_archive(path: str, format_name: str, format_version: int,
         with np.load(path, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
     except (zipfile.BadZipFile, ValueError, OSError, EOFError) as err:
-        raise ModelFileError(path, f"not a fourierjax {kind} file (.npz): {err}") from None
+        raise ModelFileError(path, f"not a fourierjax {kind} file (.npz): {_not_npz_reason(path, err)}") from None
     if "header" not in data:
         raise ModelFileError(path, f"not a fourierjax {kind} file: no 'header' entry")
     try:
@@ -254,11 +269,7 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     header = _header(FORMAT_NAME, FORMAT_VERSION, model, "model", skeleton=None,
                      provenance=provenance, alignment=alignment)
     arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
-    # What `load_model` refuses is not written in the first place.
-    bad = [k for k, v in arrays.items() if not np.isfinite(np.asarray(v)).all()]
-    if bad:
-        raise UserError(f"save_model: `model` holds NaN or infinite values in {bad}; not written "
-                        f"to {os.fspath(path)}")
+    _refuse_non_finite("save_model", "model", arrays, path)
     if not float(np.asarray(model.omega)) > 0:
         raise UserError(f"save_model: `model` omega must be > 0 rad/s, got "
                         f"{float(np.asarray(model.omega))}; not written to {os.fspath(path)}")
@@ -339,6 +350,14 @@ def load_model(path) -> ModelFile:
     return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment)
 
 
+def _refuse_non_finite(fn: str, what: str, arrays: dict, path) -> None:
+    """What the loaders refuse is not written in the first place."""
+    bad = [k for k, v in arrays.items() if not np.isfinite(np.asarray(v)).all()]
+    if bad:
+        raise UserError(f"{fn}: `{what}` holds NaN or infinite values in {bad}; not written "
+                        f"to {os.fspath(path)}")
+
+
 def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str = "none") -> None:
     """Write one (unstacked) `fourierjax.style.Characteristic` to ``path`` (format above).
 
@@ -349,7 +368,9 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
     """
     header = _header(CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION, char,
                      "characteristic", a=a, b=b, alignment=alignment)
-    _write_archive(path, header, {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS})
+    arrays = {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS}
+    _refuse_non_finite("save_characteristic", "char", arrays, path)
+    _write_archive(path, header, arrays)
 
 
 def load_characteristic(path):

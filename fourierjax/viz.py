@@ -14,6 +14,7 @@ limbs red, the trunk grey.
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import Sequence
 
@@ -24,6 +25,8 @@ matplotlib.use("Agg")  # never open a window; safe on headless CI
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import animation  # noqa: E402
+
+from fourierjax.io.atomic import temporary_beside, write_bytes_atomic  # noqa: E402
 
 __all__ = [
     "CMU_UNIT_M",
@@ -54,8 +57,13 @@ def _close(fig) -> None:
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 100) -> str:
     """Write a figure to ``path`` (PNG by extension) and close it. Returns the path as str."""
-    fig.savefig(path, dpi=dpi, bbox_inches="tight")
-    _close(fig)
+    buf = io.BytesIO()
+    fmt = os.path.splitext(os.fspath(path))[1].lstrip(".").lower() or "png"
+    try:
+        fig.savefig(buf, dpi=dpi, bbox_inches="tight", format=fmt)
+    finally:
+        _close(fig)
+    write_bytes_atomic(path, buf.getvalue())  # whole or nothing
     return os.fspath(path)
 
 
@@ -504,6 +512,9 @@ def save_gif(sequences: Sequence, parents: Sequence[int], path: str | os.PathLik
 
     anim = animation.FuncAnimation(fig, update, frames=len(idx), blit=False)
     fps = max(1.0, 1.0 / (frame_time_s * step))
-    anim.save(os.fspath(path), writer=animation.PillowWriter(fps=fps), dpi=dpi)
-    _close(fig)
+    try:
+        with temporary_beside(path) as tmp:  # whole or nothing
+            anim.save(tmp, writer=animation.PillowWriter(fps=fps), dpi=dpi)
+    finally:
+        _close(fig)
     return os.fspath(path)

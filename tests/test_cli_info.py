@@ -8,6 +8,7 @@ import pytest
 
 from fourierjax import data
 from fourierjax.cli import main
+from fourierjax.io.bvh import read_bvh
 
 SIX_CHANNELS = """HIERARCHY
 ROOT Hips
@@ -91,10 +92,13 @@ def test_user_mistakes_print_one_line_and_exit_nonzero(kind, tmp_path):
         assert r.stderr.startswith(f"fourierjax: error: {f}:22: 'Frames: 3'")
 
 
-def test_missing_bundled_name_points_to_its_file(capsys):
-    assert main(["info", "07_01"]) == 2
-    err = capsys.readouterr().err
-    assert "07_01: no such file" in err and str(data.path("07_01")) in err
+def test_bundled_clip_names_work_as_in_the_other_commands(capsys):
+    # `fit`, `plot` and `info` take a bundled clip's name for its file (info used to refuse it).
+    assert main(["info", "07_01", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["file"] == str(data.path("07_01")) and out["frames"] == read_bvh(data.path("07_01")).num_frames
+    assert main(["info", "07_99"]) == 2
+    assert "07_99: no such file (bundled clips: " in capsys.readouterr().err
 
 
 def test_in_process_matches_subprocess_keys(capsys):

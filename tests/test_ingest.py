@@ -58,3 +58,18 @@ def test_load_many_empty_and_bad_arguments():
         load_many(["x.bvh"], workers=-1)
     with pytest.raises(ValueError, match="chunk_size"):
         load_many(["x.bvh"], chunk_size=0)
+
+
+def test_load_many_takes_a_folder_or_one_path(tmp_path):
+    # A folder string was iterated character by character ("i: no such file", ...).
+    for name in ("b.bvh", "a.BVH"):
+        (tmp_path / name).write_text(data.path("07_01").read_text())
+    (tmp_path / "notes.txt").write_text("not a clip")
+    for folder in (str(tmp_path), tmp_path):
+        motions, errors = load_many(folder, workers=1, progress=False)
+        assert [m.source for m in motions] == [str(tmp_path / "a.BVH"), str(tmp_path / "b.bvh")]
+        assert errors == []
+    motions, _ = load_many(tmp_path / "b.bvh", workers=1, progress=False)
+    assert [m.source for m in motions] == [str(tmp_path / "b.bvh")]
+    with pytest.raises(ValueError, match="`paths` must be BVH paths"):
+        load_many(3, progress=False)

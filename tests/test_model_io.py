@@ -301,6 +301,17 @@ def test_save_model_refuses_what_load_model_would_refuse(tmp_path):
     with pytest.raises(UserError, match="omega must be > 0"):
         model_io.save_model(tmp_path / "s.npz", still)
     assert not (tmp_path / "n.npz").exists() and not (tmp_path / "s.npz").exists()
+    # Characteristics too (load_characteristic refused the file save_characteristic wrote).
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from fourierjax import style
+
+    char = style.characteristic(*_gait_pair())
+    bad = eqx.tree_at(lambda c: c.log_omega, char, jnp.asarray(np.inf, char.log_omega.dtype))
+    with pytest.raises(UserError, match=r"save_characteristic: `char` holds NaN or infinite values in \['log_omega'\]"):
+        model_io.save_characteristic(tmp_path / "c.npz", bad)
+    assert not (tmp_path / "c.npz").exists()
 
 
 def test_missing_files_raise_the_same_error_for_models_and_characteristics(tmp_path):

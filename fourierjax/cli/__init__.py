@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # Subcommand name -> module under fourierjax.cli. Each module defines
@@ -52,6 +53,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except FileNotFoundError as err:
         print(f"fourierjax: error: {err.filename or err}: no such file", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        # The reader of our output stopped early (`fourierjax info x.bvh | head -1`): not an
+        # error of ours. Point stdout at devnull so the interpreter's final flush is quiet.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
+    except OSError as err:
+        # A file that cannot be read or written (permission denied, a directory where a file
+        # goes, no space left, a file-size limit): one line naming it, not a traceback.
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"fourierjax: error: {where}{err.strerror or err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("fourierjax: interrupted", file=sys.stderr)

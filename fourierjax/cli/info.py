@@ -41,19 +41,10 @@ def summary(motion) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    import pathlib
-
-    from fourierjax import data
-    from fourierjax.errors import UserError
+    from fourierjax.cli._paths import resolve_input
     from fourierjax.io.bvh import read_bvh
 
-    path = pathlib.Path(args.file)
-    if not path.exists():
-        hint = ""
-        name = path.name.removesuffix(".bvh")
-        if name in data.list():
-            hint = f"; {name!r} is a bundled clip, its file is {data.path(name)}"
-        raise UserError(f"{args.file}: no such file{hint}")
+    path = resolve_input(args.file)
     info = summary(read_bvh(path))
     if args.json:
         print(json.dumps(info))

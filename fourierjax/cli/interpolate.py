@@ -100,14 +100,9 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
 
 
 def _check_path(text: str, argument: str) -> pathlib.Path:
-    from fourierjax.errors import UserError
+    from fourierjax.cli._paths import resolve_input
 
-    path = pathlib.Path(text)
-    if not path.exists():
-        raise UserError(f"{argument}: {text}: no such file")
-    if path.is_dir():
-        raise UserError(f"{argument}: {text} is a directory")
-    return path
+    return resolve_input(text, argument, "a BVH or model file")
 
 
 def _load_model_file(path: pathlib.Path, argument: str) -> Gait:

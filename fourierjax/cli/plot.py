@@ -18,8 +18,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="a BVH file, a bundled clip name (e.g. 07_01) or a model file (.npz)")
     parser.add_argument("--out", required=True, metavar="FILE",
                         help="image to write (.png/.pdf/.svg; .gif for KIND gif)")
-    parser.add_argument("--frame", default="0", metavar="K",
-                        help="stick: frame of a BVH clip (default 0)")
+    parser.add_argument("--frame", default=None, metavar="K",
+                        help="stick: frame of a BVH clip, counted in the file (default: its first "
+                        "frame after any leading rest/T-pose frames)")
     parser.add_argument("--phase", default="0", metavar="RAD",
                         help="stick: cycle phase of a model, radians (default 0)")
     parser.add_argument("--joint", default="LeftLeg", metavar="NAME",
@@ -51,17 +52,11 @@ def _num(text: str, name: str, kind=float, lo=None, hi=None):
 
 def _load(text: str):
     """('bvh', Motion) or ('model', ModelFile) for a path or bundled clip name."""
-    from fourierjax import data, model_io
-    from fourierjax.errors import UserError
+    from fourierjax import model_io
+    from fourierjax.cli._paths import resolve_input
     from fourierjax.io.bvh import read_bvh
 
-    path = pathlib.Path(text)
-    if not path.exists():
-        if "/" not in text and text.removesuffix(".bvh") in data.list():
-            return "bvh", data.load(text.removesuffix(".bvh"))
-        raise UserError(f"{text}: no such file (or bundled clip: {', '.join(data.list())})")
-    if path.is_dir():
-        raise UserError(f"{text}: is a directory, expected a BVH or model file")
+    path = resolve_input(text, expected="a BVH or model file")
     if path.suffix.lower() == ".npz":
         import dataclasses
 
@@ -128,7 +123,13 @@ def run(args: argparse.Namespace) -> int:
         _decomposition(what, obj, args, out)
     elif args.kind == "stick":
         if what == "bvh":
-            k = _num(args.frame, "--frame", int)
+            from fourierjax.cli._paths import resolve_input
+            from fourierjax.io.bvh import read_bvh
+
+            # --frame counts the file's frames, rest frames included (as `fit` reports them).
+            rest = obj
+            obj = read_bvh(resolve_input(args.input))
+            k = obj.num_frames - rest.num_frames if args.frame is None else _num(args.frame, "--frame", int)
             if not 0 <= k < obj.num_frames:
                 raise UserError(f"--frame: {k} is outside {args.input} (frames 0..{obj.num_frames - 1})")
             from fourierjax.motion import motion_joint_positions

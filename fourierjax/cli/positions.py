@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import io
 import pathlib
 
 HELP = "World positions of every joint for every frame of a BVH file, saved as [frames, joints, 3] .npy."
@@ -18,6 +19,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fourierjax.errors import UserError
+    from fourierjax.io.atomic import write_bytes_atomic
     from fourierjax.io.bvh import read_bvh
     from fourierjax.kinematics import joint_positions
 
@@ -33,6 +35,8 @@ def run(args: argparse.Namespace) -> int:
     with jax.enable_x64(True):
         pos = joint_positions(motion.skeleton(), jnp.asarray(motion.channels, jnp.float64))
         pos = np.asarray(pos)
-    np.save(out, pos)
+    buf = io.BytesIO()
+    np.save(buf, pos)
+    write_bytes_atomic(out, buf.getvalue())
     print(f"{out}: {pos.shape[0]} frames x {pos.shape[1]} joints x 3 ({motion.source})")
     return 0

@@ -81,6 +81,9 @@ def run(args: argparse.Namespace) -> int:
     shape_set = get_shape_set(args.shape_set)
     if shape_set.needs_object and obj is None:
         raise UserError(f"shape set {shape_set.name!r} needs --object x,y,z")
+    if shape_set.object_mode == "none" and obj is not None:
+        raise UserError(f"--object: shape set {shape_set.name!r} takes no object (it would be "
+                        "ignored); `fourierjax stance --list` marks the sets that do")
     out_dir = os.path.dirname(os.path.abspath(args.out))
     if not os.path.isdir(out_dir):
         raise UserError(f"--out: directory {out_dir} does not exist")
@@ -94,7 +97,10 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.stance.skeleton48 import make_body
     from fourierjax.stance.solver import solve_stance
 
-    body = make_body(height)
+    try:
+        body = make_body(height)
+    except UserError as err:
+        raise UserError(f"--height: {err}") from None
     kw = {f"target_{args.hand}": target} if target is not None else {}
     problem = shape_set.problem(body, intensity, obj, **kw)
     sol = solve_stance(problem)

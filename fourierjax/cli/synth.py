@@ -77,9 +77,9 @@ def run(args: argparse.Namespace) -> int:
 
         chars = [load_characteristic(p)[0] for p, _ in adds]
         for (p, _), c in zip(adds, chars, strict=True):
-            if tuple(c.channel_names) != tuple(model.channel_names):
-                raise UserError(f"--add: {p}: its channels do not match the model's "
-                                f"({len(c.channel_names)} vs {model.num_channels} channels)")
+            # Names the representation or the first channel that differs (an expmap model with
+            # an Euler characteristic said "96 vs 96 channels").
+            style.check_compatible(model, c, names=(f"the model {args.model}", f"--add {p}"))
         try:
             model = style.superpose(model, chars, jnp.asarray([w for _, w in adds]))
         except ValueError as err:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 HELP = "Transition from gait A to gait B (e.g. walk -> run, run -> walk) and write a BVH."
 
@@ -46,10 +47,17 @@ def run(args: argparse.Namespace) -> int:
         template_of,
         write_motion,
     )
+    from fourierjax.errors import UserError
 
     seconds = parse_number(args.seconds, "--seconds", positive=True)
     start = parse_number(args.start, "--start", nonnegative=True)
     duration = parse_number(args.duration, "--duration", positive=True)
+    if start >= seconds:  # the file would hold A only (it said "transition 10s to 12s")
+        raise UserError(f"--start: the transition starts at {start:g} s, at or after the end of "
+                        f"the {seconds:g} s motion; start it before --seconds")
+    if start + duration > seconds:
+        print(f"fourierjax: notice: the transition ends at {start + duration:g} s, after the "
+              f"{seconds:g} s motion: the file stops part-way through it", file=sys.stderr)
     fps = None if args.fps is None else parse_number(args.fps, "--fps", positive=True)
     out = check_out(args.out, (".bvh",))
     a, b = load_gait_pair(args)

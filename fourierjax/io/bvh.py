@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from fourierjax.errors import UserError
+from fourierjax.io.atomic import write_bytes_atomic
 from fourierjax.skeleton import CHANNEL_NAMES, Topology
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -763,7 +764,7 @@ def format_bvh(motion: Motion, precision: int = 6) -> str:
 
 
 def write_bvh(motion: Motion, path: str | os.PathLike, precision: int = 6) -> None:
-    """Write `motion` to `path` as BVH (see `format_bvh`); UTF-8, LF line endings."""
-    text = format_bvh(motion, precision)
-    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as f:
-        f.write(text)
+    """Write `motion` to `path` as BVH (see `format_bvh`); UTF-8, LF line endings, written
+    completely or not at all (`io.atomic`)."""
+    # Whole or nothing: a write that fails (disk full, size limit) leaves no truncated file.
+    write_bytes_atomic(path, format_bvh(motion, precision).encode("utf-8"))
