@@ -110,3 +110,18 @@ def test_plot_frame_numbers_are_the_files(tmp_path, capsys):
     assert main(["plot", "stick", "07_01", "--frame", str(frames - 1), "--out", str(tmp_path / "f.png")]) == 0
     assert (tmp_path / "f.png").stat().st_size > 0
     assert np.isfinite(frames)
+
+
+def test_absurd_lengths_and_extrapolations_are_one_line_errors(tmp_path, capsys):
+    # synth --seconds 1e6 asked XLA for 46 GB (a RESOURCE_EXHAUSTED traceback); interpolate
+    # --s 1e30 failed later with a message about NaN features that did not name --s.
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    assert main(["fit", "07_01", "09_01", "--harmonics", "2", "--out", f"{tmp_path}/"]) == 0
+    (tmp_path / "07_01.npz").rename(a)
+    (tmp_path / "09_01.npz").rename(b)
+    capsys.readouterr()
+    assert main(["synth", str(a), "--seconds", "1000000", "--out", str(tmp_path / "s.bvh")]) == 2
+    _one_error_line(capsys, "--seconds: 1e+06 s at 120 fps is", "more than the 1000000 a command writes")
+    assert main(["interpolate", str(a), str(b), "--s", "1e30", "--out", str(tmp_path / "i.bvh")]) == 2
+    _one_error_line(capsys, "--s: 1e+30 extrapolates so far that the model overflows")
+    assert not (tmp_path / "s.bvh").exists() and not (tmp_path / "i.bvh").exists()

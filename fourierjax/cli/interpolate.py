@@ -52,6 +52,22 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: Most frames a command writes (2.3 hours at 120 fps; a BVH of ~0.7 GB for a CMU skeleton):
+#: `synth --seconds 1000000` asked XLA for 46 GB and died with a JAX traceback.
+MAX_FRAMES = 1_000_000
+
+
+def frame_count(seconds: float, dt: float) -> int:
+    """Frames of a `seconds`-long motion at `dt` (at least 2), or a UserError past MAX_FRAMES."""
+    from fourierjax.errors import UserError
+
+    num = max(2, int(round(seconds / dt)))
+    if num > MAX_FRAMES:
+        raise UserError(f"--seconds: {seconds:g} s at {1 / dt:g} fps is {num} frames, more than "
+                        f"the {MAX_FRAMES} a command writes; use fewer seconds or a lower --fps")
+    return num
+
+
 def parse_number(text: str, option: str, *, positive=False, nonnegative=False, integer=False):
     """A finite float (or int) from a command-line string, else a one-line UserError."""
     from fourierjax.errors import UserError
@@ -221,6 +237,7 @@ def run(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from fourierjax import fourier, model_io, style
+    from fourierjax.errors import UserError
 
     s = parse_number(args.s, "--s")
     out = check_out(args.out, (".npz", ".bvh"))
@@ -228,6 +245,8 @@ def run(args: argparse.Namespace) -> int:
     fps = None if args.fps is None else parse_number(args.fps, "--fps", positive=True)
     a, b = load_gait_pair(args)
     model = style.interpolate(a.model, b.model, s, method=args.method)
+    if not all(bool(jnp.isfinite(x).all()) for x in (model.offset, model.amplitude, model.phase, model.omega)):
+        raise UserError(f"--s: {s:g} extrapolates so far that the model overflows; use a smaller --s")
     if out.suffix.lower() == ".npz":
         template = a.template if a.template is not None else b.template
         model_io.save_model(
@@ -240,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         template, frame_time_s = template_of(a, b, "interpolate")
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
-        t = jnp.arange(max(2, int(round(seconds / dt)))) * dt
+        t = jnp.arange(frame_count(seconds, dt)) * dt
         write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template)
     print(f"wrote {out}")
     return 0

@@ -94,7 +94,9 @@ def run(args: argparse.Namespace) -> int:
         model = style.add_noise(model, jax.random.key(args.seed), jnp.asarray(amp),
                                 harmonics=args.noise_harmonics)
     dt = 1.0 / args.fps if args.fps else (mf.frame_time_s or 1 / 120)
-    num = max(2, int(round(args.seconds / dt)))
+    from fourierjax.cli.interpolate import frame_count
+
+    num = frame_count(args.seconds, dt)
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
     motion, gait_summary = apply_gait(args, model, template, num, dt)

@@ -42,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax import style
     from fourierjax.cli.interpolate import (
         check_out,
+        frame_count,
         load_gait_pair,
         parse_number,
         template_of,
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     a, b = load_gait_pair(args)
     template, frame_time_s = template_of(a, b, "transition")
     dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
-    t = jnp.arange(max(2, int(round(seconds / dt)))) * dt
+    t = jnp.arange(frame_count(seconds, dt)) * dt
     values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
     write_motion(out, values, a.model.channel_names, dt, template)
     print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
