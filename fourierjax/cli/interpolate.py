@@ -234,6 +234,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import jax
     import jax.numpy as jnp
 
     from fourierjax import fourier, model_io, style
@@ -245,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
     fps = None if args.fps is None else parse_number(args.fps, "--fps", positive=True)
     a, b = load_gait_pair(args)
     model = style.interpolate(a.model, b.model, s, method=args.method)
-    if not all(bool(jnp.isfinite(x).all()) for x in (model.offset, model.amplitude, model.phase, model.omega)):
+    if not all(bool(jnp.isfinite(x).all()) for x in jax.tree.leaves(model)):
         raise UserError(f"--s: {s:g} extrapolates so far that the model overflows; use a smaller --s")
     if out.suffix.lower() == ".npz":
         template = a.template if a.template is not None else b.template

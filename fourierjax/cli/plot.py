@@ -51,7 +51,8 @@ def _num(text: str, name: str, kind=float, lo=None, hi=None):
 
 
 def _load(text: str):
-    """('bvh', Motion) or ('model', ModelFile) for a path or bundled clip name."""
+    """('bvh', Motion, rest) or ('model', ModelFile, 0) for a path or bundled clip name: a
+    BVH file's every frame and the number of its leading rest/T-pose frames."""
     from fourierjax import model_io
     from fourierjax.cli._paths import resolve_input
     from fourierjax.io.bvh import read_bvh
@@ -65,11 +66,11 @@ def _load(text: str):
 
         mf = model_io.load_model(path)
         # Model files hold float64; compute in JAX's default precision.
-        return "model", dataclasses.replace(mf, model=jax.tree.map(jnp.asarray, mf.model))
+        return "model", dataclasses.replace(mf, model=jax.tree.map(jnp.asarray, mf.model)), 0
     motion = read_bvh(path)
     from fourierjax.data import detect_rest_frames
 
-    return "bvh", motion[detect_rest_frames(motion):]
+    return "bvh", motion, detect_rest_frames(motion)
 
 
 def _model_motion(mf, seconds: float, input_name: str):
@@ -115,7 +116,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out: {args.out}: expected a {' or '.join(want)} file for {args.kind}")
     if not out.parent.exists():
         raise UserError(f"--out: {out.parent}: no such directory")
-    what, obj = _load(args.input)
+    what, obj, rest = _load(args.input)
+    if what == "bvh" and args.kind != "stick":
+        obj = obj[rest:]  # the captured frames (stick's --frame counts the file's)
 
     if args.kind == "spectrum":
         _spectrum(what, obj, args, out)
@@ -123,13 +126,8 @@ def run(args: argparse.Namespace) -> int:
         _decomposition(what, obj, args, out)
     elif args.kind == "stick":
         if what == "bvh":
-            from fourierjax.cli._paths import resolve_input
-            from fourierjax.io.bvh import read_bvh
-
             # --frame counts the file's frames, rest frames included (as `fit` reports them).
-            rest = obj
-            obj = read_bvh(resolve_input(args.input))
-            k = obj.num_frames - rest.num_frames if args.frame is None else _num(args.frame, "--frame", int)
+            k = rest if args.frame is None else _num(args.frame, "--frame", int)
             if not 0 <= k < obj.num_frames:
                 raise UserError(f"--frame: {k} is outside {args.input} (frames 0..{obj.num_frames - 1})")
             from fourierjax.motion import motion_joint_positions
