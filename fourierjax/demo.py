@@ -127,9 +127,6 @@ def _fit(st: _State) -> None:
     from fourierjax import __version__, data, model_io
     from fourierjax.motion import fit_motions
 
-    unknown = [c for c in st.cfg.clips if c not in data.list()]
-    if unknown:
-        raise UserError(f"--clips: unknown clip(s) {unknown}; bundled: {', '.join(data.list())}")
     starts = {}
     for c in st.cfg.clips:
         st.motions[c], starts[c] = _crop(data.load(c))
@@ -619,6 +616,11 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
         raise UserError(f"--harmonics: must be between 1 and 16, got {cfg.harmonics}")
     if not (np.isfinite(cfg.seconds) and 0.5 <= cfg.seconds <= 60):
         raise UserError(f"--seconds: must be between 0.5 and 60, got {cfg.seconds}")
+    from fourierjax import data
+
+    unknown = [c for c in cfg.clips if c not in data.list()]
+    if unknown:  # before the output folder is made: a typo leaves nothing behind
+        raise UserError(f"--clips: unknown clip(s) {unknown}; bundled: {', '.join(data.list())}")
     out = pathlib.Path(out_dir)
     if out.exists() and not out.is_dir():
         raise UserError(f"--out: {out} exists and is not a directory")

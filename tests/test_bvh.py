@@ -528,6 +528,7 @@ STRICT_NUMBER_ERRORS = [
     ("arabic-indic frame time", _edit(18, "Frame Time: \u0660.\u0661"), 18, "not a number"),
     ("subnormal frame time", _edit(18, "Frame Time: 1e-320"), 18, "below the minimum 1e-06 s"),
     ("tiny frame time", _edit(18, "Frame Time: 9e-7"), 18, "below the minimum 1e-06 s"),
+    ("huge frame time", _edit(18, "Frame Time: 1e300"), 18, "above the maximum 60 s"),
 ]  # fmt: skip
 
 

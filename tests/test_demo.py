@@ -86,11 +86,13 @@ def test_demo_summary_has_fit_metrics(demo_run):
 def test_demo_user_mistakes_print_one_line(tmp_path):
     for args, message in ((["--clips", "99_99"], "--clips: unknown clip(s) ['99_99']"),
                           (["--seconds", "x"], "--seconds: 'x' is not a number")):
-        r = subprocess.run([sys.executable, "-m", "fourierjax", "demo", "--out", str(tmp_path),
+        out = tmp_path / "never_made"
+        r = subprocess.run([sys.executable, "-m", "fourierjax", "demo", "--out", str(out),
                             "--quiet", *args], capture_output=True, text=True, timeout=300)
         assert r.returncode == 2
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and message in lines[0], r.stderr
+        assert not out.exists()  # a typo leaves no empty output folder behind
 
 
 def test_a_failing_part_is_skipped_with_a_notice(tmp_path, monkeypatch):

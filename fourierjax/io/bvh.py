@@ -19,7 +19,7 @@ from fourierjax.skeleton import CHANNEL_NAMES, Topology
 if TYPE_CHECKING:  # pragma: no cover
     from fourierjax.skeleton import Skeleton
 
-__all__ = ["BVHError", "MIN_FRAME_TIME_S", "Motion", "format_bvh", "parse_bvh", "read_bvh",
+__all__ = ["BVHError", "MAX_FRAME_TIME_S", "MIN_FRAME_TIME_S", "Motion", "format_bvh", "parse_bvh", "read_bvh",
            "write_bvh"]
 
 
@@ -116,9 +116,9 @@ class Motion:
             frame_time_s = float(self.frame_time_s)
         except (TypeError, ValueError):
             raise UserError(f"Motion: `frame_time_s` must be a number, got {self.frame_time_s!r}")
-        if not (math.isfinite(frame_time_s) and frame_time_s >= MIN_FRAME_TIME_S):
-            raise UserError(f"Motion: `frame_time_s` must be finite and >= {MIN_FRAME_TIME_S:g} s, "
-                            f"got {frame_time_s}")
+        if not (math.isfinite(frame_time_s) and MIN_FRAME_TIME_S <= frame_time_s <= MAX_FRAME_TIME_S):
+            raise UserError(f"Motion: `frame_time_s` must be between {MIN_FRAME_TIME_S:g} and "
+                            f"{MAX_FRAME_TIME_S:g} s, got {frame_time_s}")
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "end_site_offsets", ends)
         object.__setattr__(self, "channels", channels)
@@ -203,6 +203,9 @@ _FLOAT_RE = re.compile(
 # The shortest frame time accepted (1 MHz). Real capture runs at 10 kHz at most; a smaller value
 # is a corrupt header, and a subnormal one would make `Motion.fps` infinite.
 MIN_FRAME_TIME_S = 1e-6
+# The longest frame time accepted (one frame a minute). A motion file sampled more slowly is a
+# corrupt header: "Frame Time: 1e300" made a clip's duration infinite and its frequencies 0.
+MAX_FRAME_TIME_S = 60.0
 
 
 def read_bvh(path: str | os.PathLike) -> Motion:
@@ -218,9 +221,9 @@ def read_bvh(path: str | os.PathLike) -> Motion:
     or unreadable file (line None), bytes that are not UTF-8, a malformed hierarchy, unknown
     channel names, a frame count that does not match the rows, rows with the wrong number of
     values, non-numeric, NaN or infinite values, zero frames, a non-positive frame time or
-    one below `MIN_FRAME_TIME_S` (1e-6 s). Numbers (OFFSET, Frame Time, frame data) must be
-    ASCII decimals with an optional exponent: Python's laxer `float()` spellings, such as
-    `1_0` or non-ASCII digits, are errors.
+    one outside [`MIN_FRAME_TIME_S`, `MAX_FRAME_TIME_S`] (1e-6 s to 60 s). Numbers (OFFSET,
+    Frame Time, frame data) must be ASCII decimals with an optional exponent: Python's laxer
+    `float()` spellings, such as `1_0` or non-ASCII digits, are errors.
     """
     name = os.fspath(path)
     try:
@@ -499,6 +502,11 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
         raise error(
             time_line, f"frame time {_show(m.group(1))} s is below the minimum "
             f"{MIN_FRAME_TIME_S:g} s (1 MHz); the header is probably corrupt"
+        )
+    if frame_time > MAX_FRAME_TIME_S:
+        raise error(
+            time_line, f"frame time {_show(m.group(1))} s is above the maximum "
+            f"{MAX_FRAME_TIME_S:g} s (one frame a minute); the header is probably corrupt"
         )
 
     # -- the skeleton
