@@ -1352,10 +1352,11 @@ def _check_cycles(name, num_frames, mask, frame_time_s, omega) -> None:
     if short.size:
         i = int(short[0])
         c, om = float(np.atleast_1d(cycles)[i]), float(np.atleast_1d(omega)[i])
+        others = ", ".join(str(int(j)) for j in short[1:11]) + (", ..." if short.size > 11 else "")
         where = "" if omega.ndim == 0 else f" clip {i}" + (
-            f" (and {short.size - 1} other clip(s))" if short.size > 1 else "") + ":"
+            f" (and {short.size - 1} other clip(s): {others})" if short.size > 1 else "") + ":"
         if c < MIN_CYCLES:
-            what = (f"the used frames cover {c:.2f} cycle(s) of the fitted fundamental "
+            what = (f"the used frames cover {np.floor(c * 100) / 100:.2f} cycle(s) of the fitted fundamental "
                     f"({om / (2 * np.pi):.3f} Hz), fewer than {MIN_CYCLES}")
         else:
             what = (f"the least-squares fundamental ({om / (2 * np.pi):.3f} Hz) lies on the "

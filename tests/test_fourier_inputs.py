@@ -377,6 +377,9 @@ def test_fit_refuses_a_clip_shorter_than_one_cycle():
     mask = np.stack([np.ones(T, bool), np.arange(T) < 20])
     with pytest.raises(UserError, match=r"^fit_batch: clip 1: the used frames cover"):
         F.fit_batch(batch, DT, N, mask=mask)
+    # Every short clip of a batch is named (up to 11), so one run finds them all.
+    with pytest.raises(UserError, match=r"^fit_batch: clip 1 \(and 1 other clip\(s\): 2\): the used"):
+        F.fit_batch(batch[[0, 1, 1]], DT, N, mask=mask[[0, 1, 1]])
 
 
 def test_fit_refuses_the_first_half_second_of_a_real_walk():
