@@ -735,9 +735,7 @@ def spectral_omega(
     # The window spans the used frames, first to last: a mask that leaves out the start of a
     # clip was windowed from frame 0, which put the taper's peak on unused frames.
     k = jnp.arange(T, dtype=features.dtype)
-    used = w > 0
-    first = jnp.argmax(used).astype(features.dtype)
-    last = (T - 1 - jnp.argmax(used[::-1])).astype(features.dtype)
+    first, last = (i.astype(features.dtype) for i in _used_range(w > 0, jnp))
     hann = 0.5 - 0.5 * jnp.cos(2 * jnp.pi * (k - first) / jnp.maximum(last - first, 1.0))
     win = hann * w
     x = (features - _masked_mean(features, w)[None, :]) * win[:, None]
@@ -1314,6 +1312,12 @@ MIN_CYCLES = 0.95
 _FLOOR_TOLERANCE = 1e-3
 
 
+def _used_range(used, xp):
+    """`(first, last)` index of the True frames of ``used`` along its last axis (NumPy or
+    jax.numpy: ``xp``); for a mask that leaves frames out at either end."""
+    return xp.argmax(used, axis=-1), used.shape[-1] - 1 - xp.argmax(used[..., ::-1], axis=-1)
+
+
 def _omega_floor(w, frame_time_s):
     """Lowest ω the least-squares search ranks for a clip with frame weights ``w`` [T] (when its
     guess lies above): the one whose cycle the used frames (first to last) cover `MIN_CYCLES`
@@ -1325,10 +1329,7 @@ def _omega_floor(w, frame_time_s):
     harmonic meets the true 5th (SSE 2.41 against 2.83 at the true ω; scipy from the same guess
     finds 4.06).
     """
-    used = w > 0
-    T = w.shape[-1]
-    first = jnp.argmax(used)
-    last = T - 1 - jnp.argmax(used[::-1])
+    first, last = _used_range(w > 0, jnp)
     span_s = (last - first + 1).astype(w.dtype) * frame_time_s
     return (2 * np.pi * MIN_CYCLES) / span_s
 
@@ -1343,9 +1344,7 @@ def _check_cycles(name, num_frames, mask, frame_time_s, omega) -> None:
     if mask is None:
         span = np.full(omega.shape, float(num_frames))
     else:
-        used = np.asarray(mask) > 0
-        first = np.argmax(used, axis=-1)
-        last = used.shape[-1] - 1 - np.argmax(used[..., ::-1], axis=-1)
+        first, last = _used_range(np.asarray(mask) > 0, np)
         span = (last - first + 1).astype(float)
     cycles = span * np.broadcast_to(np.asarray(frame_time_s, float), omega.shape) * omega / (2 * np.pi)
     short = np.flatnonzero(np.atleast_1d(cycles < MIN_CYCLES * (1 + _FLOOR_TOLERANCE)))
