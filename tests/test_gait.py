@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from fourierjax import contacts as C
 from fourierjax import gait as G
 from fourierjax.errors import UserError
-from tests.test_contacts import SHARED, _fk, _read_bvh, _Topo
+from tests.helpers import CMU_BUNDLED, NamesTopology, fk_oracle, read_bvh_oracle
 
 # ----------------------------------------------------------------------------- hip rule, pure
 
@@ -170,9 +170,9 @@ def test_integrate_phase():
 @functools.cache
 def clip_pose(name: str):
     """(feet [T,2,3,3] world, feet_local, groins_local [T,2,3], root [T,3], frame_time)."""
-    b = _read_bvh(SHARED / f"{name}.bvh")
-    pos, es = _fk(b, b["frames"][1:])
-    fp = C.foot_points(_Topo(b["names"], b["es_par"]))
+    b = read_bvh_oracle(CMU_BUNDLED / f"{name}.bvh")
+    pos, es = fk_oracle(b, b["frames"][1:])
+    fp = C.foot_points(NamesTopology(b["names"], b["es_par"]))
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
     root = pos[:, 0]
     gi = [b["names"].index(n) for n in G.CMU_GROINS]
@@ -392,20 +392,64 @@ def test_step_scales_harmonics():
 
 def test_exported_bvh_carries_root_motion(tmp_path):
     from fourierjax.io.bvh import read_bvh, write_bvh
+    from fourierjax.io.gait_bvh import gait_motion
 
     model, mot, fp, _, clear, _, _ = fitted("07_01")
     r = synth("07_01")
-    out = G.gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    out = gait_motion(mot, r, model.channel_names, mot.frame_time_s)
     write_bvh(out, tmp_path / "walk.bvh")
     back = read_bvh(tmp_path / "walk.bvh")
     np.testing.assert_allclose(back.channels[:, :3], np.asarray(r.root_position), atol=1e-4)
     # Independent numpy FK of the file: the feet stand on the ground and advance.
-    b = _read_bvh(tmp_path / "walk.bvh")
-    pos, es = _fk(b, b["frames"][::7])
+    b = read_bvh_oracle(tmp_path / "walk.bvh")
+    pos, es = fk_oracle(b, b["frames"][::7])
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
     low = (feet[..., 1] - clear).min(axis=(1, 2))
     assert np.max(np.abs(low)) < 2e-3
     assert back.channels[-1, 2] > 150.0
+
+
+def test_gait_motion_old_path_is_a_deprecated_alias():
+    from fourierjax.io.gait_bvh import gait_motion
+
+    model, mot, _, _, _, _, _ = fitted("07_01")
+    r = synth("07_01")
+    new = gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    with pytest.warns(DeprecationWarning, match="fourierjax.io.gait_bvh.gait_motion"):
+        old = G.gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    np.testing.assert_array_equal(old.channels, new.channels)
+    assert old.topology == new.topology and old.frame_time_s == new.frame_time_s
+
+
+def test_core_gait_modules_do_not_import_the_edges():
+    import ast
+    from pathlib import Path
+
+    import fourierjax
+
+    root = Path(fourierjax.__file__).parent
+    edges = ("fourierjax.io", "fourierjax.cli", "fourierjax.viz", "fourierjax.demo", "matplotlib")
+
+    def imported(tree):
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                yield node.module
+            elif isinstance(node, ast.Import):
+                yield from (a.name for a in node.names)
+
+    files = sorted((root / "_gait").glob("*.py"))
+    assert len(files) >= 6
+    for f in files:  # the private modules: never, not even inside a function
+        bad = [m for m in imported(ast.parse(f.read_text())) if m.startswith(edges)]
+        assert not bad, (f.name, bad)
+    face = ast.parse((root / "gait.py").read_text())
+    # The face: only the deprecated alias imports io, at call time.
+    top = [m for node in face.body if isinstance(node, ast.Import | ast.ImportFrom)
+           for m in imported(node)]
+    assert not [m for m in top if m.startswith(edges)]
+    lazy = {fn.name for fn in face.body if isinstance(fn, ast.FunctionDef)
+            if any(m.startswith(edges) for m in imported(fn))}
+    assert lazy == {"gait_motion"}
 
 
 # ------------------------------------------------------- a small leg skeleton: vmap, gradients
@@ -524,7 +568,7 @@ def test_synthesize_gait_bad_input():
         G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins,
                           clearance=jnp.zeros((2, 2)))
     with pytest.raises(UserError, match="RightUpLeg"):
-        G.groin_joints(_Topo(("Hips", "LeftUpLeg"), ()))
+        G.groin_joints(NamesTopology(("Hips", "LeftUpLeg"), ()))
 
 
 def test_synthesize_gait_rejects_bad_numbers_and_indices():
