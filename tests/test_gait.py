@@ -149,6 +149,74 @@ def test_gradient_at_lmax_is_finite_and_sqrt_gap_is_zero_there():
         assert float(G.hip_rule(leg, -0.1, 2.0, rule=rule).lift[0]) == pytest.approx(0, abs=1e-6)
 
 
+def test_hip_rule_refuses_bad_width_and_temperature_concrete_and_traced():
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0]])
+    bad = [(0.0, None), (-0.01, None), (float("nan"), None), (float("inf"), None),
+           (0.01, 0.0), (0.01, -1.0), (0.01, float("nan")), (0.01, float("inf"))]
+    for width, temperature in bad:
+        name = "width" if temperature is None else "temperature"
+        for rule in G.RULES:
+            with pytest.raises(UserError, match=rf"^hip_rule: `{name}` .* must be finite and > 0"):
+                G.hip_rule(leg, 0.1, 1.0, rule=rule, width=width, temperature=temperature)
+        with pytest.raises(UserError, match=rf"`{name}`"):
+            G.hip_rule_curves(leg, 0.1, 1.0, width=width, temperature=temperature)
+    # Traced: width 0 gave NaN gradients, temperature 0 NaN values; now the program fails.
+    f = jax.jit(lambda w, t: G.hip_rule(leg, 0.1, 1.0, rule="smooth", width=w, temperature=t).lift)
+    assert bool(jnp.all(jnp.isfinite(f(0.01, 0.02))))
+    for width, temperature in bad:
+        with pytest.raises(Exception, match="`width` and `temperature` must be finite and > 0"):
+            jax.block_until_ready(f(width, 0.02 if temperature is None else temperature))
+    g = jax.jit(lambda w: G.hip_rule(leg, 0.1, 1.0, rule="smooth", width=w).lift)
+    with pytest.raises(Exception, match="`width` and `temperature` must be finite and > 0"):
+        jax.block_until_ready(g(0.0))
+    # Under grad and vmap too (one bad item in a batch).
+    with pytest.raises(Exception, match="must be finite and > 0"):
+        jax.block_until_ready(jax.grad(lambda w: jnp.sum(g(w)))(0.0))
+    with pytest.raises(Exception, match="must be finite and > 0"):
+        jax.block_until_ready(jax.vmap(g)(jnp.array([0.01, 0.0])))
+
+
+def test_hip_rule_refuses_bad_gait_and_jump_when_traced():
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0]])
+    f = jax.jit(lambda g, j: G.hip_rule(leg, g, j).lift)
+    np.testing.assert_allclose(f(0.1, 2.0), G.hip_rule(leg, 0.1, 2.0).lift)
+    for gait, jump in ((0.1, -1.0), (float("nan"), 1.0), (0.1, float("inf"))):
+        with pytest.raises(Exception, match="`gait` must be finite and `jump` finite and >= 0"):
+            jax.block_until_ready(f(gait, jump))
+
+
+def test_gradients_finite_at_zero_leg_length_with_traced_l_max():
+    # The smooth rule's softened sqrt had d/d l_max sqrt((1e-4 l_max)^2) = NaN at l_max = 0.
+    zeros = jnp.zeros((4, 2))
+
+    def total(leg, gait, jump, l_max, rule):
+        h = G.hip_rule(leg, gait, jump, rule=rule, l_max=l_max)
+        return jnp.sum(h.L + h.lift + h.N)
+
+    grad = jax.jit(jax.grad(total, argnums=(0, 1, 2, 3)), static_argnums=4)
+    for rule in G.RULES:
+        for l_max in (0.0, 1.0):
+            grads = grad(zeros, 0.1, 1.0, l_max, rule)
+            assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), (rule, l_max, grads)
+        # Eagerly too (concrete legs of zero length with a concrete positive l_max).
+        grads = jax.grad(total, argnums=(0, 3))(zeros, 0.1, 1.0, 1.0, rule)
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), (rule, grads)
+
+
+def test_smooth_rule_tiny_temperature_is_finite_and_exact_under_jit():
+    # tau = 1e-30 overflowed leg / tau inside the log-sum-exp (inf - inf = NaN under jit).
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0], [8.0, 10.0]])
+    f = jax.jit(lambda t: G.hip_rule(leg, 0.1, 1.0, rule="smooth", temperature=t))
+    for tau in (1e-30, 1e-20, 1e-6):
+        h = f(tau)
+        np.testing.assert_allclose(h.L, jnp.max(leg, axis=-1), rtol=1e-6)
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in h)
+        g = jax.grad(lambda x, t=tau: jnp.sum(G.hip_rule(x, 0.1, 1.0, rule="smooth", temperature=t).L))(leg)
+        assert bool(jnp.all(jnp.isfinite(g)))
+        # The soft max picks the larger leg: gradient one-hot per frame.
+        np.testing.assert_allclose(jnp.sum(g, axis=-1), 1.0, rtol=1e-5)
+
+
 # ------------------------------------------------------------------------------ step, speed
 
 
@@ -571,6 +639,29 @@ def test_synthesize_gait_bad_input():
         G.groin_joints(NamesTopology(("Hips", "LeftUpLeg"), ()))
 
 
+def test_synthesize_gait_does_not_retrace_for_new_numbers(monkeypatch):
+    # filter_jit holds Python numbers static: frame time, width and temperature go in as arrays.
+    from fourierjax._gait import synthesis
+
+    sk, fp, groins, _ = toy()
+    model = toy_model(0)
+    traces = []
+
+    def counting_apply_step(m, step):
+        traces.append(1)
+        return G.apply_step(m, step)
+
+    monkeypatch.setattr(synthesis, "apply_step", counting_apply_step)
+    outs = [
+        G.synthesize_gait(model, sk, 12, dt, feet=fp, groins=groins, rule="smooth", width=w,
+                          temperature=t, gait=g, jump=1.0, num_cycle_samples=8)
+        for dt, w, t, g in ((1 / 30, 0.01, 0.1, 0.05), (1 / 25, 0.02, 0.2, 0.06), (1 / 24, 0.03, 0.3, 0.07))
+    ]
+    assert len(traces) <= 1
+    # ... and the values still matter.
+    assert not np.allclose(outs[0].root_position, outs[1].root_position)
+
+
 def test_synthesize_gait_rejects_bad_numbers_and_indices():
     sk, fp, groins, _ = toy()
     model = toy_model(0)
@@ -606,6 +697,9 @@ def test_synthesize_gait_rejects_bad_numbers_and_indices():
             run(**{name: float("nan")})
     with pytest.raises(UserError, match=r"^synthesize_gait: `up_axis`"):
         run(up_axis=5)
+    for kw in ({"width": 0.0}, {"width": float("nan")}, {"temperature": 0.0}, {"temperature": -1.0}):
+        with pytest.raises(UserError, match=rf"^synthesize_gait: `{next(iter(kw))}` .* must be finite and > 0"):
+            run(rule="smooth", **kw)
     # NumPy integers and Python-style negative joint indices are fine (same compiled function).
     ref = run()
     same = run(num_frames=np.int64(12), groins=(groins[0] - 9, groins[1] - 9))
