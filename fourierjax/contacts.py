@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -11,6 +11,9 @@ from jaxtyping import Array, ArrayLike, Bool, Float, Integer
 from fourierjax._checks import number
 from fourierjax._math import safe_sqrt
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.skeleton import Topology
 
 # The CMU skeleton's foot joints, ankle first (the heel strike is seen there), toes last.
 CMU_FEET: tuple[tuple[str, ...], tuple[str, ...]] = (
@@ -36,7 +39,7 @@ class FootPoints(NamedTuple):
 
 
 def foot_points(
-    topology,
+    topology: Topology,
     feet: tuple[tuple[str, ...], tuple[str, ...]] = CMU_FEET,
     *,
     end_sites: bool = True,

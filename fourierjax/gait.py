@@ -7,6 +7,8 @@ adds `jump · √(Lmax − L)`); phases in radians of the gait cycle.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from fourierjax._gait.common import CMU_GROINS, RULES, groin_joints
 from fourierjax._gait.fit import HipFit, fit_hip_rule
@@ -28,6 +30,9 @@ from fourierjax._gait.metrics import (
 )
 from fourierjax._gait.root import apply_step, integrate_phase, root_trajectory
 from fourierjax._gait.synthesis import GaitResult, model_hip_curves, synthesize_gait
+
+if TYPE_CHECKING:
+    from fourierjax.io.bvh import Motion
 
 __all__ = [
     "CMU_GROINS",
@@ -57,7 +62,7 @@ __all__ = [
 ]
 
 
-def gait_motion(template, result: GaitResult, channel_names, frame_time_s: float):
+def gait_motion(template: Motion, result: GaitResult, channel_names: Sequence[str], frame_time_s: float) -> Motion:
     """Deprecated: use `fourierjax.io.gait_bvh.gait_motion` (the core does not import `io`).
 
     Arguments:

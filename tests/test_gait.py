@@ -809,3 +809,10 @@ def test_synth_command_with_step_constraints(tmp_path, capsys):
     np.testing.assert_allclose(read_bvh(out).channels[:, 1], plain[:, 2], atol=1e-4)
     assert main(["synth", str(tmp_path / "toy.npz"), "--seconds", "0.4", "--gait", "2",
                  "--out", str(out)]) == 2
+
+
+def test_cli_hip_rules_match_the_library():
+    # cli/_gait_args repeats the rule names so that building the parser does not import JAX.
+    from fourierjax.cli import _gait_args
+
+    assert _gait_args.RULES == G.RULES

@@ -2,27 +2,33 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike
+from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.contacts import FootPoints
+    from fourierjax.skeleton import Skeleton, Topology
 
 RULES = ("unuma1995", "continuous", "smooth")
 CMU_GROINS = ("LeftUpLeg", "RightUpLeg")
 
 
-def check_finite(where: str, name: str, value) -> None:
+def check_finite(where: str, name: str, value: ArrayLike) -> None:
     """UserError for a concrete non-finite `value` (traced values: see `traced_checks`)."""
     v = concrete(value)
     if v is not None and not np.all(np.isfinite(v)):
         raise UserError(f"{where}: `{name}` must be finite, got {v if v.ndim == 0 else 'non-finite entries'}")
 
 
-def check_jump(where: str, jump) -> None:
+def check_jump(where: str, jump: ArrayLike) -> None:
     """UserError for a concrete `jump` that is negative or not finite."""
     # Eq. 5 lifts the hip by jump·√(Lmax − L) in flight: the flight height, so jump ≥ 0 (the
     # lift is ≥ 0 by construction). A negative jump would push the stance foot into the ground.
@@ -39,7 +45,7 @@ def check_rule(rule: str) -> str:
     return rule
 
 
-def check_positive(where: str, name: str, value, what: str) -> None:
+def check_positive(where: str, name: str, value: ArrayLike, what: str) -> None:
     """UserError for a concrete `value` that is not finite and > 0."""
     v = concrete(value)
     if v is not None and not (np.all(np.isfinite(v)) and np.all(v > 0)):
@@ -50,7 +56,7 @@ def _traced(*values) -> bool:
     return any(isinstance(v, jax.core.Tracer) for v in values)
 
 
-def smooth_parameter_checks(where: str, x: Array, width: ArrayLike, temperature) -> Array:
+def smooth_parameter_checks(where: str, x: Array, width: ArrayLike, temperature: ArrayLike | None) -> Array:
     """`x`, carrying checks that `width` and `temperature` (when given) are finite and > 0.
 
     Concrete values raise `UserError` here; traced ones (under jit, vmap or grad) go through
@@ -79,7 +85,7 @@ def traced_jump_checks(where: str, x: Array, gait: ArrayLike, jump: ArrayLike) -
     return eqx.error_if(x, bad, f"{where}: `gait` must be finite and `jump` finite and >= 0")
 
 
-def groin_joints(topology, names: tuple[str, str] = CMU_GROINS) -> tuple[int, int]:
+def groin_joints(topology: Topology, names: tuple[str, str] = CMU_GROINS) -> tuple[int, int]:
     """Indices of the left and right groin (hip) joints; CMU names by default.
 
     Arguments:
@@ -104,7 +110,7 @@ def _is_index(i, n: int) -> bool:
     return isinstance(i, int | np.integer) and not isinstance(i, bool) and -n <= i < n
 
 
-def check_indices(where: str, skeleton, feet, groins) -> tuple[int, int]:
+def check_indices(where: str, skeleton: Skeleton, feet: FootPoints, groins: tuple[int, int]) -> tuple[int, int]:
     """The groin joint indices as non-negative Python ints; UserError for an index outside the
     skeleton (JAX would clamp it: a wrong joint and a wrong leg length, silently)."""
     num_joints = skeleton.topology.num_joints
@@ -125,7 +131,9 @@ def check_indices(where: str, skeleton, feet, groins) -> tuple[int, int]:
     return tuple(int(g) % num_joints for g in groins)
 
 
-def pose_points(skeleton, representation: str, idx: Array, groins, feat: Array):
+def pose_points(
+    skeleton: Skeleton, representation: str, idx: Array, groins: tuple[int, int], feat: Float[Array, " C"]
+) -> tuple[Float[Array, "2 P 3"], Float[Array, "2 3"]]:
     """Foot points `[2, P, 3]` and groins `[2, 3]` of one feature frame, pelvis at the origin."""
     from fourierjax.kinematics import forward_kinematics
     from fourierjax.motion import local_pose_from_features

@@ -3,13 +3,18 @@ path carried by the feet on the ground."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+if TYPE_CHECKING:
+    from fourierjax.fourier import FourierModel
 
-def apply_step(model, step: Float[ArrayLike, ""]):
+
+def apply_step(model: FourierModel, step: Float[ArrayLike, ""]) -> FourierModel:
     """Unuma 1995 §3.1 *step*: replace every `A_n` (n ≥ 1) by `step · A_n`.
 
     Arguments:

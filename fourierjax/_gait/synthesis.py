@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -23,6 +24,11 @@ from fourierjax._gait.metrics import estimate_sole_clearance
 from fourierjax._gait.root import apply_step, root_trajectory
 from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.contacts import FootPoints
+    from fourierjax.fourier import FourierModel
+    from fourierjax.skeleton import Skeleton
 
 
 class GaitResult(eqx.Module):
@@ -121,12 +127,12 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
 
 
 def synthesize_gait(
-    model,
-    skeleton,
+    model: FourierModel,
+    skeleton: Skeleton,
     num_frames: int,
     frame_time_s: float,
     *,
-    feet,
+    feet: FootPoints,
     groins: tuple[int, int],
     clearance: Float[ArrayLike, "2 P"] | None = None,
     step: Float[ArrayLike, ""] = 1.0,
@@ -252,10 +258,10 @@ def _cycle_points(model, skeleton, feet, groins, num_samples):
 
 
 def model_hip_curves(
-    model,
-    skeleton,
+    model: FourierModel,
+    skeleton: Skeleton,
     *,
-    feet,
+    feet: FootPoints,
     groins: tuple[int, int],
     gait: Float[ArrayLike, ""],
     jump: Float[ArrayLike, ""],

@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fourierjax.io.bvh import Motion
 
+if TYPE_CHECKING:
+    from fourierjax.gait import GaitResult
 
-def gait_motion(template: Motion, result, channel_names, frame_time_s: float) -> Motion:
+
+def gait_motion(
+    template: Motion, result: GaitResult, channel_names: Sequence[str], frame_time_s: float
+) -> Motion:
     """A writeable `Motion` of a synthesized gait, carrying its root trajectory.
 
     Joint rotations go through `motion.motion_from_features`; the root position channels are
