@@ -816,3 +816,23 @@ def test_cli_hip_rules_match_the_library():
     from fourierjax.cli import _gait_args
 
     assert _gait_args.RULES == G.RULES
+
+
+def test_cli_apply_gait_in_process():
+    # In-process (pytest turns warnings into errors): the CLI uses io.gait_bvh, not the
+    # deprecated gait.gait_motion; its flight count is gait.flight_fraction's.
+    import argparse
+
+    from fourierjax.cli._gait_args import add_gait_arguments, apply_gait
+
+    model, mot, _, _, _, _, _ = fitted("07_01")
+    parser = argparse.ArgumentParser()
+    add_gait_arguments(parser)
+    args = parser.parse_args(["--gait", "0.05", "--jump", "1"])
+    motion, summary = apply_gait(args, model, mot, 60, mot.frame_time_s)
+    assert motion.num_frames == 60
+    assert summary.startswith("step constraints: hip rule unuma1995, root motion on; flight ")
+    assert "foot skating" in summary and "root advance" in summary
+    off = parser.parse_args(["--no-root-motion"])
+    _, summary_off = apply_gait(off, model, mot, 60, mot.frame_time_s)
+    assert "flight not measured" in summary_off
