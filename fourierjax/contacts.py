@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float, Integer
 
 from fourierjax._checks import number
+from fourierjax._math import safe_sqrt
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.skeleton import Topology
 
 # The CMU skeleton's foot joints, ankle first (the heel strike is seen there), toes last.
 CMU_FEET: tuple[tuple[str, ...], tuple[str, ...]] = (
@@ -33,18 +38,23 @@ class FootPoints(NamedTuple):
     names: tuple[tuple[str, ...], tuple[str, ...]]
 
 
-def foot_points(topology, feet=CMU_FEET, *, end_sites: bool = True) -> FootPoints:
+def foot_points(
+    topology: Topology,
+    feet: tuple[tuple[str, ...], tuple[str, ...]] = CMU_FEET,
+    *,
+    end_sites: bool = True,
+) -> FootPoints:
     """Find the foot points of a skeleton by joint name.
 
-    **Arguments:**
+    Arguments:
+        topology: a `fourierjax.skeleton.Topology` (uses `names` and `end_site_parents`).
+        feet: `(left_names, right_names)`, the joints of each foot, ankle first. Defaults to
+            the CMU naming (`LeftFoot, LeftToeBase` / `RightFoot, RightToeBase`).
+        end_sites: also take the End Site(s) hanging from the last joint of each foot (the
+            toe tip, the lowest point of a flat foot).
 
-    - `topology`: a `fourierjax.skeleton.Topology` (uses `names` and `end_site_parents`).
-    - `feet`: `(left_names, right_names)`, the joints of each foot, ankle first. Defaults to
-      the CMU naming (`LeftFoot, LeftToeBase` / `RightFoot, RightToeBase`).
-    - `end_sites`: also take the End Site(s) hanging from the last joint of each foot (the
-      toe tip, the lowest point of a flat foot).
-
-    **Returns:** a `FootPoints`. Both feet must have the same number of points.
+    Returns:
+        A `FootPoints`. Both feet must have the same number of points.
 
     Raises `UserError` naming the missing joints and the skeleton's joints when the skeleton
     does not use the names asked for (pass `feet=` for other skeletons).
@@ -79,58 +89,73 @@ def foot_points(topology, feet=CMU_FEET, *, end_sites: bool = True) -> FootPoint
     return FootPoints(out_idx[0], out_idx[1], (out_names[0], out_names[1]))
 
 
-def gather_foot_positions(joint_positions, end_site_positions, points: FootPoints):
+def gather_foot_positions(
+    joint_positions: Float[ArrayLike, "*batch J 3"],
+    end_site_positions: Float[ArrayLike, "*batch E 3"],
+    points: FootPoints,
+) -> Float[Array, "*batch 2 P 3"]:
     """Stack the foot points of FK output into `[..., 2, P, 3]` (left, right).
 
-    **Arguments:**
+    Arguments:
+        joint_positions: `[..., J, 3]` joint positions (any leading batch/time axes).
+        end_site_positions: `[..., E, 3]` End-Site positions.
+        points: from `foot_points`.
 
-    - `joint_positions`: `[..., J, 3]` joint positions (any leading batch/time axes).
-    - `end_site_positions`: `[..., E, 3]` End-Site positions.
-    - `points`: from `foot_points`.
-
-    **Returns:** `[..., 2, P, 3]`. Pure jnp (numpy inputs give a JAX array).
+    Returns:
+        `[..., 2, P, 3]`. Pure jnp (numpy inputs give a JAX array).
     """
     allp = jnp.concatenate([jnp.asarray(joint_positions), jnp.asarray(end_site_positions)], -2)
     idx = jnp.asarray([points.left, points.right])
     return allp[..., idx, :]
 
 
-def point_speeds(positions, frame_time_s, *, up_axis: int | None = None):
+def point_speeds(
+    positions: Float[ArrayLike, "T ... 3"],
+    frame_time_s: Float[ArrayLike, ""],
+    *,
+    up_axis: int | None = None,
+) -> Float[Array, "T ..."]:
     """Speed of points over time by central differences (one-sided at the ends).
 
-    **Arguments:**
+    Arguments:
+        positions: `[T, ..., 3]` (T ≥ 2).
+        frame_time_s: seconds per frame.
+        up_axis: if given, that component is ignored (horizontal speed).
 
-    - `positions`: `[T, ..., 3]` (T ≥ 2).
-    - `frame_time_s`: seconds per frame.
-    - `up_axis`: if given, that component is ignored (horizontal speed).
-
-    **Returns:** `[T, ...]` in file units per second. Pure jnp, differentiable.
+    Returns:
+        `[T, ...]` in file units per second. Pure jnp, differentiable (a zero gradient, not
+        NaN, where a point stands still).
     """
     p = jnp.asarray(positions)
     if up_axis is not None:
         keep = [k for k in range(3) if k != up_axis]
         p = p[..., keep]
     v = jnp.gradient(p, axis=0) / frame_time_s
-    # sqrt(0) has an infinite derivative: shim the exact-zero case (a planted foot).
-    sq = jnp.sum(v * v, axis=-1)
-    safe = jnp.where(sq > 0, sq, 1.0)
-    return jnp.where(sq > 0, jnp.sqrt(safe), 0.0)
+    # sqrt(0) has an infinite derivative (a planted foot): safe_sqrt's is 0 there.
+    return safe_sqrt(jnp.sum(v * v, axis=-1))
 
 
-def soft_contact_weights(height, speed, height_threshold, speed_threshold, softness=0.25):
+def soft_contact_weights(
+    height: Float[ArrayLike, "*shape"],
+    speed: Float[ArrayLike, "*shape"],
+    height_threshold: Float[ArrayLike, ""],
+    speed_threshold: Float[ArrayLike, ""],
+    softness: Float[ArrayLike, ""] = 0.25,
+) -> Float[Array, "*shape"]:
     """Differentiable contact weights in [0, 1]: low AND slow, with sigmoid edges.
 
     `w = σ((h_th − h) / (softness·h_th)) · σ((v_th − v) / (softness·v_th))`: 1/4 at both
     thresholds, → 1 well below both, → 0 above either.
 
-    **Arguments:**
+    Arguments:
+        height: `[...]` height above the floor (file units).
+        speed: `[...]` point speed (file units / s), e.g. from `point_speeds`.
+        height_threshold: positive scalar (file units).
+        speed_threshold: positive scalar (file units / s).
+        softness: edge width as a fraction of each threshold.
 
-    - `height`: `[...]` height above the floor (file units).
-    - `speed`: `[...]` point speed (file units / s), e.g. from `point_speeds`.
-    - `height_threshold`, `speed_threshold`: positive scalars.
-    - `softness`: edge width as a fraction of each threshold.
-
-    **Returns:** `[...]` weights. Pure jnp.
+    Returns:
+        `[...]` weights. Pure jnp.
     """
     import jax
 
@@ -154,17 +179,34 @@ class GroundEstimate(NamedTuple):
     speed_threshold: float
 
 
-def floor_heights(ground: GroundEstimate, foot_positions, *, up_axis: int = 1) -> np.ndarray:
-    """Height of each point's floor under it, `[T, F, P]` (`[T, F, 3]` input gives `[T, F, 1]`)."""
+def floor_heights(
+    ground: GroundEstimate, foot_positions: Float[ArrayLike, "T F *P 3"], *, up_axis: int = 1
+) -> Float[np.ndarray, "T F P"]:
+    """Height of each point's floor under it (NumPy).
+
+    Arguments:
+        ground: from `estimate_ground`.
+        foot_positions: `[T, F, P, 3]` (or `[T, F, 3]`, read as P = 1) foot points.
+        up_axis: index of the up axis.
+
+    Returns:
+        `[T, F, P]` floor heights (file units).
+    """
     p = _as_points(foot_positions)
     return ground.intercepts + np.delete(p, up_axis, axis=-1) @ ground.slope
 
 
-def sole_clearance(ground: GroundEstimate) -> np.ndarray:
-    """`[F, P]` height of each foot point above the foot's lowest point when planted.
+def sole_clearance(ground: GroundEstimate) -> Float[np.ndarray, "F P"]:
+    """Height of each foot point above the foot's lowest point when planted.
 
     The point with the lowest floor (the toe tip on CMU feet) gets 0; the ankle ~1 CMU unit.
     These are the sole clearances the hip-height rule uses (`fourierjax.gait`).
+
+    Arguments:
+        ground: from `estimate_ground`.
+
+    Returns:
+        `[F, P]` clearances ≥ 0 (file units).
     """
     a = np.asarray(ground.intercepts)
     return a - a.min(axis=-1, keepdims=True)
@@ -269,7 +311,7 @@ def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
 
 
 def estimate_ground(
-    foot_positions,
+    foot_positions: Float[ArrayLike, "T F *P 3"],
     frame_time_s: float,
     *,
     up_axis: int = 1,
@@ -277,11 +319,17 @@ def estimate_ground(
     height_threshold: float | None = None,
     speed_threshold: float | None = None,
 ) -> GroundEstimate:
-    """Estimate the floor under each foot point and the contact thresholds.
+    """Estimate the floor under each foot point and the contact thresholds (NumPy).
 
-    See `foot_contacts` for the arguments and the defaults. With `ground_height` given the
-    floor is level at that height and each point's clearance is its 2nd-percentile height
-    above it (0 if the point goes lower).
+    With `ground_height` given the floor is level at that height and each point's clearance
+    is its 2nd-percentile height above it (0 if the point goes lower).
+
+    Arguments:
+        foot_positions, frame_time_s, up_axis, ground_height, height_threshold,
+            speed_threshold: as `foot_contacts` (which documents the defaults).
+
+    Returns:
+        A `GroundEstimate`.
     """
     p = _as_points(foot_positions)
     frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
@@ -303,7 +351,7 @@ def estimate_ground(
 
 
 def foot_contacts(
-    foot_positions,
+    foot_positions: Float[ArrayLike, "T F *P 3"],
     frame_time_s: float,
     *,
     up_axis: int = 1,
@@ -312,7 +360,7 @@ def foot_contacts(
     speed_threshold: float | None = None,
     min_contact_s: float = 0.04,
     max_gap_s: float = 0.025,
-) -> np.ndarray:
+) -> Bool[np.ndarray, "T F"]:
     """Detect foot contacts: a point is in contact when it is low AND slow (NumPy, edge code).
 
     A point is *low* when its height above its floor is below `height_threshold`, *slow* when
@@ -328,17 +376,19 @@ def foot_contacts(
     `height_threshold = 0.25 ℓ` (CMU: ~0.8 units ≈ 4.5 cm) and `speed_threshold = 6 ℓ/s`
     (CMU: ~19 units/s ≈ 1.1 m/s).
 
-    **Arguments:**
+    Arguments:
+        foot_positions: `[T, F, 3]` one point per foot, or `[T, F, P, 3]` (e.g. from
+            `gather_foot_positions`), file units.
+        frame_time_s: seconds per frame.
+        up_axis: index of the vertical axis (1: Y up).
+        ground_height: a level floor height; `None` fits the floor (see above).
+        height_threshold: overrides the relative default (file units).
+        speed_threshold: overrides the relative default (file units / s).
+        min_contact_s: contacts shorter than this are dropped (seconds).
+        max_gap_s: gaps inside a contact up to this long are closed (seconds).
 
-    - `foot_positions`: `[T, F, 3]` one point per foot, or `[T, F, P, 3]` (e.g. from
-      `gather_foot_positions`), file units.
-    - `frame_time_s`: seconds per frame.
-    - `up_axis`: index of the vertical axis (1: Y up).
-    - `ground_height`: a level floor height; `None` fits the floor (see above).
-    - `height_threshold`, `speed_threshold`: override the relative defaults.
-    - `min_contact_s`, `max_gap_s`: cleanup durations.
-
-    **Returns:** `bool [T, F]`. Raises `UserError` naming the argument for a non-finite or
+    Returns:
+        `bool [T, F]`. Raises `UserError` naming the argument for a non-finite or
     non-positive `frame_time_s` or threshold, a non-finite `ground_height`, negative or
     non-finite durations, or an `up_axis` other than the integer 0, 1 or 2.
     """
@@ -370,14 +420,16 @@ def foot_contacts(
     return out
 
 
-def step_events(contacts) -> tuple[np.ndarray, ...]:
+def step_events(contacts: Bool[ArrayLike, "T F"]) -> tuple[Integer[np.ndarray, " strikes"], ...]:
     """Heel strikes: the frames where each foot's contact begins.
 
     A contact already on at frame 0 is not a strike (its onset was not seen).
 
-    **Arguments:** `contacts`: `bool [T, F]`.
+    Arguments:
+        contacts: `bool [T, F]`.
 
-    **Returns:** a tuple of F integer arrays of frame indices, ascending.
+    Returns:
+        A tuple of F integer arrays of frame indices, ascending.
     """
     c = np.asarray(contacts, bool)
     if c.ndim != 2:
@@ -385,8 +437,15 @@ def step_events(contacts) -> tuple[np.ndarray, ...]:
     return tuple(np.nonzero(c[1:, f] & ~c[:-1, f])[0] + 1 for f in range(c.shape[1]))
 
 
-def step_intervals(contacts) -> np.ndarray:
-    """Frames between consecutive heel strikes of different feet (one per step)."""
+def step_intervals(contacts: Bool[ArrayLike, "T F"]) -> Integer[np.ndarray, " steps"]:
+    """Frames between consecutive heel strikes of different feet (one per step).
+
+    Arguments:
+        contacts: `bool [T, F]`.
+
+    Returns:
+        Integer frame counts, in time order.
+    """
     ev = step_events(contacts)
     frames = np.concatenate(ev) if ev else np.zeros(0, int)
     feet = np.concatenate([np.full(len(e), f) for f, e in enumerate(ev)]) if ev else frames
@@ -399,7 +458,7 @@ def step_intervals(contacts) -> np.ndarray:
 STEP_STATISTICS = ("mean", "median")
 
 
-def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> float:
+def step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float, *, statistic: str = "mean") -> float:
     """Step duration, heel strike to the other foot's heel strike (Tilmanne §2.2).
 
     The gait cycle is two steps: `omega = 2π / (2 · step_period_s)`. When each foot has at
@@ -408,10 +467,13 @@ def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> 
     (`step_intervals`) are used. `statistic="median"` resists a spurious extra strike (a
     stumble, CMU 142_02), which would pull the mean down.
 
-    **Arguments:** `contacts`: `bool [T, F]`; `frame_time_s`: seconds per frame;
-    `statistic`: `"mean"` or `"median"` of the intervals.
+    Arguments:
+        contacts: `bool [T, F]`.
+        frame_time_s: seconds per frame.
+        statistic: `"mean"` or `"median"` of the intervals.
 
-    **Returns:** seconds. Raises `UserError` when the clip holds fewer than two alternating
+    Returns:
+        Seconds. Raises `UserError` when the clip holds fewer than two alternating
     heel strikes, for an unknown `statistic`, or a non-finite or non-positive `frame_time_s`.
     """
     if statistic not in STEP_STATISTICS:
@@ -431,25 +493,55 @@ def step_period_s(contacts, frame_time_s: float, *, statistic: str = "mean") -> 
     return float(reduce(steps)) * frame_time_s
 
 
-def mean_step_period_s(contacts, frame_time_s: float) -> float:
-    """`step_period_s(contacts, frame_time_s, statistic="mean")`: mean step duration (s)."""
+def mean_step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float) -> float:
+    """Mean step duration: `step_period_s(contacts, frame_time_s, statistic="mean")`.
+
+    Arguments:
+        contacts: `bool [T, F]`.
+        frame_time_s: seconds per frame.
+
+    Returns:
+        Seconds.
+    """
     return step_period_s(contacts, frame_time_s, statistic="mean")
 
 
-def flight_fraction(contacts) -> float:
-    """Fraction of frames with no foot in contact (`contacts`: `bool [T, F]`)."""
+def flight_fraction(contacts: Bool[ArrayLike, "T F"]) -> float:
+    """Fraction of frames with no foot in contact.
+
+    Arguments:
+        contacts: `bool [T, F]`.
+
+    Returns:
+        A fraction in [0, 1].
+    """
     c = np.asarray(contacts, bool)
     return float(np.mean(~c.any(axis=1)))
 
 
-def double_support_fraction(contacts) -> float:
-    """Fraction of frames with every foot in contact (`contacts`: `bool [T, F]`)."""
+def double_support_fraction(contacts: Bool[ArrayLike, "T F"]) -> float:
+    """Fraction of frames with every foot in contact.
+
+    Arguments:
+        contacts: `bool [T, F]`.
+
+    Returns:
+        A fraction in [0, 1].
+    """
     c = np.asarray(contacts, bool)
     return float(np.mean(c.all(axis=1)))
 
 
-def contact_timeline(contacts, labels=("L", "R")) -> str:
-    """One text line per foot, `#` in contact, `.` in the air (for logs and the CLI)."""
+def contact_timeline(contacts: Bool[ArrayLike, "T F"], labels: tuple[str, ...] = ("L", "R")) -> str:
+    """One text line per foot, `#` in contact, `.` in the air (for logs and the CLI).
+
+    Arguments:
+        contacts: `bool [T, F]`.
+        labels: the name printed before each foot's line (its index when missing).
+
+    Returns:
+        F lines joined by newlines.
+    """
     c = np.asarray(contacts, bool)
     return "\n".join(
         f"{labels[f] if f < len(labels) else f} " + "".join("#" if x else "." for x in c[:, f])

@@ -186,7 +186,7 @@ def _gait_bvh(st: _State, name: str, clip: str, model, **kw) -> dict:
     m = st.motions[clip]
     r = gait.synthesize_gait(_padded(st, model), m.skeleton(), T, dt, feet=pts, groins=groins,
                              clearance=clear, **kw)
-    _write_motion(st, name, gait.gait_motion(m[:1], r, model.channel_names, dt))
+    _write_motion(st, name, _import("fourierjax.io.gait_bvh").gait_motion(m[:1], r, model.channel_names, dt))
     lowest = np.asarray(r.lowest).min(axis=1)
     info = {"flight_fraction": float(np.mean(lowest > 1e-3)),
             "distance_units": float(np.hypot(*(np.asarray(r.root_position[-1] - r.root_position[0])[[0, 2]])))}

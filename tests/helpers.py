@@ -82,3 +82,87 @@ def reference_fk(topology, offsets, end_site_offsets, channels):
     for k, p in enumerate(topology.end_site_parents):
         ends[:, k] = world_p[:, p] + world_r[p].apply(np.array(end_site_offsets[k], dtype=float))
     return world_p, ends
+
+
+# --- shared by test_contacts and test_gait: an independent numpy BVH reader and FK (oracles) ---
+from pathlib import Path  # noqa: E402 (appended section: helpers.py is append-only)
+
+# The bundled copies of the CMU clips (CI and users have no ../shared).
+CMU_BUNDLED = Path(__file__).resolve().parents[1] / "fourierjax" / "data" / "cmu_mb"
+
+
+def read_bvh_oracle(path):
+    """An independent numpy BVH reader (oracle): a dict of names, parents, offsets, channels,
+    End Sites (`es_par`, `es_off`), `frames` and `frame_time`."""
+    toks = Path(path).read_text().split()
+    names, parents, offsets, chans, es_par, es_off = [], [], [], [], [], []
+    stack, i, cur = [], 0, None
+    while toks[i] != "MOTION":
+        t = toks[i]
+        if t in ("ROOT", "JOINT"):
+            names.append(toks[i + 1])
+            parents.append(stack[-1] if stack else -1)
+            cur, i = len(names) - 1, i + 2
+        elif t == "End":
+            es_par.append(stack[-1])
+            cur, i = "end", i + 2
+        elif t == "{":
+            stack.append(cur)
+            i += 1
+        elif t == "}":
+            stack.pop()
+            i += 1
+        elif t == "OFFSET":
+            (es_off if cur == "end" else offsets).append([float(x) for x in toks[i + 1 : i + 4]])
+            i += 4
+        elif t == "CHANNELS":
+            n = int(toks[i + 1])
+            chans.append(tuple(toks[i + 2 : i + 2 + n]))
+            i += 2 + n
+        else:
+            i += 1
+    nf, ft = int(toks[i + 2]), float(toks[i + 5])
+    frames = np.array(toks[i + 6 :], float).reshape(nf, -1)
+    return dict(names=names, parents=parents, offsets=np.array(offsets), channels=chans,
+                es_par=es_par, es_off=np.array(es_off), frames=frames, frame_time=ft)
+
+
+def _axis_rotation(axis, a):
+    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
+    m = {"X": [[o, z, z], [z, c, -s], [z, s, c]], "Y": [[c, z, s], [z, o, z], [-s, z, c]],
+         "Z": [[c, -s, z], [s, c, z], [z, z, o]]}[axis]
+    return np.moveaxis(np.array(m), (0, 1), (-2, -1))
+
+
+def fk_oracle(b, frames):
+    """Independent numpy FK of `read_bvh_oracle` output: (positions [T, J, 3], End Sites [T, E, 3])."""
+    T, J = frames.shape[0], len(b["names"])
+    pos, R, k = np.zeros((T, J, 3)), np.zeros((T, J, 3, 3)), 0
+    for j in range(J):
+        off = np.broadcast_to(b["offsets"][j], (T, 3)).copy()
+        Rl = np.broadcast_to(np.eye(3), (T, 3, 3))
+        for c in b["channels"][j]:
+            v = frames[:, k]
+            k += 1
+            if c.endswith("position"):
+                off[:, "XYZ".index(c[0])] = v
+            else:
+                Rl = Rl @ _axis_rotation(c[0], np.deg2rad(v))
+        p = b["parents"][j]
+        if p < 0:
+            R[:, j], pos[:, j] = Rl, off
+        else:
+            R[:, j] = R[:, p] @ Rl
+            pos[:, j] = pos[:, p] + np.einsum("tij,tj->ti", R[:, p], off)
+    es = np.stack(
+        [pos[:, p] + np.einsum("tij,j->ti", R[:, p], o) for p, o in zip(b["es_par"], b["es_off"])],
+        1,
+    )
+    return pos, es
+
+
+class NamesTopology:
+    """The two fields of a Topology that `contacts.foot_points` and `gait.groin_joints` read."""
+
+    def __init__(self, names, es_par):
+        self.names, self.end_site_parents = tuple(names), tuple(es_par)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -12,91 +11,16 @@ import pytest
 
 from fourierjax import contacts as C
 from fourierjax.errors import UserError
-
-# The bundled copies of the CMU clips (CI and users have no ../shared).
-SHARED = Path(__file__).resolve().parents[1] / "fourierjax" / "data" / "cmu_mb"
-
-
-# -- an independent numpy BVH reader and FK (oracle; also used until fourierjax.data lands) --
-def _read_bvh(path):
-    toks = Path(path).read_text().split()
-    names, parents, offsets, chans, es_par, es_off = [], [], [], [], [], []
-    stack, i, cur = [], 0, None
-    while toks[i] != "MOTION":
-        t = toks[i]
-        if t in ("ROOT", "JOINT"):
-            names.append(toks[i + 1])
-            parents.append(stack[-1] if stack else -1)
-            cur, i = len(names) - 1, i + 2
-        elif t == "End":
-            es_par.append(stack[-1])
-            cur, i = "end", i + 2
-        elif t == "{":
-            stack.append(cur)
-            i += 1
-        elif t == "}":
-            stack.pop()
-            i += 1
-        elif t == "OFFSET":
-            (es_off if cur == "end" else offsets).append([float(x) for x in toks[i + 1 : i + 4]])
-            i += 4
-        elif t == "CHANNELS":
-            n = int(toks[i + 1])
-            chans.append(tuple(toks[i + 2 : i + 2 + n]))
-            i += 2 + n
-        else:
-            i += 1
-    nf, ft = int(toks[i + 2]), float(toks[i + 5])
-    frames = np.array(toks[i + 6 :], float).reshape(nf, -1)
-    return dict(names=names, parents=parents, offsets=np.array(offsets), channels=chans,
-                es_par=es_par, es_off=np.array(es_off), frames=frames, frame_time=ft)
-
-
-def _rot(axis, a):
-    c, s, o, z = np.cos(a), np.sin(a), np.ones_like(a), np.zeros_like(a)
-    m = {"X": [[o, z, z], [z, c, -s], [z, s, c]], "Y": [[c, z, s], [z, o, z], [-s, z, c]],
-         "Z": [[c, -s, z], [s, c, z], [z, z, o]]}[axis]
-    return np.moveaxis(np.array(m), (0, 1), (-2, -1))
-
-
-def _fk(b, frames):
-    T, J = frames.shape[0], len(b["names"])
-    pos, R, k = np.zeros((T, J, 3)), np.zeros((T, J, 3, 3)), 0
-    for j in range(J):
-        off = np.broadcast_to(b["offsets"][j], (T, 3)).copy()
-        Rl = np.broadcast_to(np.eye(3), (T, 3, 3))
-        for c in b["channels"][j]:
-            v = frames[:, k]
-            k += 1
-            if c.endswith("position"):
-                off[:, "XYZ".index(c[0])] = v
-            else:
-                Rl = Rl @ _rot(c[0], np.deg2rad(v))
-        p = b["parents"][j]
-        if p < 0:
-            R[:, j], pos[:, j] = Rl, off
-        else:
-            R[:, j] = R[:, p] @ Rl
-            pos[:, j] = pos[:, p] + np.einsum("tij,tj->ti", R[:, p], off)
-    es = np.stack(
-        [pos[:, p] + np.einsum("tij,j->ti", R[:, p], o) for p, o in zip(b["es_par"], b["es_off"])],
-        1,
-    )
-    return pos, es
-
-
-class _Topo:
-    def __init__(self, names, es_par):
-        self.names, self.end_site_parents = tuple(names), tuple(es_par)
+from tests.helpers import CMU_BUNDLED, NamesTopology, fk_oracle, read_bvh_oracle
 
 
 @functools.cache
 def clip_feet(name: str):
     """Foot points [T, 2, 3, 3] of a bundled clip (T-pose frame dropped) and its frame time."""
-    b = _read_bvh(SHARED / f"{name}.bvh")
+    b = read_bvh_oracle(CMU_BUNDLED / f"{name}.bvh")
     start = 2 if name == "07_12" else 1
-    pos, es = _fk(b, b["frames"][start:])
-    pts = C.foot_points(_Topo(b["names"], b["es_par"]))
+    pos, es = fk_oracle(b, b["frames"][start:])
+    pts = C.foot_points(NamesTopology(b["names"], b["es_par"]))
     return np.asarray(C.gather_foot_positions(pos, es, pts)), b["frame_time"]
 
 
@@ -106,8 +30,8 @@ RUNS = ["09_01", "02_03", "09_02"]
 
 # -- foot_points -----------------------------------------------------------------------------
 def test_foot_points_cmu():
-    b = _read_bvh(SHARED / "07_01.bvh")
-    topo = _Topo(b["names"], b["es_par"])
+    b = read_bvh_oracle(CMU_BUNDLED / "07_01.bvh")
+    topo = NamesTopology(b["names"], b["es_par"])
     fp = C.foot_points(topo)
     n = b["names"]
     J = len(n)
@@ -121,7 +45,7 @@ def test_foot_points_cmu():
 
 
 def test_foot_points_unknown_skeleton():
-    topo = _Topo(("pelvis", "l_ankle", "r_ankle"), ())
+    topo = NamesTopology(("pelvis", "l_ankle", "r_ankle"), ())
     with pytest.raises(UserError, match="LeftFoot.*pelvis"):
         C.foot_points(topo)
     fp = C.foot_points(topo, feet=(("l_ankle",), ("r_ankle",)))

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from fourierjax import contacts as C
 from fourierjax import gait as G
 from fourierjax.errors import UserError
-from tests.test_contacts import SHARED, _fk, _read_bvh, _Topo
+from tests.helpers import CMU_BUNDLED, NamesTopology, fk_oracle, read_bvh_oracle
 
 # ----------------------------------------------------------------------------- hip rule, pure
 
@@ -149,6 +149,74 @@ def test_gradient_at_lmax_is_finite_and_sqrt_gap_is_zero_there():
         assert float(G.hip_rule(leg, -0.1, 2.0, rule=rule).lift[0]) == pytest.approx(0, abs=1e-6)
 
 
+def test_hip_rule_refuses_bad_width_and_temperature_concrete_and_traced():
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0]])
+    bad = [(0.0, None), (-0.01, None), (float("nan"), None), (float("inf"), None),
+           (0.01, 0.0), (0.01, -1.0), (0.01, float("nan")), (0.01, float("inf"))]
+    for width, temperature in bad:
+        name = "width" if temperature is None else "temperature"
+        for rule in G.RULES:
+            with pytest.raises(UserError, match=rf"^hip_rule: `{name}` .* must be finite and > 0"):
+                G.hip_rule(leg, 0.1, 1.0, rule=rule, width=width, temperature=temperature)
+        with pytest.raises(UserError, match=rf"`{name}`"):
+            G.hip_rule_curves(leg, 0.1, 1.0, width=width, temperature=temperature)
+    # Traced: width 0 gave NaN gradients, temperature 0 NaN values; now the program fails.
+    f = jax.jit(lambda w, t: G.hip_rule(leg, 0.1, 1.0, rule="smooth", width=w, temperature=t).lift)
+    assert bool(jnp.all(jnp.isfinite(f(0.01, 0.02))))
+    for width, temperature in bad:
+        with pytest.raises(Exception, match="`width` and `temperature` must be finite and > 0"):
+            jax.block_until_ready(f(width, 0.02 if temperature is None else temperature))
+    g = jax.jit(lambda w: G.hip_rule(leg, 0.1, 1.0, rule="smooth", width=w).lift)
+    with pytest.raises(Exception, match="`width` and `temperature` must be finite and > 0"):
+        jax.block_until_ready(g(0.0))
+    # Under grad and vmap too (one bad item in a batch).
+    with pytest.raises(Exception, match="must be finite and > 0"):
+        jax.block_until_ready(jax.grad(lambda w: jnp.sum(g(w)))(0.0))
+    with pytest.raises(Exception, match="must be finite and > 0"):
+        jax.block_until_ready(jax.vmap(g)(jnp.array([0.01, 0.0])))
+
+
+def test_hip_rule_refuses_bad_gait_and_jump_when_traced():
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0]])
+    f = jax.jit(lambda g, j: G.hip_rule(leg, g, j).lift)
+    np.testing.assert_allclose(f(0.1, 2.0), G.hip_rule(leg, 0.1, 2.0).lift)
+    for gait, jump in ((0.1, -1.0), (float("nan"), 1.0), (0.1, float("inf"))):
+        with pytest.raises(Exception, match="`gait` must be finite and `jump` finite and >= 0"):
+            jax.block_until_ready(f(gait, jump))
+
+
+def test_gradients_finite_at_zero_leg_length_with_traced_l_max():
+    # The smooth rule's softened sqrt had d/d l_max sqrt((1e-4 l_max)^2) = NaN at l_max = 0.
+    zeros = jnp.zeros((4, 2))
+
+    def total(leg, gait, jump, l_max, rule):
+        h = G.hip_rule(leg, gait, jump, rule=rule, l_max=l_max)
+        return jnp.sum(h.L + h.lift + h.N)
+
+    grad = jax.jit(jax.grad(total, argnums=(0, 1, 2, 3)), static_argnums=4)
+    for rule in G.RULES:
+        for l_max in (0.0, 1.0):
+            grads = grad(zeros, 0.1, 1.0, l_max, rule)
+            assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), (rule, l_max, grads)
+        # Eagerly too (concrete legs of zero length with a concrete positive l_max).
+        grads = jax.grad(total, argnums=(0, 3))(zeros, 0.1, 1.0, 1.0, rule)
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), (rule, grads)
+
+
+def test_smooth_rule_tiny_temperature_is_finite_and_exact_under_jit():
+    # tau = 1e-30 overflowed leg / tau inside the log-sum-exp (inf - inf = NaN under jit).
+    leg = jnp.array([[10.0, 8.0], [9.0, 9.5], [7.0, 6.0], [8.0, 10.0]])
+    f = jax.jit(lambda t: G.hip_rule(leg, 0.1, 1.0, rule="smooth", temperature=t))
+    for tau in (1e-30, 1e-20, 1e-6):
+        h = f(tau)
+        np.testing.assert_allclose(h.L, jnp.max(leg, axis=-1), rtol=1e-6)
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in h)
+        g = jax.grad(lambda x, t=tau: jnp.sum(G.hip_rule(x, 0.1, 1.0, rule="smooth", temperature=t).L))(leg)
+        assert bool(jnp.all(jnp.isfinite(g)))
+        # The soft max picks the larger leg: gradient one-hot per frame.
+        np.testing.assert_allclose(jnp.sum(g, axis=-1), 1.0, rtol=1e-5)
+
+
 # ------------------------------------------------------------------------------ step, speed
 
 
@@ -170,9 +238,9 @@ def test_integrate_phase():
 @functools.cache
 def clip_pose(name: str):
     """(feet [T,2,3,3] world, feet_local, groins_local [T,2,3], root [T,3], frame_time)."""
-    b = _read_bvh(SHARED / f"{name}.bvh")
-    pos, es = _fk(b, b["frames"][1:])
-    fp = C.foot_points(_Topo(b["names"], b["es_par"]))
+    b = read_bvh_oracle(CMU_BUNDLED / f"{name}.bvh")
+    pos, es = fk_oracle(b, b["frames"][1:])
+    fp = C.foot_points(NamesTopology(b["names"], b["es_par"]))
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
     root = pos[:, 0]
     gi = [b["names"].index(n) for n in G.CMU_GROINS]
@@ -392,20 +460,64 @@ def test_step_scales_harmonics():
 
 def test_exported_bvh_carries_root_motion(tmp_path):
     from fourierjax.io.bvh import read_bvh, write_bvh
+    from fourierjax.io.gait_bvh import gait_motion
 
     model, mot, fp, _, clear, _, _ = fitted("07_01")
     r = synth("07_01")
-    out = G.gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    out = gait_motion(mot, r, model.channel_names, mot.frame_time_s)
     write_bvh(out, tmp_path / "walk.bvh")
     back = read_bvh(tmp_path / "walk.bvh")
     np.testing.assert_allclose(back.channels[:, :3], np.asarray(r.root_position), atol=1e-4)
     # Independent numpy FK of the file: the feet stand on the ground and advance.
-    b = _read_bvh(tmp_path / "walk.bvh")
-    pos, es = _fk(b, b["frames"][::7])
+    b = read_bvh_oracle(tmp_path / "walk.bvh")
+    pos, es = fk_oracle(b, b["frames"][::7])
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
     low = (feet[..., 1] - clear).min(axis=(1, 2))
     assert np.max(np.abs(low)) < 2e-3
     assert back.channels[-1, 2] > 150.0
+
+
+def test_gait_motion_old_path_is_a_deprecated_alias():
+    from fourierjax.io.gait_bvh import gait_motion
+
+    model, mot, _, _, _, _, _ = fitted("07_01")
+    r = synth("07_01")
+    new = gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    with pytest.warns(DeprecationWarning, match="fourierjax.io.gait_bvh.gait_motion"):
+        old = G.gait_motion(mot, r, model.channel_names, mot.frame_time_s)
+    np.testing.assert_array_equal(old.channels, new.channels)
+    assert old.topology == new.topology and old.frame_time_s == new.frame_time_s
+
+
+def test_core_gait_modules_do_not_import_the_edges():
+    import ast
+    from pathlib import Path
+
+    import fourierjax
+
+    root = Path(fourierjax.__file__).parent
+    edges = ("fourierjax.io", "fourierjax.cli", "fourierjax.viz", "fourierjax.demo", "matplotlib")
+
+    def imported(tree):
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                yield node.module
+            elif isinstance(node, ast.Import):
+                yield from (a.name for a in node.names)
+
+    files = sorted((root / "_gait").glob("*.py"))
+    assert len(files) >= 6
+    for f in files:  # the private modules: never, not even inside a function
+        bad = [m for m in imported(ast.parse(f.read_text())) if m.startswith(edges)]
+        assert not bad, (f.name, bad)
+    face = ast.parse((root / "gait.py").read_text())
+    # The face: only the deprecated alias imports io, at call time.
+    top = [m for node in face.body if isinstance(node, ast.Import | ast.ImportFrom)
+           for m in imported(node)]
+    assert not [m for m in top if m.startswith(edges)]
+    lazy = {fn.name for fn in face.body if isinstance(fn, ast.FunctionDef)
+            if any(m.startswith(edges) for m in imported(fn))}
+    assert lazy == {"gait_motion"}
 
 
 # ------------------------------------------------------- a small leg skeleton: vmap, gradients
@@ -524,7 +636,30 @@ def test_synthesize_gait_bad_input():
         G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins,
                           clearance=jnp.zeros((2, 2)))
     with pytest.raises(UserError, match="RightUpLeg"):
-        G.groin_joints(_Topo(("Hips", "LeftUpLeg"), ()))
+        G.groin_joints(NamesTopology(("Hips", "LeftUpLeg"), ()))
+
+
+def test_synthesize_gait_does_not_retrace_for_new_numbers(monkeypatch):
+    # filter_jit holds Python numbers static: frame time, width and temperature go in as arrays.
+    from fourierjax._gait import synthesis
+
+    sk, fp, groins, _ = toy()
+    model = toy_model(0)
+    traces = []
+
+    def counting_apply_step(m, step):
+        traces.append(1)
+        return G.apply_step(m, step)
+
+    monkeypatch.setattr(synthesis, "apply_step", counting_apply_step)
+    outs = [
+        G.synthesize_gait(model, sk, 12, dt, feet=fp, groins=groins, rule="smooth", width=w,
+                          temperature=t, gait=g, jump=1.0, num_cycle_samples=8)
+        for dt, w, t, g in ((1 / 30, 0.01, 0.1, 0.05), (1 / 25, 0.02, 0.2, 0.06), (1 / 24, 0.03, 0.3, 0.07))
+    ]
+    assert len(traces) <= 1
+    # ... and the values still matter.
+    assert not np.allclose(outs[0].root_position, outs[1].root_position)
 
 
 def test_synthesize_gait_rejects_bad_numbers_and_indices():
@@ -562,6 +697,9 @@ def test_synthesize_gait_rejects_bad_numbers_and_indices():
             run(**{name: float("nan")})
     with pytest.raises(UserError, match=r"^synthesize_gait: `up_axis`"):
         run(up_axis=5)
+    for kw in ({"width": 0.0}, {"width": float("nan")}, {"temperature": 0.0}, {"temperature": -1.0}):
+        with pytest.raises(UserError, match=rf"^synthesize_gait: `{next(iter(kw))}` .* must be finite and > 0"):
+            run(rule="smooth", **kw)
     # NumPy integers and Python-style negative joint indices are fine (same compiled function).
     ref = run()
     same = run(num_frames=np.int64(12), groins=(groins[0] - 9, groins[1] - 9))
@@ -671,3 +809,30 @@ def test_synth_command_with_step_constraints(tmp_path, capsys):
     np.testing.assert_allclose(read_bvh(out).channels[:, 1], plain[:, 2], atol=1e-4)
     assert main(["synth", str(tmp_path / "toy.npz"), "--seconds", "0.4", "--gait", "2",
                  "--out", str(out)]) == 2
+
+
+def test_cli_hip_rules_match_the_library():
+    # cli/_gait_args repeats the rule names so that building the parser does not import JAX.
+    from fourierjax.cli import _gait_args
+
+    assert _gait_args.RULES == G.RULES
+
+
+def test_cli_apply_gait_in_process():
+    # In-process (pytest turns warnings into errors): the CLI uses io.gait_bvh, not the
+    # deprecated gait.gait_motion; its flight count is gait.flight_fraction's.
+    import argparse
+
+    from fourierjax.cli._gait_args import add_gait_arguments, apply_gait
+
+    model, mot, _, _, _, _, _ = fitted("07_01")
+    parser = argparse.ArgumentParser()
+    add_gait_arguments(parser)
+    args = parser.parse_args(["--gait", "0.05", "--jump", "1"])
+    motion, summary = apply_gait(args, model, mot, 60, mot.frame_time_s)
+    assert motion.num_frames == 60
+    assert summary.startswith("step constraints: hip rule unuma1995, root motion on; flight ")
+    assert "foot skating" in summary and "root advance" in summary
+    off = parser.parse_args(["--no-root-motion"])
+    _, summary_off = apply_gait(off, model, mot, 60, mot.frame_time_s)
+    assert "flight not measured" in summary_off

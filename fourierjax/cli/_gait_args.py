@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+#: `gait.RULES`, repeated so that building the parser does not import JAX (a test checks they agree).
 RULES = ("unuma1995", "continuous", "smooth")
 
 
@@ -60,15 +61,23 @@ def _check(args) -> None:
 
 
 def apply_gait(args, model, template, num_frames: int, frame_time_s: float):
-    """Synthesize `num_frames` under the step constraints; returns `(motion, summary line)`.
+    """Synthesize `num_frames` under the step constraints.
 
-    **Arguments:** `args` (parsed flags), `model` (a `FourierModel` on the template's skeleton),
-    `template` (a `Motion` supplying the skeleton), `num_frames`, `frame_time_s`.
+    Arguments:
+        args: the parsed flags of `add_gait_arguments`.
+        model: a `FourierModel` on the template's skeleton.
+        template: a `Motion` supplying the skeleton.
+        num_frames: frames to synthesize.
+        frame_time_s: seconds per frame.
+
+    Returns:
+        `(motion, summary line)`.
     """
     import numpy as np
 
     from fourierjax import contacts, gait
     from fourierjax.errors import UserError
+    from fourierjax.io.gait_bvh import gait_motion
 
     _check(args)
     topo = template.topology
@@ -82,13 +91,14 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float):
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
         root_motion=args.root_motion,
     )
-    motion = gait.gait_motion(template, result, model.channel_names, frame_time_s)
+    # The summary's numbers all come from the one GaitResult (no second pass through the model).
+    motion = gait_motion(template, result, model.channel_names, frame_time_s)
     skate = gait.foot_skating(result.foot_positions, frame_time_s, result.clearance[None])
     advance = np.asarray(result.root_position[-1] - result.root_position[0])
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))
         # Both feet off the ground (the hip rule puts the ground at height 0).
-        flight = float(np.mean(np.asarray(result.lowest).min(axis=1) > 1e-3))
+        flight = float(gait.flight_fraction(result.lowest))
         flight_text = (f"flight {100 * flight:.1f}% of frames (N(t) peaks at {n_peak:.3f}: "
                        "--gait below that gives flight)")
     else:  # the model's own root height: no ground is enforced, so no flight to count

@@ -1,0 +1,123 @@
+"""Gait quality metrics: foot skating, ground penetration, flight fraction, sole clearance."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from fourierjax._gait.hip import lowest_points
+
+
+class SkatingStats(NamedTuple):
+    """Foot skating: horizontal speed of foot points while on the ground.
+
+    `mean_speed` (file units / s) and `mean_per_frame` (file units / frame) over the contact
+    samples; `max_speed` (units / s); `contact_fraction` of point-frames in contact."""
+
+    mean_speed: Array
+    mean_per_frame: Array
+    max_speed: Array
+    contact_fraction: Array
+
+
+def foot_skating(
+    foot_positions: Float[ArrayLike, "T F P 3"],
+    frame_time_s: float,
+    floor: Float[ArrayLike, "*#T #F #P"],
+    *,
+    height_threshold: float = 0.5,
+    up_axis: int = 1,
+) -> SkatingStats:
+    """Foot skating of world foot points (pure jnp).
+
+    A point counts as on the ground when it is less than `height_threshold` above its floor;
+    its skating is its horizontal speed there (central differences).
+
+    Arguments:
+        foot_positions: `[T, F, P, 3]` world foot points.
+        frame_time_s: seconds per frame.
+        floor: floor height under each point, broadcastable to `[T, F, P]` (ground + sole
+            clearance; for a real clip `contacts.floor_heights`).
+        height_threshold: file units.
+        up_axis: index of the up axis.
+
+    Returns:
+        `SkatingStats`.
+    """
+    from fourierjax.contacts import point_speeds
+
+    p = jnp.asarray(foot_positions)
+    y = p[..., up_axis]
+    above = y - jnp.broadcast_to(jnp.asarray(floor, y.dtype), y.shape)
+    on = above < height_threshold
+    v = point_speeds(p, frame_time_s, up_axis=up_axis)
+    n = jnp.maximum(jnp.sum(on), 1)
+    mean = jnp.sum(jnp.where(on, v, 0.0)) / n
+    return SkatingStats(
+        mean_speed=mean,
+        mean_per_frame=mean * frame_time_s,
+        max_speed=jnp.max(jnp.where(on, v, 0.0)),
+        contact_fraction=jnp.mean(on),
+    )
+
+
+def ground_penetration(
+    foot_positions: Float[ArrayLike, "T 2 P 3"],
+    clearance: Float[ArrayLike, "2 P"],
+    *,
+    ground: Float[ArrayLike, ""] = 0.0,
+    up_axis: int = 1,
+) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """Depth of the lowest foot points below the ground.
+
+    Arguments:
+        foot_positions: `[T, 2, P, 3]` world foot points.
+        clearance: `[2, P]` sole clearances.
+        ground: ground height.
+        up_axis: index of the up axis.
+
+    Returns:
+        `(max, mean over frames)` of the depth, both ≥ 0 (file units).
+    """
+    low = jnp.min(lowest_points(foot_positions, clearance, up_axis=up_axis), axis=-1) - ground
+    depth = jnp.maximum(-low, 0.0)
+    return jnp.max(depth), jnp.mean(depth)
+
+
+def flight_fraction(lowest: Float[ArrayLike, "T 2"], *, tolerance: float = 1e-3) -> Float[Array, ""]:
+    """Fraction of frames with both feet off the ground.
+
+    Arguments:
+        lowest: `[T, 2]` heights of each foot's lowest point above the ground.
+        tolerance: height (file units) above which a foot is off the ground.
+
+    Returns:
+        Scalar in [0, 1].
+    """
+    return jnp.mean(jnp.min(lowest, axis=-1) > tolerance)
+
+
+def estimate_sole_clearance(foot_local: Float[ArrayLike, "K 2 P 3"], *, up_axis: int = 1) -> Float[Array, "2 P"]:
+    """Sole clearance of each foot point, estimated from poses (e.g. one cycle of a model).
+
+    For each foot, over the frames where it is the lower foot (stance), the median height of
+    each point above the foot's lowest point; the lowest point of a planted foot gets 0.
+    (`contacts.sole_clearance` measures the same from a real clip's fitted floor.)
+
+    Arguments:
+        foot_local: `[K, 2, P, 3]` foot points over K poses.
+        up_axis: index of the up axis.
+
+    Returns:
+        `[2, P]` clearances ≥ 0 (file units). Pure jnp.
+    """
+    y = jnp.asarray(foot_local)[..., up_axis]  # [K, 2, P]
+    low = jnp.min(y, axis=-1)  # [K, 2]
+    rel = y - low[..., None]
+    stance: Bool[Array, "K 2"] = jnp.stack([low[:, 0] <= low[:, 1], low[:, 1] <= low[:, 0]], axis=-1)
+    vals = jnp.where(stance[..., None], rel, jnp.nan)
+    c = jnp.nanmedian(vals, axis=0)
+    c = jnp.where(jnp.isnan(c), 0.0, c)
+    return c - jnp.min(c, axis=-1, keepdims=True)

@@ -1,0 +1,159 @@
+"""Root motion (Unuma 1995 §3.1 step and speed): scaled steps, integrated phase, and the root
+path carried by the feet on the ground."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+if TYPE_CHECKING:
+    from fourierjax.fourier import FourierModel
+
+
+def apply_step(model: FourierModel, step: Float[ArrayLike, ""]) -> FourierModel:
+    """Unuma 1995 §3.1 *step*: replace every `A_n` (n ≥ 1) by `step · A_n`.
+
+    Arguments:
+        model: a `FourierModel`.
+        step: scalar (≥ 0; 1 leaves the model as is).
+
+    Returns:
+        The scaled model (offsets, phases and ω unchanged).
+    """
+    return eqx.tree_at(lambda m: m.amplitude, model, model.amplitude * step)
+
+
+def integrate_phase(
+    speed: Float[ArrayLike, "*T"],
+    omega: Float[ArrayLike, ""],
+    num_frames: int,
+    frame_time_s: float,
+    phase0: Float[ArrayLike, ""] = 0.0,
+) -> Float[Array, " T"]:
+    """Unuma 1995 §3.1 *speed*: the cycle phase integrated frame by frame.
+
+    Frame `k` is at phase `phase0 + ω · Δt · Σ_{i<k} speed_i`: `speed` scales the time step
+    Δτ through the cycle, so changing it (even to 0) never jumps the pose; at `speed = 1` the
+    phase is `ω · k Δt` exactly as `synthesize` computes it.
+
+    Arguments:
+        speed: scalar or `[T]` schedule (dimensionless; 1 = the captured pace).
+        omega: fundamental in rad/s.
+        num_frames: T.
+        frame_time_s: Δt in seconds.
+        phase0: phase of frame 0 (radians).
+
+    Returns:
+        `[T]` phases in radians.
+    """
+    speed = jnp.broadcast_to(jnp.asarray(speed, dtype=jnp.result_type(float)), (num_frames,))
+    ticks = jnp.concatenate([jnp.zeros((1,), speed.dtype), jnp.cumsum(speed)[:-1]])
+    return phase0 + omega * (ticks * frame_time_s)
+
+
+#: `root_trajectory` with the model's root velocity: the least fraction of the model's own move
+#: (along its direction) that a stance move keeps.
+_MIN_ALONG = 0.1
+
+
+def root_trajectory(
+    foot_local: Float[Array, "T 2 P 3"],
+    height: Float[Array, " T"],
+    phase: Float[Array, " T"],
+    clearance: Float[ArrayLike, "2 P"],
+    *,
+    up_axis: int = 1,
+    contact_threshold: Float[ArrayLike, ""] | None = None,
+    temperature: Float[ArrayLike, ""] | None = None,
+    flight_step: Float[Array, "T-1 2"] | None = None,
+) -> Float[Array, "T 3"]:
+    """Root positions over time from the feet on the ground (the carrying foot point stays put).
+
+    Between two frames the root moves horizontally by minus the displacement of the foot point
+    that carries the body: a soft argmin (temperature τ) of the points' heights above the
+    ground, taken over both feet. A planted point therefore stays put, and a rolling foot hands
+    over from heel to toe tip without a jump (each move compares the *same* point at both
+    frames). When even the lowest point is above `contact_threshold` (flight) the root keeps
+    its last horizontal velocity per radian of phase, so it comes to rest with the phase.
+
+    In flight the root moves with the model's own root velocity at the current pace
+    (`synthesize_gait`) or keeps its last velocity per radian of phase (alone); either way
+    slowing the phase (speed → 0) brings the root to rest. Unuma's N(t) does not tell a run's
+    flight from its mid-stance knee bend (both N ≈ 0.06-0.08 on CMU 09_01), so runs synthesized
+    with the rule advance slower than captured (09_01: ~55 vs 63 units/s).
+
+    Arguments:
+        foot_local: `[T, 2, P, 3]` foot points with the pelvis at the origin (root rotation
+            applied, translation not).
+        height: `[T]` root height above the ground (e.g. `root_height`).
+        phase: `[T]` cycle phase of each frame (radians).
+        clearance: `[2, P]` sole clearances.
+        up_axis: index of the up axis.
+        contact_threshold: height (file units) below which the lowest point is on the
+            ground; default `0.03 · mean(height)` (CMU: ~0.5 units ≈ 3 cm).
+        temperature: τ in file units; default `0.003 · mean(height)` (CMU: ~0.05 units).
+        flight_step: optional `[T - 1, 2]` horizontal root moves to use in flight instead of
+            the carried velocity (`synthesize_gait` passes the model's own root velocity).
+            With it, every stance move keeps at least 10% of `flight_step` along its
+            direction (the deficit is added). A fitted run's landing foot is lowest while
+            still swinging forward, and carrying the root it dragged the pelvis backwards
+            (09_01, default hip rule: down to -45 units/s in 64 of 480 frames; now never:
+            min +6, mean 47 units/s against 43 before and 63.5 captured), at the price of
+            that foot sliding by the deficit for a few frames (skating metric 6.6 -> 10.5
+            units/s on that run; walks unchanged: 07_01 7.7).
+
+    Returns:
+        `[T, 3]` root positions; horizontal components start at 0, the up component is
+        `height`. Validated on real clips: from their own poses it recovers 93% (07_01) of the
+        captured root advance; the rest is skating in the capture. On a fitted 07_01 model
+        (`synthesize_gait`, 4 s) the lowest point (after sole clearance) moves at a median
+        0.1-0.4 units/s; where the support hands over (heel to toe, foot to foot) the soft
+        argmin mixes points that move differently, and the carrying point slides for a few
+        frames (90th percentile 8-16 units/s).
+    """
+    T = foot_local.shape[0]
+    # Scale-relative defaults; differentiated like everything else (true derivatives).
+    scale = jnp.mean(height)
+    th = 0.03 * scale if contact_threshold is None else contact_threshold
+    tau = 0.003 * scale if temperature is None else temperature
+    y = foot_local[..., up_axis]
+    h = height[:, None, None] + y - jnp.broadcast_to(clearance, y.shape)  # [T, 2, P]
+    h_mid = (0.5 * (h[1:] + h[:-1])).reshape(T - 1, -1)
+    w = jax.nn.softmax(-h_mid / tau, axis=-1)
+    horiz = [k for k in range(3) if k != up_axis]
+    xz = foot_local[..., horiz].reshape(T, -1, 2)
+    stance_step = -jnp.sum(w[..., None] * (xz[1:] - xz[:-1]), axis=1)  # [T-1, 2]
+    low = -tau * jax.nn.logsumexp(-h_mid / tau, axis=-1)  # soft min height
+    ground = jax.nn.sigmoid((th - low) / (0.1 * th))  # 1 on the ground, 0 in flight
+    dphase = phase[1:] - phase[:-1]
+
+    if flight_step is not None:
+        # A foot may not carry the root backwards against the model's own travel: a run's
+        # landing foot, lowest while still swinging forward, dragged the pelvis back (09_01
+        # defaults: -45 units/s, 64 of 480 frames). Each stance move keeps at least
+        # `_MIN_ALONG` of the model's move along its direction (the deficit is added), so the
+        # root never reverses and the landing foot slides only by the deficit.
+        f2 = jnp.sum(flight_step * flight_step, axis=-1)
+        along = jnp.sum(stance_step * flight_step, axis=-1) / (f2 + 0.01 * jnp.mean(f2) + 1e-30)
+        stance_step = stance_step + jnp.maximum(_MIN_ALONG - along, 0.0)[:, None] * flight_step
+        moves = ground[:, None] * stance_step + (1.0 - ground[:, None]) * flight_step
+    else:
+
+        def body(vel, inputs):
+            step, a, dth = inputs
+            # Velocity per radian of phase, learned on the ground; shim the 0/0 at rest.
+            moving = jnp.abs(dth) > 1e-12
+            safe = jnp.where(moving, dth, 1.0)
+            vel_new = jnp.where((a > 0.5) & moving, step / safe, vel)
+            return vel_new, a * step + (1.0 - a) * vel * dth
+
+        vel0 = jnp.zeros((2,), foot_local.dtype)
+        _, moves = jax.lax.scan(body, vel0, (stance_step, ground, dphase))
+    path = jnp.concatenate([jnp.zeros((1, 2), moves.dtype), jnp.cumsum(moves, axis=0)])
+    out = jnp.zeros((T, 3), foot_local.dtype)
+    out = out.at[:, horiz[0]].set(path[:, 0]).at[:, horiz[1]].set(path[:, 1])
+    return out.at[:, up_axis].set(height)

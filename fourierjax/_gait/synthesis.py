@@ -1,0 +1,296 @@
+"""Gait synthesis under the step constraints (Unuma 1995 §3.1), and the hip curves of a model."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from fourierjax._checks import integer
+from fourierjax._gait.common import (
+    check_finite,
+    check_indices,
+    check_jump,
+    check_positive,
+    check_rule,
+    pose_points,
+)
+from fourierjax._gait.hip import HipRule, contact_height, hip_rule, hip_rule_curves, leg_heights, lowest_points
+from fourierjax._gait.metrics import estimate_sole_clearance
+from fourierjax._gait.root import apply_step, root_trajectory
+from fourierjax._jit import filter_jit
+from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.contacts import FootPoints
+    from fourierjax.fourier import FourierModel
+    from fourierjax.skeleton import Skeleton
+
+
+class GaitResult(eqx.Module):
+    """A synthesized gait with step constraints (one character; vmap adds a leading axis).
+
+    - `features`: `[T, C]` model channels per frame (`fourier` layout). With root motion the
+      root channels are replaced: `root.y` by the hip-rule height, `root.vx, root.vz` by the
+      velocity of `root_position` (central differences).
+    - `phase`: `[T]` cycle phase of each frame (radians).
+    - `root_position`: `[T, 3]` world root (pelvis) position, file units.
+    - `foot_positions`: `[T, 2, P, 3]` world foot points (left, right).
+    - `lowest`: `[T, 2]` height of each foot's lowest point above the ground (sole clearance
+      taken off).
+    - `hip`: the `HipRule` (L, N, lift, flight, l_max).
+    - `clearance`: `[2, P]` the sole clearances used.
+    """
+
+    features: Array
+    phase: Array
+    root_position: Array
+    foot_positions: Array
+    lowest: Array
+    hip: HipRule
+    clearance: Array
+
+
+def _integrate_trapezoid(v, dt):
+    return jnp.concatenate([jnp.zeros((1,), v.dtype), jnp.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+
+
+@filter_jit
+def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
+                     root_motion, frame_time_s, width, temperature, *,
+                     num_frames, feet, groins, rule, num_cycle_samples, up_axis):
+    # Every number a caller may vary is an array (traced): filter_jit holds Python numbers
+    # static, and each new frame time, width or temperature would compile again.
+    from fourierjax.fourier import synthesize_phase
+
+    stepped = apply_step(model, step)
+    # t_eff (the integrated time, computed by the caller) makes speed = 1 bit-identical to
+    # `synthesize(model, k dt)`.
+    phase = stepped.omega * t_eff + phase0
+    feats = synthesize_phase(stepped, phase)
+    idx = jnp.asarray([feet.left, feet.right])
+    rep = model.representation
+
+    def points(f):
+        return pose_points(skeleton, rep, idx, groins, f)
+
+    # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule; the sole
+    # clearances (if not given) from a cycle of the unstepped model (the foot's geometry must
+    # not change with the step length). One vmapped FK over all poses: one FK graph to compile.
+    K = num_cycle_samples
+    grid = jnp.linspace(0.0, 2 * jnp.pi, K, endpoint=False, dtype=phase.dtype)
+    poses = [feats, synthesize_phase(stepped, grid)]
+    if clearance is None:
+        poses.append(synthesize_phase(model, grid))
+    all_feet, all_groins = jax.vmap(points)(jnp.concatenate(poses, axis=0))
+    foot_local, groin_local = all_feet[:num_frames], all_groins[:num_frames]
+    cyc_feet = all_feet[num_frames : num_frames + K]
+    cyc_groins = all_groins[num_frames : num_frames + K]
+    if clearance is None:
+        clearance = estimate_sole_clearance(all_feet[num_frames + K :], up_axis=up_axis)
+    soft = temperature if rule == "smooth" else None
+    cyc_leg = leg_heights(cyc_groins, cyc_feet, clearance, up_axis=up_axis, temperature=soft)
+    leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
+    # The frames themselves may reach past the grid's max: include them, so N >= 0.
+    both = jnp.concatenate([cyc_leg, leg], axis=0)
+    l_max = hip_rule(both, gait, jump, rule=rule, temperature=temperature, width=width).l_max
+    hip = hip_rule(leg, gait, jump, rule=rule, l_max=l_max, temperature=temperature,
+                   width=width)
+    horiz = [k for k in range(3) if k != up_axis]
+    # Both roots are cheap next to FK: compute both and select, so `root_motion` is traced
+    # (one compilation serves both).
+    speed_t = jnp.broadcast_to(jnp.asarray(speed, feats.dtype), (num_frames,))
+    height = contact_height(foot_local, clearance, up_axis=up_axis) + hip.lift
+    # In flight the root moves with the model's own (captured) root velocity at this pace.
+    v_model = feats[:, :2] * speed_t[:, None]
+    flight_step = 0.5 * (v_model[1:] + v_model[:-1]) * frame_time_s
+    root_on = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis,
+                              flight_step=flight_step)
+    vel = jnp.gradient(root_on, axis=0) / frame_time_s
+    feats_on = feats.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]])
+    feats_on = feats_on.at[:, 2].set(height)
+    # Without root motion: the model's own root, velocities scaled with the pace.
+    feats_off = feats.at[:, 0].multiply(speed_t).at[:, 1].multiply(speed_t)
+    root_off = jnp.zeros((num_frames, 3), feats.dtype)
+    root_off = root_off.at[:, horiz[0]].set(_integrate_trapezoid(feats_off[:, 0], frame_time_s))
+    root_off = root_off.at[:, horiz[1]].set(_integrate_trapezoid(feats_off[:, 1], frame_time_s))
+    root_off = root_off.at[:, up_axis].set(feats_off[:, 2])
+    feats = jnp.where(root_motion, feats_on, feats_off)
+    root = jnp.where(root_motion, root_on, root_off)
+    foot_world = foot_local + root[:, None, None, :]  # explicit ranks: [T, 2, P, 3]
+    lowest = lowest_points(foot_world, clearance, up_axis=up_axis)
+    return GaitResult(feats, phase, root, foot_world, lowest, hip, clearance)
+
+
+def synthesize_gait(
+    model: FourierModel,
+    skeleton: Skeleton,
+    num_frames: int,
+    frame_time_s: float,
+    *,
+    feet: FootPoints,
+    groins: tuple[int, int],
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    step: Float[ArrayLike, ""] = 1.0,
+    speed: Float[ArrayLike, "*T"] = 1.0,
+    gait: Float[ArrayLike, ""] = 1.0,
+    jump: Float[ArrayLike, ""] = 0.0,
+    rule: str = "unuma1995",
+    root_motion: bool = True,
+    phase0: Float[ArrayLike, ""] = 0.0,
+    width: Float[ArrayLike, ""] = 0.01,
+    temperature: Float[ArrayLike, ""] | None = None,
+    num_cycle_samples: int = 64,
+    up_axis: int = 1,
+) -> GaitResult:
+    """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
+
+    Joint angles come from the model at the integrated phase (`apply_step`,
+    `integrate_phase`); with `root_motion` the root height is the hip-height rule's
+    (`root_height`: the lowest foot point on the ground, plus the flight lift of eq. 5) and its
+    horizontal path comes from the feet on the ground (`root_trajectory`; in flight, from the
+    model's own root velocity at the current pace). Without it, the root
+    follows the model's own `root.*` channels (velocities scaled by `speed`). `Lmax` is taken
+    over one cycle of the stepped model (`num_cycle_samples` phases).
+
+    With `step = 1`, `speed = 1`, `gait = 1`, `jump = 0` the joint channels equal
+    `synthesize(model, k Δt)` exactly, the lift is 0, and without root motion every channel is
+    unchanged.
+
+    Arguments:
+        model: a `FourierModel` on `motion.channel_names_for(topology, representation)`.
+        skeleton: the `Skeleton` it animates.
+        num_frames: number of output frames (≥ 2).
+        frame_time_s: output frame spacing in seconds (a concrete number).
+        feet: `contacts.FootPoints`.
+        groins: `(left, right)` joint indices (`groin_joints`).
+        clearance: `[2, P]` sole clearances (`contacts.sole_clearance` of the source clip);
+            default `None` estimates them from one cycle of the model
+            (`estimate_sole_clearance`).
+        step: scalar amplitude scale (`apply_step`).
+        speed: scalar or `[num_frames]` schedule (`integrate_phase`).
+        gait, jump, rule, width, temperature: as `hip_rule` (`jump ≥ 0`).
+        root_motion: root from the hip rule and the stance feet (True) or the model's own.
+        phase0: phase of the first frame (radians).
+        num_cycle_samples: phases of the cycle over which `Lmax` is taken.
+        up_axis: index of the up axis.
+
+    Returns:
+        A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
+        and `clearance`; vmap over characters (models, parameters) at the call site.
+
+    Raises `UserError` for a non-integer `num_frames` (or < 2), a `frame_time_s` that is not
+    finite and > 0, `groins` or foot points out of the skeleton's range, and, when concrete
+    (not traced), a non-finite `step`, `speed`, `gait`, `jump` or `phase0`, a `jump < 0`, or a
+    `width` or `temperature` that is not finite and > 0 (traced `gait`, `jump`, `width` and
+    `temperature` are checked by `eqx.error_if` in `hip_rule`).
+    """
+    where = "synthesize_gait"
+    check_rule(rule)
+    num_frames = integer(num_frames, f"{where}: `num_frames`", 2)
+    num_cycle_samples = integer(num_cycle_samples, f"{where}: `num_cycle_samples`", 1)
+    if isinstance(frame_time_s, jax.core.Tracer):
+        raise UserError(
+            f"{where}: `frame_time_s` sets the (static) frame spacing: pass a concrete number, not a traced value"
+        )
+    try:
+        dt = float(frame_time_s)
+    except TypeError:
+        raise UserError(f"{where}: `frame_time_s` must be a number (seconds), got {frame_time_s!r}") from None
+    if not (math.isfinite(dt) and dt > 0):
+        raise UserError(f"{where}: `frame_time_s` must be finite and > 0 (seconds), got {frame_time_s}")
+    if up_axis not in (0, 1, 2):
+        raise UserError(f"{where}: `up_axis` must be 0, 1 or 2, got {up_axis!r}")
+    groins = check_indices(where, skeleton, feet, groins)
+    if len(feet.left) != len(feet.right):
+        raise UserError("synthesize_gait: both feet must have the same number of points")
+    for name, value in (("step", step), ("speed", speed), ("gait", gait), ("phase0", phase0)):
+        check_finite(where, name, value)
+    check_jump(where, jump)
+    check_positive(where, "width", width, "the sigmoid width of the smooth rule, in units of N")
+    if temperature is not None:
+        check_positive(where, "temperature", temperature, "the log-sum-exp temperature, file units")
+    num_points = len(feet.left)
+    # The model's float type as JAX holds it (a float64 NumPy model is float32 without x64).
+    dtype = jnp.asarray(model.offset).dtype
+    if clearance is not None:
+        clearance = jnp.asarray(clearance, dtype=dtype)
+    if clearance is not None and clearance.shape != (2, num_points):
+        raise UserError(
+            f"synthesize_gait: clearance must be [2, {num_points}], got {clearance.shape}"
+        )
+    speed = jnp.asarray(speed, dtype)
+    if speed.ndim not in (0, 1) or (speed.ndim == 1 and speed.shape[0] != num_frames):
+        raise UserError(
+            f"synthesize_gait: speed must be a scalar or [num_frames={num_frames}], got shape "
+            f"{speed.shape}"
+        )
+    # One shape for scalar and scheduled speeds: one compilation serves both.
+    speed = jnp.broadcast_to(speed, (num_frames,))
+    ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
+    t_eff = ticks * dt
+    return _synthesize_gait(
+        model, skeleton, clearance,
+        jnp.asarray(step, dtype), speed, t_eff, jnp.asarray(gait, dtype),
+        jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
+        jnp.asarray(dt, dtype), jnp.asarray(width, dtype),
+        None if temperature is None else jnp.asarray(temperature, dtype),
+        num_frames=num_frames, feet=feet, groins=groins, rule=rule,
+        num_cycle_samples=num_cycle_samples, up_axis=int(up_axis),
+    )
+
+
+@filter_jit
+def _cycle_points(model, skeleton, feet, groins, num_samples):
+    from fourierjax.fourier import synthesize_phase
+
+    idx = jnp.asarray([feet.left, feet.right])
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False,
+                        dtype=jnp.asarray(model.offset).dtype)
+    foot_local, groin_local = jax.vmap(
+        lambda f: pose_points(skeleton, model.representation, idx, groins, f)
+    )(synthesize_phase(model, grid))
+    return grid, foot_local, groin_local
+
+
+def model_hip_curves(
+    model: FourierModel,
+    skeleton: Skeleton,
+    *,
+    feet: FootPoints,
+    groins: tuple[int, int],
+    gait: Float[ArrayLike, ""],
+    jump: Float[ArrayLike, ""],
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    num_samples: int = 128,
+    width: Float[ArrayLike, ""] = 0.01,
+    temperature: Float[ArrayLike, ""] | None = None,
+    up_axis: int = 1,
+) -> dict[str, Float[Array, " K"]]:
+    """The three hip rules over one cycle of a model: the data of a side-by-side plot.
+
+    Arguments:
+        model, skeleton, feet, groins, clearance: as `synthesize_gait`.
+        gait, jump, width, temperature: as `hip_rule`.
+        num_samples: K, phases per cycle.
+        up_axis: index of the up axis.
+
+    Returns:
+        `dict`: `"phase"` `[K]` (radians), `"L_L"`, `"L_R"`, and the `hip_rule_curves`
+        entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
+    """
+    groins = check_indices("model_hip_curves", skeleton, feet, groins)
+    num_samples = integer(num_samples, "model_hip_curves: `num_samples`", 1)
+    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples)
+    if clearance is None:
+        clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
+    leg = leg_heights(groin_local, foot_local, jnp.asarray(clearance), up_axis=up_axis)
+    out = hip_rule_curves(leg, gait, jump, width=width, temperature=temperature)
+    out.update(phase=grid, L_L=leg[:, 0], L_R=leg[:, 1])
+    return out
+
+
