@@ -1,0 +1,1 @@
+"""Private implementation of `fourierjax.style`; import the public names from there."""
