@@ -56,20 +56,28 @@ def check_omega(where: str, name: str, omega):
 
 
 def check_models_omega(where: str, **models):
-    """The models (in the order given) with their ω checked by `check_omega`."""
+    """The models (in the order given) with their ω checked as `check_omega` does. A traced
+    check guards every leaf of its model, so that it runs whichever output is used (XLA drops
+    an `error_if` whose result nothing reads)."""
     out = []
     for name, model in models.items():
-        omega = check_omega(where, f"{name}.omega", model.omega)
-        out.append(model if omega is model.omega else replace(model, omega=omega))
+        message = f"{where}: `{name}.omega` must be finite and > 0 (rad/s)"
+        value = concrete(model.omega)
+        if value is None:
+            model = eqx.error_if(model, ~jnp.all(jnp.isfinite(model.omega) & (model.omega > 0)), message)
+        else:
+            check_omega(where, f"{name}.omega", value)
+        out.append(model)
     return out[0] if len(out) == 1 else tuple(out)
 
 
 def check_log_omega(where: str, chars):
-    """`chars` unless its log(ω_A/ω_B) is ±inf or NaN (a characteristic read from a file may be)."""
+    """`chars` unless its log(ω_A/ω_B) is ±inf or NaN (a characteristic read from a file may
+    be); a traced check guards every leaf."""
     message = f"{where}: `characteristics` log_omega must be finite (log of a ratio of two positive ω)"
     value = concrete(chars.log_omega)
     if value is None:
-        return replace(chars, log_omega=eqx.error_if(chars.log_omega, ~jnp.isfinite(chars.log_omega), message))
+        return eqx.error_if(chars, ~jnp.all(jnp.isfinite(chars.log_omega)), message)
     bad = ~np.isfinite(value)
     if np.any(bad):
         raise UserError(f"{message}, got {show(value, bad)}")
@@ -272,13 +280,14 @@ def on_branch_of(a, b):
         return b
     offset = b.offset
     if euler.any():
-        mask = jnp.asarray(euler)
-        offset = jnp.where(mask, a.offset + wrap_angle(offset - a.offset), offset)
+        mask = jnp.broadcast_to(jnp.asarray(euler), offset.shape)
+        reference = jnp.broadcast_to(a.offset, offset.shape)
+        offset = jnp.where(mask, reference + wrap_angle(offset - reference), offset)
     if not triples.size:
         return replace(b, offset=offset)
     idx = jnp.asarray(triples)
     v = offset[..., idx]  # [..., K, 3]
-    moved, g = nearest_rotation_vector(a.offset[..., idx], v)
+    moved, g = nearest_rotation_vector(jnp.broadcast_to(a.offset[..., idx], v.shape), v)
     offset = offset.at[..., idx].set(moved)
     n2 = jnp.sum(v * v, axis=-1, keepdims=True)
     unit = v / jnp.sqrt(jnp.where(n2 < _TINY, 1.0, n2))

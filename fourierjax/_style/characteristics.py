@@ -224,7 +224,7 @@ def _superpose(base, chars, weights, method: str, include_omega: bool):
     w = weights
     euler, _ = channel_kinds(base)
     # Characteristics written before offsets were compared on one branch may hold 2π too much.
-    char_offset = jnp.where(jnp.asarray(euler), wrap_angle(chars.offset), chars.offset)
+    char_offset = jnp.where(jnp.asarray(euler)[None, :], wrap_angle(chars.offset), chars.offset)
     offset = base.offset + jnp.sum(w[:, None] * char_offset, axis=0)
     if method == "polar":
         amplitude = base.amplitude + jnp.sum(w[:, None, None] * chars.amplitude, axis=0)

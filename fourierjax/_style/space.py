@@ -217,7 +217,7 @@ def _fit_style_weights(base, chars, target, ridge, include_omega: bool):
     k, c, n, _ = chars.phasor.shape
     euler, _ = channel_kinds(base)
     # Offsets on one branch, as `superpose` adds them.
-    char_offset = jnp.where(jnp.asarray(euler), wrap_angle(chars.offset), chars.offset)
+    char_offset = jnp.where(jnp.asarray(euler)[None, :], wrap_angle(chars.offset), chars.offset)
     # Columns: style-space direction of each characteristic in phasor coordinates; the
     # phasor superposition is linear in w, so least squares is exact and closed form.
     cols = jnp.concatenate([char_offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2)
