@@ -239,18 +239,32 @@ def test_traced_bad_values_are_refused():
         jnp.nan,
         match=r"characteristic: `a.omega`",
     )
-    _refused(jax.jit(lambda w: style.superpose(a, char, w).offset), jnp.inf, match=r"superpose: `weights` must be finite")
+    _refused(
+        jax.jit(lambda w: style.superpose(a, char, w).offset), jnp.inf, match=r"superpose: `weights` must be finite"
+    )
     _refused(
         jax.jit(lambda lo: style.superpose(a, eqx.tree_at(lambda c: c.log_omega, char, lo), 1.0).omega),
         jnp.inf,
         match=r"superpose: `characteristics` log_omega must be finite",
     )
-    _refused(jax.jit(lambda d: style.transition(a, b, t, 0.5, d)), 0.0, match=r"transition: `duration_s` must be finite and > 0")
-    _refused(jax.jit(lambda st: style.transition(a, b, t, st, 1.0)), jnp.nan, match=r"transition: `start_s` must be finite")
     _refused(
-        jax.jit(lambda d: style.transition_schedule(6.0, 7.0, t, 0.5, d)[1]), -1.0, match=r"transition_schedule: `duration_s`"
+        jax.jit(lambda d: style.transition(a, b, t, 0.5, d)),
+        0.0,
+        match=r"transition: `duration_s` must be finite and > 0",
     )
-    _refused(jax.jit(lambda r: style.fit_style_weights(a, char, b, ridge=r)), -1.0, match=r"fit_style_weights: `ridge` must be >= 0")
+    _refused(
+        jax.jit(lambda st: style.transition(a, b, t, st, 1.0)), jnp.nan, match=r"transition: `start_s` must be finite"
+    )
+    _refused(
+        jax.jit(lambda d: style.transition_schedule(6.0, 7.0, t, 0.5, d)[1]),
+        -1.0,
+        match=r"transition_schedule: `duration_s`",
+    )
+    _refused(
+        jax.jit(lambda r: style.fit_style_weights(a, char, b, ridge=r)),
+        -1.0,
+        match=r"fit_style_weights: `ridge` must be >= 0",
+    )
     _refused(
         jax.jit(lambda x: style.add_noise(a, jax.random.key(0), x).amplitude),
         jnp.nan,

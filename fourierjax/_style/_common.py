@@ -266,11 +266,17 @@ def nearest_rotation_vector(reference: Array, v: Array) -> tuple[Array, Array]:
     return v - g[..., None] * v, g
 
 
+def turns(d: Array) -> Array:
+    """The whole turns `2πk` in `d`, so that `d − turns(d)` is `wrap_angle(d)`; exactly
+    `d` when `|d| < π` (no rounding, bit for bit), and no gradient."""
+    return jax.lax.stop_gradient(2 * jnp.pi * jnp.round(d / (2 * jnp.pi)))
+
+
 def on_branch_of(a, b):
     """`b` with its angle offsets moved onto `a`'s branch (same rotations, same motion).
 
-    Euler channels: `a.offset + wrap(b.offset − a.offset)`, to (−π, π] of a's offset, which
-    shifts b's whole signal by 2πk. Exponential-map triples: the equivalent rotation vector
+    Euler channels: `b.offset − 2πk` within π of a's offset (`a + wrap(b − a)`), which
+    shifts b's whole signal by whole turns. Exponential-map triples: the equivalent rotation vector
     nearest a's (`nearest_rotation_vector`), and b's harmonics mapped through the Jacobian of
     that change, so that b's rotations stay the same to first order in the amplitudes. Root
     channels are left alone. Works for a stacked `b` against one `a` by broadcasting.
@@ -281,8 +287,7 @@ def on_branch_of(a, b):
     offset = b.offset
     if euler.any():
         mask = jnp.broadcast_to(jnp.asarray(euler), offset.shape)
-        reference = jnp.broadcast_to(a.offset, offset.shape)
-        offset = jnp.where(mask, reference + wrap_angle(offset - reference), offset)
+        offset = offset - jnp.where(mask, turns(offset - a.offset), 0.0)
     if not triples.size:
         return replace(b, offset=offset)
     idx = jnp.asarray(triples)

@@ -30,6 +30,7 @@ from fourierjax._style._common import (
     phasor,
     polar_from_phasor,
     replace,
+    turns,
 )
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
@@ -224,7 +225,7 @@ def _superpose(base, chars, weights, method: str, include_omega: bool):
     w = weights
     euler, _ = channel_kinds(base)
     # Characteristics written before offsets were compared on one branch may hold 2π too much.
-    char_offset = jnp.where(jnp.asarray(euler)[None, :], wrap_angle(chars.offset), chars.offset)
+    char_offset = chars.offset - jnp.where(jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
     offset = base.offset + jnp.sum(w[:, None] * char_offset, axis=0)
     if method == "polar":
         amplitude = base.amplitude + jnp.sum(w[:, None, None] * chars.amplitude, axis=0)

@@ -11,7 +11,6 @@ from jaxtyping import Array, ArrayLike, Float
 from fourierjax._checks import concrete
 from fourierjax._jit import filter_jit
 from fourierjax._linalg import spd_solve
-from fourierjax._math import wrap_angle
 from fourierjax._style._common import (
     channel_kinds,
     check_compatible,
@@ -23,6 +22,7 @@ from fourierjax._style._common import (
     phasor,
     polar_from_phasor,
     replace,
+    turns,
 )
 from fourierjax._style.characteristics import Characteristic, pad_harmonics, stack, stacked_characteristics
 from fourierjax.errors import UserError
@@ -217,7 +217,7 @@ def _fit_style_weights(base, chars, target, ridge, include_omega: bool):
     k, c, n, _ = chars.phasor.shape
     euler, _ = channel_kinds(base)
     # Offsets on one branch, as `superpose` adds them.
-    char_offset = jnp.where(jnp.asarray(euler)[None, :], wrap_angle(chars.offset), chars.offset)
+    char_offset = chars.offset - jnp.where(jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
     # Columns: style-space direction of each characteristic in phasor coordinates; the
     # phasor superposition is linear in w, so least squares is exact and closed form.
     cols = jnp.concatenate([char_offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2)
