@@ -7,28 +7,34 @@ models are compared on one branch (see `interpolate`).
 """
 
 from fourierjax._math import wrap_angle
-from fourierjax._style._common import Ease, Method, OmegaMode, check_compatible, phasor
-from fourierjax._style.characteristics import (
+from fourierjax._style import (
     Characteristic,
+    Ease,
+    Method,
+    OmegaMode,
+    StylePCA,
     add_noise,
+    blend_time_domain,
     characteristic,
     characteristic_function,
-    pad_harmonics,
-    stack,
-    superpose,
-)
-from fourierjax._style.interpolation import blend_time_domain, interpolate, interpolate_omega
-from fourierjax._style.space import (
-    StylePCA,
+    check_compatible,
+    ease,
     fit_style_weights,
+    interpolate,
+    interpolate_omega,
     model_from_style_vector,
+    pad_harmonics,
     pca_project,
     pca_reconstruct,
+    phasor,
+    stack,
     style_matrix,
     style_pca,
     style_vector,
+    superpose,
+    transition,
+    transition_schedule,
 )
-from fourierjax._style.transitions import ease, transition, transition_schedule
 
 #: Deprecated name of `OmegaMode` (the type of `omega_mode=`).
 OmegaInterp = OmegaMode
