@@ -650,7 +650,8 @@ def test_omega_checks_keep_jit_vmap_and_gradients_in_s_working(x64):
     np.testing.assert_allclose(g, np.log(9.0 / 5.0) * models.omega, rtol=1e-12)
     g = jax.grad(lambda s: style.interpolate_omega(5.0, 9.0, s))(0.0)
     assert float(g) == pytest.approx(5.0 * np.log(9.0 / 5.0))
-    # Traced models are not value-checked (no host sync inside jit or vmap over models).
+    # Traced models pass their value checks (eqx.error_if inside the program; bad traced values
+    # are refused in test_style_branches.py).
     stacked = style.stack([a, b])
     vecs = jax.vmap(style.style_vector)(stacked)
     np.testing.assert_allclose(vecs[1], style.style_vector(b), atol=1e-14)
