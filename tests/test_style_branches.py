@@ -281,3 +281,13 @@ def test_traced_bad_values_are_refused():
     np.testing.assert_allclose(
         jax.jit(lambda d: style.transition(a, b, t, 0.5, d))(0.8), style.transition(a, b, t, 0.5, 0.8), rtol=1e-6
     )
+
+
+def test_the_public_face_re_exports_the_shared_helpers():
+    from fourierjax import _math
+    from fourierjax._style import characteristics
+
+    assert style.wrap_angle is _math.wrap_angle
+    assert style.Characteristic is characteristics.Characteristic
+    assert sorted(style.__all__) == sorted(set(style.__all__))
+    assert all(hasattr(style, name) for name in style.__all__)
