@@ -6,6 +6,8 @@ at a common cycle phase θ, and returns new models or channel values; angle offs
 models are compared on one branch (see `interpolate`).
 """
 
+import warnings
+
 from fourierjax._math import wrap_angle
 from fourierjax._style import (
     Characteristic,
@@ -36,9 +38,6 @@ from fourierjax._style import (
     transition_schedule,
 )
 
-#: Deprecated name of `OmegaMode` (the type of `omega_mode=`).
-OmegaInterp = OmegaMode
-
 __all__ = [
     "Characteristic",
     "Ease",
@@ -68,3 +67,11 @@ __all__ = [
     "transition_schedule",
     "wrap_angle",
 ]
+
+
+def __getattr__(name: str):
+    # `OmegaInterp`, the type of the old `omega=` keyword: a deprecated alias of `OmegaMode`.
+    if name == "OmegaInterp":
+        warnings.warn("fourierjax.style.OmegaInterp is deprecated, use OmegaMode", DeprecationWarning, stacklevel=2)
+        return OmegaMode
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -206,6 +206,8 @@ def test_omega_mode_is_the_new_name_and_omega_a_deprecated_alias(x64):
     with pytest.raises(UserError, match=r"^interpolate: give `omega_mode` only"):
         with pytest.warns(DeprecationWarning):
             style.interpolate(a, b, 0.5, omega_mode="linear", omega="geometric")
+    with pytest.warns(DeprecationWarning, match="OmegaMode"):
+        assert style.OmegaInterp is style.OmegaMode
     with pytest.raises(UserError, match=r"^interpolate: `omega_mode`='cubic'"):
         style.interpolate(a, b, 0.5, omega_mode="cubic")
 
@@ -291,3 +293,31 @@ def test_the_public_face_re_exports_the_shared_helpers():
     assert style.Characteristic is characteristics.Characteristic
     assert sorted(style.__all__) == sorted(set(style.__all__))
     assert all(hasattr(style, name) for name in style.__all__)
+
+
+BANDAI = __import__("pathlib").Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1"
+
+
+def test_bandai_thighs_near_180_combine_on_one_branch():
+    """Bandai-Namco walks (CC BY-NC, read in place): the left thigh's Z rotation sits at +177.6°
+    in the proud walk and −181.5° in the normal one."""
+    path = BANDAI / "data"
+    if not path.is_dir():
+        pytest.skip(f"Bandai-Namco data not found at {BANDAI} (see its README)")
+    from fourierjax import fourier
+    from fourierjax import motion as fmotion
+    from fourierjax.io.bvh import read_bvh
+
+    models = {}
+    for name in ("proud", "normal"):
+        motion = read_bvh(path / f"dataset-1_walk_{name}_001.bvh")
+        x, names = fmotion.features_from_motion(motion, "euler")
+        models[name] = fourier.fit(jnp.asarray(x, jnp.float32), motion.frame_time_s, 3, channel_names=names).model
+    a, b = models["proud"], models["normal"]
+    i = names.index("UpperLeg_L.Zrotation")
+    raw = np.degrees(float(a.offset[i] - b.offset[i]))
+    assert abs(raw) > 300  # the two fits sit on branches a turn apart
+    char = np.degrees(float(style.characteristic(a, b).offset[i]))
+    assert abs(char) < 10 and char == pytest.approx(raw - 360 * round(raw / 360), abs=1e-3)
+    mid = np.degrees(float(style.interpolate(a, b, 0.5).offset[i]))
+    assert abs(mid - np.degrees(float(a.offset[i]))) < 5  # next to both thighs, not swung round to ~0°
