@@ -1,0 +1,53 @@
+"""Private implementation of `fourierjax.style`; import the public names from there."""
+
+from fourierjax._style._common import Ease, Method, OmegaMode, check_compatible, phasor
+from fourierjax._style.characteristics import (
+    Characteristic,
+    add_noise,
+    characteristic,
+    characteristic_function,
+    pad_harmonics,
+    stack,
+    superpose,
+)
+from fourierjax._style.interpolation import blend_time_domain, interpolate, interpolate_omega
+from fourierjax._style.space import (
+    StylePCA,
+    fit_style_weights,
+    model_from_style_vector,
+    pca_project,
+    pca_reconstruct,
+    style_matrix,
+    style_pca,
+    style_vector,
+)
+from fourierjax._style.transitions import ease, transition, transition_schedule
+
+__all__ = [
+    "Characteristic",
+    "Ease",
+    "Method",
+    "OmegaMode",
+    "StylePCA",
+    "add_noise",
+    "blend_time_domain",
+    "characteristic",
+    "characteristic_function",
+    "check_compatible",
+    "ease",
+    "fit_style_weights",
+    "interpolate",
+    "interpolate_omega",
+    "model_from_style_vector",
+    "pad_harmonics",
+    "pca_project",
+    "pca_reconstruct",
+    "phasor",
+    "stack",
+    "style_matrix",
+    "style_pca",
+    "style_vector",
+    "superpose",
+    "transition",
+    "transition_schedule",
+]

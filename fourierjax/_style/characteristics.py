@@ -1,0 +1,359 @@
+"""Fourier characteristics and their superposition (Unuma 1995, eq. 6-8), noise harmonics, stacking."""
+
+from __future__ import annotations
+
+import operator
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
+
+from fourierjax._jit import filter_jit
+from fourierjax._math import wrap_angle
+from fourierjax._style._common import (
+    METHODS,
+    Method,
+    canonical,
+    channel_kinds,
+    check_choice,
+    check_compatible,
+    check_finite,
+    check_log_omega,
+    check_models_omega,
+    check_scalar,
+    dtype_of,
+    evaluate,
+    num_harmonics,
+    on_branch_of,
+    phasor,
+    polar_from_phasor,
+    replace,
+    turns,
+)
+from fourierjax.errors import UserError
+from fourierjax.fourier import FourierModel
+
+
+class Characteristic(eqx.Module):
+    """Fourier characteristics `A − B` of two gait models (Unuma 1995, eq. 7).
+
+    Stored in both coordinate systems, because they cannot be derived from one another without
+    the two models: the polar differences (Unuma) and the phasor difference. A leading batch
+    axis `[K, ...]` on every leaf when stacked with `stack`.
+
+    Attributes:
+        offset: `[C]`, `A0_A − A0_B`, angle channels compared on one branch (see
+            `characteristic`).
+        amplitude: `[C, N]`, `A_A − A_B` (may be negative).
+        phase: `[C, N]`, `φ_A − φ_B` wrapped to (−π, π] (the shorter arc).
+        phasor: `[C, N, 2]`, `c_A − c_B`, `c = (A cos φ, A sin φ)`.
+        log_omega: `log(ω_A / ω_B)` (scalar).
+        representation: static, copied from the models.
+        channel_names: static, copied from the models.
+    """
+
+    offset: Float[Array, "*k channels"]
+    amplitude: Float[Array, "*k channels harmonics"]
+    phase: Float[Array, "*k channels harmonics"]
+    phasor: Float[Array, "*k channels harmonics 2"]
+    log_omega: Float[Array, "*k"]
+    representation: str = eqx.field(static=True, default="")
+    channel_names: tuple[str, ...] = eqx.field(static=True, default=())
+
+
+def pad_harmonics(model, num_harmonics: int):
+    """`model` with zero-amplitude harmonics appended up to `num_harmonics` (same signal).
+
+    Arguments:
+        model: a FourierModel or Characteristic with `N ≤ num_harmonics` harmonics.
+        num_harmonics: the new count (a Python int).
+
+    Returns:
+        The same kind of object with `num_harmonics` harmonics.
+    """
+    n = _count(model)
+    if isinstance(num_harmonics, bool):
+        raise UserError(f"pad_harmonics: num_harmonics must be an int, got {num_harmonics!r}")
+    try:
+        num_harmonics = operator.index(num_harmonics)  # ints and NumPy integers, never floats
+    except TypeError:
+        raise UserError(f"pad_harmonics: num_harmonics must be an int, got {num_harmonics!r}") from None
+    if num_harmonics < n:
+        raise UserError(f"pad_harmonics: num_harmonics={num_harmonics} is below the model's {n}")
+    if num_harmonics == n:
+        return model
+    extra = num_harmonics - n
+
+    def pad(x, axis_from_end):
+        widths = [(0, 0)] * x.ndim
+        widths[x.ndim - axis_from_end] = (0, extra)
+        return jnp.pad(x, widths)
+
+    fields = {"amplitude": pad(model.amplitude, 1), "phase": pad(model.phase, 1)}
+    if isinstance(model, Characteristic):
+        fields["phasor"] = pad(model.phasor, 2)
+    return replace(model, **fields)
+
+
+_count = num_harmonics
+
+
+def common_harmonics(*models):
+    """The models zero-padded to the largest harmonic count among them."""
+    n = max(_count(m) for m in models)
+    return tuple(pad_harmonics(m, n) for m in models)
+
+
+def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
+    """The Fourier characteristics `A − B` (Unuma 1995, eq. 7), e.g. briskness =
+    `characteristic(brisk_walk, normal_walk)`.
+
+    Angle offsets are subtracted on one branch: Euler channels as `wrap(A0_A − A0_B)` in
+    (−π, π] (a thigh at +179° against −179° differs by −2°, not 358°), exponential-map triples
+    `J.expmap0..2` after b's rotation vector is replaced by the equivalent one nearest a's
+    (its harmonics follow to first order); `root.*` channels subtract plainly.
+
+    Arguments:
+        a: a FourierModel.
+        b: a compatible FourierModel (different harmonic counts are zero-padded).
+
+    Returns:
+        A Characteristic; `superpose(b, [it], [1.0])` reproduces `a` (both methods) on b's
+        branch. Raises `UserError` when a model's ω is not finite and > 0 (`log_omega` would
+        be infinite; under jit the error comes from `eqx.error_if` when the program runs).
+    """
+    check_compatible(a, b)
+    a, b = check_models_omega("characteristic", a=a, b=b)
+    a, b = common_harmonics(a, b)
+    return _characteristic(a, b)
+
+
+@filter_jit
+def _characteristic(a, b):
+    b = on_branch_of(a, b)
+    return Characteristic(
+        offset=a.offset - b.offset,
+        amplitude=a.amplitude - b.amplitude,
+        phase=wrap_angle(a.phase - b.phase),
+        phasor=phasor(a) - phasor(b),
+        log_omega=jnp.log(a.omega) - jnp.log(b.omega),
+        representation=getattr(a, "representation", ""),
+        channel_names=tuple(getattr(a, "channel_names", ())),
+    )
+
+
+@filter_jit
+def _characteristic_function(char, theta):
+    return evaluate(char.offset, char.amplitude, char.phase, theta)
+
+
+def characteristic_function(char: Characteristic, phase: ArrayLike) -> Float[Array, " channels"]:
+    """The characteristic function Ψ(θ) = ΔA0 + Σ ΔA_n sin(nθ + Δφ_n) (Unuma 1995, eq. 8).
+
+    Ψ is NOT Θ_A(θ) − Θ_B(θ) (sines do not subtract that way); it is the curve Unuma plots for
+    a characteristic.
+
+    Arguments:
+        char: one (unstacked) Characteristic.
+        phase: scalar θ in radians.
+
+    Returns:
+        `[C]`.
+    """
+    if char.offset.ndim != 1:
+        raise UserError(
+            "characteristic_function: `char` must be one characteristic, got a stacked batch; vmap over it"
+        )
+    phase = check_scalar("characteristic_function", "phase", phase, "; vmap over phase for many frames")
+    return _characteristic_function(char, jnp.asarray(phase, dtype=dtype_of(char)))
+
+
+def stack(items: Sequence):
+    """Stack FourierModels (or Characteristics) along a new leading axis, padding harmonics.
+
+    Arguments:
+        items: a non-empty sequence of compatible models or characteristics.
+
+    Returns:
+        One object of the same type whose leaves have a leading axis `len(items)`; vmap over it
+        with `eqx.filter_vmap` / `jax.vmap`.
+    """
+    items = list(items)
+    if not items:
+        raise UserError("stack: needs at least one model")
+    for i, m in enumerate(items[1:], start=1):
+        check_compatible(items[0], m, names=("items[0]", f"items[{i}]"))
+    items = common_harmonics(*items)
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *items)
+
+
+def stacked_characteristics(characteristics) -> Characteristic:
+    """One Characteristic, a sequence of them, or a stacked batch, as a stacked batch `[K, ...]`."""
+    if isinstance(characteristics, Characteristic):
+        if characteristics.offset.ndim == 1:
+            return jax.tree.map(lambda x: x[None], characteristics)
+        return characteristics
+    characteristics = list(characteristics)
+    if not characteristics:
+        raise UserError("characteristics: empty; pass at least one Characteristic")
+    for i, c in enumerate(characteristics):
+        if not isinstance(c, Characteristic):
+            raise UserError(f"characteristics[{i}]: expected a Characteristic, got {type(c)}")
+    return stack(characteristics)
+
+
+def _prepare_superposition(base, characteristics, weights):
+    chars = stacked_characteristics(characteristics)
+    check_compatible(base, chars, names=("base", "characteristics"))
+    k = chars.offset.shape[0]
+    weights = jnp.asarray(weights, dtype=dtype_of(base))
+    if weights.shape == () and k == 1:
+        weights = weights[None]
+    if weights.shape != (k,):
+        raise UserError(
+            f"superpose: `weights` has shape {weights.shape}, expected ({k},), one per characteristic"
+        )
+    weights = check_finite("superpose", "weights", weights)
+    n = max(_count(base), _count(chars))
+    return pad_harmonics(base, n), pad_harmonics(chars, n), weights
+
+
+@filter_jit
+def _superpose(base, chars, weights, method: str, include_omega: bool):
+    w = weights
+    euler, _ = channel_kinds(base)
+    # Characteristics written before offsets were compared on one branch may hold 2π too much.
+    char_offset = chars.offset - jnp.where(jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
+    offset = base.offset + jnp.sum(w[:, None] * char_offset, axis=0)
+    if method == "polar":
+        amplitude = base.amplitude + jnp.sum(w[:, None, None] * chars.amplitude, axis=0)
+        phase = base.phase + jnp.sum(w[:, None, None] * chars.phase, axis=0)
+        amplitude, phase = canonical(amplitude, phase)
+    else:
+        c = phasor(base) + jnp.sum(w[:, None, None, None] * chars.phasor, axis=0)
+        amplitude, phase = polar_from_phasor(c)
+    om = base.omega
+    if include_omega:
+        om = om * jnp.exp(jnp.sum(w * chars.log_omega))
+    return replace(base, offset=offset, amplitude=amplitude, phase=phase, omega=om)
+
+
+def superpose(
+    base: FourierModel,
+    characteristics: Characteristic | Sequence[Characteristic],
+    weights: Float[ArrayLike, " k"],
+    *,
+    method: Method = "polar",
+    include_omega: bool = True,
+) -> FourierModel:
+    """Superposition of weighted Fourier characteristics onto a base motion (Unuma 1995, §3.2),
+    e.g. a brisk run = `superpose(run, [characteristic(brisk_walk, walk)], [1.37])`.
+
+    - `method="polar"` (Unuma): `A = A_base + Σ w_k ΔA_k`, `φ = φ_base + Σ w_k Δφ_k`, then
+      negative amplitudes are canonicalised. Adding a characteristic rotates each harmonic's
+      phase by the (shorter-arc) phase difference and scales its amplitude linearly.
+    - `method="phasor"`: `c = c_base + Σ w_k Δc_k`, plain vector addition: the synthesised
+      signal is EXACTLY `Θ_base(θ) + Σ w_k (Θ_A,k(θ) − Θ_B,k(θ))` at a common phase θ. This is
+      the form to use for least squares and PCA (linear in w).
+
+    Both give `superpose(b, [characteristic(a, b)], [1]) == a` (on b's branch) and
+    `w = 0 → base`; they differ in between (an arc against a chord when the phases differ),
+    and polar never shrinks an amplitude through zero when two phases oppose. The offset
+    always adds linearly; Euler offset differences are taken in (−π, π] (`characteristic`
+    stores them so; older characteristic files are wrapped here), so half of a +179° → −179°
+    characteristic moves a leg by 1°, not 179°.
+
+    Arguments:
+        base: FourierModel.
+        characteristics: one Characteristic, a sequence, or a stacked batch (leading `K`).
+        weights: `[K]` (a scalar for a single characteristic).
+        method: `"polar"` (default) or `"phasor"`.
+        include_omega: also scale ω by `Π_k (ω_A,k/ω_B,k)^w_k` (default True).
+
+    Returns:
+        A FourierModel with the static fields of `base`. Raises `UserError` for non-finite
+        weights or log_omega and a base ω that is not > 0 (under jit, from `eqx.error_if`).
+    """
+    check_choice(method, METHODS, "method", "superpose")
+    base = check_models_omega("superpose", base=base)
+    base, chars, weights = _prepare_superposition(base, characteristics, weights)
+    chars = check_log_omega("superpose", chars)
+    return _superpose(base, chars, weights, method, bool(include_omega))
+
+
+@filter_jit
+def _add_noise(model, key, amplitude, harmonics: tuple[int, ...]):
+    c, n = model.amplitude.shape
+    k = len(harmonics)
+    phase_dtype = jnp.result_type(model.phase)
+    amp = jnp.broadcast_to(amplitude[:, None] if amplitude.ndim == 1 else amplitude, (c, k))
+    phases = jax.random.uniform(key, (c, k), dtype=phase_dtype, minval=-jnp.pi, maxval=jnp.pi)
+    new_n = max(max(harmonics), n)
+    idx = jnp.asarray(harmonics) - 1
+    amplitude_new = jnp.pad(model.amplitude, ((0, 0), (0, new_n - n))).at[:, idx].add(amp)
+    phase_new = jnp.pad(model.phase, ((0, 0), (0, new_n - n))).at[:, idx].add(phases)
+    amplitude_new, phase_new = canonical(amplitude_new, phase_new)
+    return replace(model, amplitude=amplitude_new, phase=phase_new)
+
+
+def add_noise(
+    model: FourierModel,
+    key: PRNGKeyArray,
+    amplitude: ArrayLike,
+    harmonics: int | Sequence[int] = 3,
+) -> FourierModel:
+    """Randomised higher harmonics, e.g. a shivering walk (Unuma 1995, §3.3).
+
+    Adds harmonics above the model's `N` with the given amplitude and phases drawn uniformly in
+    (−π, π) from `key`. Integer harmonics keep the motion periodic with the gait cycle (the
+    same tremor repeats every cycle, as in Unuma); draw a new key per cycle for aperiodic noise.
+
+    Arguments:
+        model: FourierModel with `N` harmonics on `C` channels.
+        key: a JAX PRNG key.
+        amplitude: in model units (radians for angle channels): a scalar, `[C]` (zero for the
+            channels to keep still, e.g. root translation) or `[C, K]` per added harmonic.
+        harmonics: an int `K` (the harmonics `N+1 … N+K`, default 3) or explicit harmonic
+            numbers, each `> N` (Python ints).
+
+    Returns:
+        A FourierModel with `max(harmonics)` harmonics (unused ones at zero).
+    """
+    n = _count(model)
+    bad = UserError(
+        f"add_noise: `harmonics`={harmonics!r}; expected an int K or a sequence of int harmonic "
+        "numbers (a float such as 2.0 is not a count)"
+    )
+    if isinstance(harmonics, bool | str):
+        raise bad
+    try:
+        count = operator.index(harmonics)  # ints and NumPy integers, never floats
+    except TypeError:
+        count = None
+    if count is not None:
+        if count < 1:
+            raise UserError(f"add_noise: `harmonics`={count}; add at least one harmonic")
+        harmonics = tuple(range(n + 1, n + 1 + count))
+    else:
+        try:
+            harmonics = tuple(operator.index(h) for h in harmonics)
+        except TypeError:
+            raise bad from None
+        if not harmonics:
+            raise UserError("add_noise: `harmonics` is empty; give at least one harmonic number")
+        if min(harmonics) <= n:
+            raise UserError(
+                f"add_noise: `harmonics`={harmonics}: noise harmonics must be above the model's N={n}"
+            )
+        if len(set(harmonics)) != len(harmonics):
+            raise UserError(f"add_noise: `harmonics`={harmonics}: repeated harmonic")
+    amplitude = jnp.asarray(amplitude, dtype=dtype_of(model))
+    c = model.offset.shape[-1]
+    if amplitude.shape not in ((), (c,), (c, len(harmonics))):
+        raise UserError(
+            f"add_noise: `amplitude` has shape {amplitude.shape}; expected (), ({c},) or ({c}, {len(harmonics)})"
+        )
+    amplitude = check_finite("add_noise", "amplitude", amplitude)
+    return _add_noise(model, key, amplitude, harmonics)

@@ -1,0 +1,236 @@
+"""Gait transitions over time: ease curves, the integrated-phase schedule and the transition itself."""
+
+from __future__ import annotations
+
+import functools
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from fourierjax._checks import concrete
+from fourierjax._jit import filter_jit
+from fourierjax._style._common import (
+    EASES,
+    METHODS,
+    Ease,
+    Method,
+    OmegaMode,
+    check_choice,
+    check_compatible,
+    check_models_omega,
+    check_omega,
+    check_scalar,
+    dtype_of,
+    evaluate,
+    omega_at,
+    omega_mode_argument,
+    on_branch_of,
+)
+from fourierjax._style.characteristics import common_harmonics
+from fourierjax._style.interpolation import interpolate_core
+from fourierjax.errors import UserError
+from fourierjax.fourier import FourierModel
+
+# Gauss-Legendre nodes on [-1, 1] for the phase integral over the transition window; the
+# integrand ω(s(u)) is smooth there, so 16 nodes are exact to rounding in float64.
+_GL_NODES, _GL_WEIGHTS = (np.asarray(x, dtype=np.float64) for x in np.polynomial.legendre.leggauss(16))
+
+
+def ease(u: ArrayLike, kind: Ease = "smoothstep") -> Array:
+    """An ease curve from 0 to 1, clamped outside [0, 1].
+
+    Arguments:
+        u: normalised time (any shape).
+        kind: `"smoothstep"` (3u² − 2u³, zero slope at both ends, default), `"smootherstep"`
+            (6u⁵ − 15u⁴ + 10u³, zero slope and curvature) or `"linear"`.
+
+    Returns:
+        s(u), same shape.
+    """
+    check_choice(kind, EASES, "kind", "ease")
+    u = jnp.clip(jnp.asarray(u), 0.0, 1.0)
+    if kind == "linear":
+        return u
+    if kind == "smoothstep":
+        return u * u * (3 - 2 * u)
+    return u * u * u * (u * (6 * u - 15) + 10)
+
+
+def _schedule_one(t, omega_a, omega_b, start, duration, ease_kind, omega_mode):
+    # s(t) and the integrated cycle phase θ(t) = ∫_0^t ω(s(τ)) dτ at one time t: F(t) − F(0)
+    # for the antiderivative F below (F(0) = 0 unless the window starts before t = 0, where
+    # F alone gave θ(0) = 0.30 rad for a window from −0.5 s).
+    s, f_t = _phase_antiderivative(t, omega_a, omega_b, start, duration, ease_kind, omega_mode)
+    _, f_0 = _phase_antiderivative(jnp.zeros_like(t), omega_a, omega_b, start, duration, ease_kind, omega_mode)
+    return s, f_t - f_0
+
+
+def _phase_antiderivative(t, omega_a, omega_b, start, duration, ease_kind, omega_mode):
+    u_end = jnp.clip((t - start) / duration, 0.0, 1.0)
+    s = ease(u_end, ease_kind)
+    nodes = jnp.asarray(_GL_NODES, dtype=u_end.dtype)
+    weights = jnp.asarray(_GL_WEIGHTS, dtype=u_end.dtype)
+    u = 0.5 * u_end * (nodes + 1)
+    window = duration * 0.5 * u_end * jnp.sum(weights * omega_at(omega_a, omega_b, ease(u, ease_kind), omega_mode))
+    before = omega_a * jnp.minimum(t, start)
+    after = omega_b * jnp.maximum(t - (start + duration), 0.0)
+    return s, before + window + after
+
+
+def _schedule_all(t_s, omega_a, omega_b, start, duration, ease_kind, omega_mode):
+    """`_schedule_one` at every time of `t_s` `[T]`."""
+    return jax.vmap(_schedule_one, in_axes=(0, None, None, None, None, None, None))(
+        t_s, omega_a, omega_b, start, duration, ease_kind, omega_mode
+    )
+
+
+@filter_jit
+def _schedule(t_s, omega_a, omega_b, start, duration, ease_kind: str, omega_mode: str):
+    return _schedule_all(t_s, omega_a, omega_b, start, duration, ease_kind, omega_mode)
+
+
+def _check_window(where: str, t_s, start_s, duration_s):
+    """`(start_s, duration_s)` checked: shapes always; values (finite, duration > 0) concrete or
+    traced: a zero duration divides by zero in the schedule and gives NaN frames."""
+    if jnp.ndim(t_s) != 1:
+        raise UserError(
+            f"{where}: `t_s` must be [T] sample times in seconds, got shape {jnp.shape(t_s)}; "
+            "flatten a grid of times (t_s.ravel()) and reshape the result"
+        )
+    start_s = check_scalar(where, "start_s", start_s)
+    if jnp.ndim(duration_s) != 0:
+        raise UserError(f"{where}: `duration_s` must be a scalar, got shape {jnp.shape(duration_s)}")
+    d = concrete(duration_s)
+    if d is None:
+        duration_s = eqx.error_if(
+            duration_s,
+            ~(jnp.isfinite(duration_s) & (duration_s > 0)),
+            f"{where}: `duration_s` must be finite and > 0; a transition needs a finite positive duration (seconds)",
+        )
+    elif not (np.isfinite(d) and d > 0):
+        raise UserError(
+            f"{where}: `duration_s`={d.item()!r}; a transition needs a finite positive duration (seconds)"
+        )
+    return start_s, duration_s
+
+
+def transition_schedule(
+    omega_a: ArrayLike,
+    omega_b: ArrayLike,
+    t_s: Float[ArrayLike, " frames"],
+    start_s: ArrayLike,
+    duration_s: ArrayLike,
+    *,
+    ease: Ease = "smoothstep",
+    omega_mode: OmegaMode = "geometric",
+    omega: OmegaMode | None = None,
+) -> tuple[Float[Array, " frames"], Float[Array, " frames"]]:
+    """The blend weight s(t) and the integrated cycle phase θ(t) of a transition.
+
+    `s(t) = ease((t − start)/duration)`, 0 before the window and 1 after it. The phase is the
+    integral of the instantaneous frequency, `θ(t) = ∫_0^t ω(s(τ)) dτ` (exact before and after
+    the window, 16-point Gauss–Legendre inside it), so it is continuous and monotone however
+    fast ω changes; the naive `ω(s(t))·t` instead jumps by `Δω·t` and plays the cycle at the
+    wrong speed during the window.
+
+    Arguments:
+        omega_a: rad/s of the start gait.
+        omega_b: rad/s of the end gait.
+        t_s: `[T]` times in seconds (any order, θ(0) = 0).
+        start_s: start of the window in seconds.
+        duration_s: length of the window in seconds (> 0).
+        ease: see `ease`.
+        omega_mode: see `interpolate_omega`.
+        omega: deprecated alias of `omega_mode`.
+
+    Returns:
+        `(s [T], theta [T])`, theta in radians. Raises `UserError` for a `t_s` that is not 1-D
+        or a non-scalar window, and for `duration_s ≤ 0`, non-finite window values or an ω that
+        is not > 0 (under jit, from `eqx.error_if`).
+    """
+    check_choice(ease, EASES, "ease", "transition_schedule")
+    omega_mode = omega_mode_argument("transition_schedule", omega_mode, omega)
+    start_s, duration_s = _check_window("transition_schedule", t_s, start_s, duration_s)
+    omega_a = check_omega("transition_schedule", "omega_a", omega_a)
+    omega_b = check_omega("transition_schedule", "omega_b", omega_b)
+    t_s = jnp.asarray(t_s)
+    dtype = jnp.result_type(t_s.dtype, jnp.asarray(omega_a).dtype, float)
+    f = functools.partial(jnp.asarray, dtype=dtype)
+    return _schedule(f(t_s), f(omega_a), f(omega_b), f(start_s), f(duration_s), ease, omega_mode)
+
+
+@filter_jit
+def _transition(a, b, t_s, start, duration, ease_kind: str, method: str, omega_mode: str):
+    b = on_branch_of(a, b)
+    s, theta = _schedule_all(t_s, a.omega, b.omega, start, duration, ease_kind, omega_mode)
+
+    def frame(s_i, theta_i):
+        m = interpolate_core(a, b, s_i, method, omega_mode)
+        return evaluate(m.offset, m.amplitude, m.phase, theta_i)
+
+    return jax.vmap(frame)(s, theta), s, theta
+
+
+def transition(
+    a: FourierModel,
+    b: FourierModel,
+    t_s: Float[ArrayLike, " frames"],
+    start_s: ArrayLike,
+    duration_s: ArrayLike,
+    *,
+    ease: Ease = "smoothstep",
+    method: Method = "polar",
+    omega_mode: OmegaMode = "geometric",
+    omega: OmegaMode | None = None,
+    return_schedule: bool = False,
+):
+    """A gait transition from `a` to `b` over a time window (Unuma §2.3, walk → run).
+
+    Frame `t` plays `Ξ(s(t), θ(t))`: the interpolated model (`interpolate`) at blend weight
+    `s(t)` evaluated at the integrated cycle phase `θ(t) = ∫ ω(s(τ)) dτ` (see
+    `transition_schedule`). Because the phase is integrated, the cycle never jumps when ω
+    changes, so a run → walk transition is as smooth as walk → run (Unuma found his
+    run → walk unnatural): the cadence decelerates continuously, the eased s(t) has zero slope at
+    both ends of the window, and every channel, root velocity channels included, changes
+    continuously (C¹ in time with `"smoothstep"`). b is played on a's angle branch (see
+    `interpolate`), so an Euler thigh at +179° going to −179° turns by 2°, not 358°. Choose
+    `start_s` at a gait event (θ a multiple of 2π) to begin the change at a foot strike.
+
+    Arguments:
+        a: FourierModel of the start gait.
+        b: compatible FourierModel of the end gait, aligned to the same gait event.
+        t_s: `[T]` sample times in seconds (θ(0) = 0).
+        start_s: start of the transition window in seconds.
+        duration_s: its length in seconds (> 0).
+        ease: see `ease`.
+        method: see `interpolate`.
+        omega_mode: see `interpolate_omega`.
+        omega: deprecated alias of `omega_mode`.
+        return_schedule: also return `(s [T], theta [T])`.
+
+    Returns:
+        `[T, C]` channel values (model units), or `(values, s, theta)`. Raises `UserError` as
+        `transition_schedule` does (and for a model whose ω is not > 0).
+    """
+    check_compatible(a, b)
+    check_choice(ease, EASES, "ease", "transition")
+    check_choice(method, METHODS, "method", "transition")
+    omega_mode = omega_mode_argument("transition", omega_mode, omega)
+    start_s, duration_s = _check_window("transition", t_s, start_s, duration_s)
+    a, b = check_models_omega("transition", a=a, b=b)
+    a, b = common_harmonics(a, b)
+    dtype = dtype_of(a)
+    values, s, theta = _transition(
+        a,
+        b,
+        jnp.asarray(t_s, dtype=dtype),
+        jnp.asarray(start_s, dtype=dtype),
+        jnp.asarray(duration_s, dtype=dtype),
+        ease,
+        method,
+        omega_mode,
+    )
+    return (values, s, theta) if return_schedule else values
