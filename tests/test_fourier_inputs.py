@@ -306,9 +306,9 @@ def test_model_and_style_vector_errors_are_user_errors():
         lambda: F.FourierModel(jnp.zeros(3), z, z, jnp.zeros(2)),
         lambda: F.FourierModel(jnp.zeros(3), z, z, jnp.asarray(1.0), "quaternion"),
         lambda: F.FourierModel(jnp.zeros(3), z, z, jnp.asarray(1.0), "euler", ("a", "b")),
-        lambda: F.FourierModel.from_style_vector(jnp.zeros(5), 2, 3),
-        lambda: F.FourierModel.from_style_vector(jnp.zeros(15), 2, 3, convention="cos"),
-        lambda: _model().style_vector("cos"),
+        lambda: F.FourierModel.from_tilmanne_vector(jnp.zeros(5), 2, 3),
+        lambda: F.FourierModel.from_tilmanne_vector(jnp.zeros(15), 2, 3, convention="cos"),
+        lambda: _model().tilmanne_vector("cos"),
     ]
     for make in cases:
         with pytest.raises(UserError):
