@@ -8,10 +8,13 @@ first, then every joint's rotation in radians, as Euler angles in the file's ord
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from fourierjax import rotations
 from fourierjax._checks import number
@@ -31,6 +34,10 @@ from fourierjax._fourier._layout import (
     yaw_quat as _yaw_quat,
 )
 from fourierjax.errors import UserError
+from fourierjax.skeleton import Skeleton, Topology
+
+if TYPE_CHECKING:  # imported where used at run time: `fourierjax._fourier` imports this module
+    from fourierjax._fourier._model import FourierModel
 
 #: Feature representations of joint rotations.
 REPRESENTATIONS = ("euler", "expmap")
@@ -66,7 +73,7 @@ def angle_channel_mask(channel_names: tuple[str, ...]) -> tuple[bool, ...]:
     return tuple(not name.startswith("root.") for name in channel_names)
 
 
-def channel_names_for(topology, representation: str) -> tuple[str, ...]:
+def channel_names_for(topology: Topology, representation: str) -> tuple[str, ...]:
     """Feature channel names for a skeleton: ``ROOT_CHANNELS`` then each joint's rotation."""
     if representation not in REPRESENTATIONS:
         raise UserError(f"representation: {representation!r} is not one of {REPRESENTATIONS}")
@@ -93,7 +100,9 @@ def heading_of(motion) -> float:
     return float(np.arctan2(s, c))
 
 
-def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndarray:
+def make_euler_continuous(
+    angles: Float[ArrayLike, "F *joints 3"], order: str, valid: Bool[ArrayLike, " F"] | None = None
+) -> Float[np.ndarray, "F *joints 3"]:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
     Every rotation has two Euler triples (Tait-Bryan ``(a, b, c) ~ (a + pi, pi - b, c + pi)``;
@@ -149,8 +158,9 @@ def make_euler_continuous(angles: np.ndarray, order: str, valid=None) -> np.ndar
 
 
 def features_from_motion(
-    motion, representation: str = "euler", heading_rad: float | None = None, valid=None
-) -> tuple[np.ndarray, tuple[str, ...]]:
+    motion, representation: str = "euler", heading_rad: float | None = None,
+    valid: Bool[ArrayLike, " F"] | None = None,
+) -> tuple[Float[np.ndarray, "F C"], tuple[str, ...]]:
     """Fitting features of a clip: heading-frame root velocity and height, joint rotations.
 
     Arguments:
@@ -210,7 +220,7 @@ def _joint_rotations(motion, joints, representation: str, *, root_quat=None,
     return blocks
 
 
-def joint_expmaps(motion) -> tuple[np.ndarray, tuple[str, ...]]:
+def joint_expmaps(motion) -> tuple[Float[np.ndarray, "F K3"], tuple[str, ...]]:
     """Continuous exponential maps of every non-root joint of a clip (Tilmanne & Dutoit §2.1).
 
     The root is left out (its rotation includes the walking direction); so are joints without
@@ -245,8 +255,8 @@ def _check_names(topology, channel_names, where: str) -> str:
 
 def motion_from_features(
     template,
-    features,
-    channel_names,
+    features: Float[ArrayLike, "F C"],
+    channel_names: tuple[str, ...],
     frame_time_s: float,
     *,
     heading_rad: float = 0.0,
@@ -317,7 +327,9 @@ def motion_from_features(
                                source=None)
 
 
-def channel_model(template, model, root_xz=(0.0, 0.0)):
+def channel_model(
+    template, model: FourierModel, root_xz: Float[ArrayLike, "*batch 2"] = (0.0, 0.0)
+) -> FourierModel:
     """A Fourier model of the template's BVH channels from a gait model: a walker in place.
 
     ``motion_from_features`` in the frequency domain, for models of ``"euler"`` features (e.g.
@@ -361,7 +373,9 @@ def channel_model(template, model, root_xz=(0.0, 0.0)):
             "are not linear in exponential maps (fit with representation='euler')"
         )
     omega = model.omega
-    if not isinstance(omega, jax.core.Tracer) and not bool(np.all(np.asarray(omega) > 0)):
+    if isinstance(omega, jax.core.Tracer):  # refused at run time (a value check that holds under jit)
+        omega = eqx.error_if(omega, ~jnp.all(omega > 0), "channel_model: `model` omega must be > 0 (rad/s)")
+    elif not bool(np.all(np.asarray(omega) > 0)):
         raise UserError(f"channel_model: `model` omega must be > 0 (rad/s), got {np.asarray(omega)}")
     root_xz = jnp.asarray(root_xz, model.offset.dtype)
     if root_xz.ndim == 0 or root_xz.shape[-1] != 2:
@@ -417,7 +431,9 @@ def _layout_tables(topology, representation):
     return {k: (np.asarray(js), np.asarray(cs)) for k, (js, cs) in groups.items()}
 
 
-def local_pose_from_features(skeleton, features, representation: str):
+def local_pose_from_features(
+    skeleton: Skeleton, features: Float[ArrayLike, " C"], representation: str
+) -> tuple[Float[Array, "J 3"], Float[Array, "J 4"]]:
     """Local translations [J, 3] and rotations [J, 4] of one feature frame (pure JAX).
 
     The root sits at the origin (root-relative) with its heading-frame orientation; joints
@@ -442,7 +458,9 @@ def local_pose_from_features(skeleton, features, representation: str):
     return translations, quats
 
 
-def root_relative_positions(skeleton, features, representation: str):
+def root_relative_positions(
+    skeleton: Skeleton, features: Float[ArrayLike, "T C"], representation: str
+) -> Float[Array, "T J 3"]:
     """Joint positions [T, J, 3] with the root at the origin (heading frame), through FK.
 
     Arguments:

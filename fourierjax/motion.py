@@ -11,12 +11,14 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jaxtyping import ArrayLike, Bool, Float, Int
 
 from fourierjax import _jit
 from fourierjax._fourier._layout import bucket as _bucket
 from fourierjax._fourier._layout import root_pose as _root_pose
 from fourierjax._fourier._layout import rot as _rot
 from fourierjax._fourier._layout import rotation_joints as _rotation_joints
+from fourierjax._fourier._model import FourierModel
 from fourierjax.errors import UserError
 from fourierjax.features import (  # noqa: F401  (re-exported: their old home)
     REPRESENTATIONS,
@@ -31,6 +33,7 @@ from fourierjax.features import (  # noqa: F401  (re-exported: their old home)
     motion_from_features,
     root_relative_positions,
 )
+from fourierjax.skeleton import Skeleton
 
 __all__ = [
     "channel_names_for",
@@ -49,7 +52,9 @@ __all__ = [
 ]
 
 
-def motion_joint_positions(motion, frames=None) -> np.ndarray:
+def motion_joint_positions(
+    motion, frames: Int[ArrayLike, " K"] | None = None
+) -> Float[np.ndarray, "K J 3"]:
     """World joint positions of a clip through forward kinematics of its BVH channels.
 
     Arguments:
@@ -66,7 +71,9 @@ def motion_joint_positions(motion, frames=None) -> np.ndarray:
 _root_relative_positions_jit = _jit.filter_jit(root_relative_positions)
 
 
-def model_joint_positions(model, skeleton, phases) -> np.ndarray:
+def model_joint_positions(
+    model: FourierModel, skeleton: Skeleton, phases: Float[ArrayLike, " K"]
+) -> Float[np.ndarray, "K J 3"]:
     """Joint positions of a Fourier gait model's pose at cycle phases (Unuma 1995 eq. 1).
 
     The pose is ``fourier.synthesize_phase(model, phases)`` through forward kinematics; the
@@ -108,7 +115,9 @@ def _hip_flexion_phase(model, motion, channel: int):
     return jnp.asarray(peak if ahead[0] >= ahead[1] else peak + np.pi)
 
 
-def glitch_frames(motion, max_joint_speed_deg_s: float = 5000.0, pad_s: float = 0.1):
+def glitch_frames(
+    motion, max_joint_speed_deg_s: float = 5000.0, pad_s: float = 0.1
+) -> Bool[np.ndarray, " F"]:
     """Capture glitches: ``bool [F]``, True within ``pad_s`` of a frame where some joint turns
     faster than ``max_joint_speed_deg_s`` (CMU 142_02's left arm jumps 60 degrees in one frame
     at frame 1140; captured motion stays under ~3200 deg/s, even at toes and fingers).
@@ -196,6 +205,9 @@ class ClipFit:
     ``rms_deg`` and ``variance_explained_angles`` over rotation channels,
     ``variance_explained_positions`` over root-relative joint positions (through FK).
     ``masked_frames`` counts capture-glitch frames left out of the fit (:func:`glitch_frames`).
+    ``result`` is the clip's `fourier.FitStatus` name in lower case (``"successful"``, else e.g.
+    ``"too_few_cycles"``; the model and metrics are then meaningless) and ``message`` says what
+    is wrong, naming the clip's file.
     """
 
     source: str | None
@@ -216,6 +228,12 @@ class ClipFit:
     left_heel_strikes: tuple[int, ...]
     right_heel_strikes: tuple[int, ...]
     masked_frames: int = 0
+    result: str = "successful"
+    message: str = ""
+
+    @property
+    def successful(self) -> bool:
+        return self.result == "successful"
 
     @property
     def fundamental_hz(self) -> float:
@@ -253,7 +271,7 @@ class ClipFit:
         }
 
 
-def foot_positions_of(motion, points=None) -> np.ndarray:
+def foot_positions_of(motion, points=None) -> Float[np.ndarray, "F P 3"]:
     """World positions of the foot points of every frame of a clip, through FK.
 
     Frames are padded to a few length buckets, so clips of similar lengths share one compiled
@@ -277,7 +295,7 @@ def foot_positions_of(motion, points=None) -> np.ndarray:
                                                      points))[:F]
 
 
-def foot_contacts_of(motion) -> np.ndarray | None:
+def foot_contacts_of(motion) -> Bool[np.ndarray, "F 2"] | None:
     """Foot contacts ``bool [F, 2]`` (left, right) of a clip: ``fourierjax.contacts`` on FK foot
     points (ankle, toe, toe tip). None when the skeleton has no CMU-named feet."""
     from fourierjax import contacts
@@ -348,7 +366,8 @@ def fit_motions(
         num_harmonics: N; representation: "euler" | "expmap".
         fit_kwargs: passed on to ``fit_batch`` (search band, grid...).
     Returns:
-        One :class:`ClipFit` per motion, in order.
+        One :class:`ClipFit` per motion, in order. A clip that cannot be fitted (e.g. too short
+        for a cycle) does not stop the others: its ``result`` and ``message`` say why.
     """
     from fourierjax import fourier as fr
 
@@ -383,7 +402,8 @@ def fit_motions(
         om_steps = np.array([prepared[i][8] for i in idx])
         res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
                            mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
-                           representation=representation, channel_names=names, **fit_kwargs)
+                           representation=representation, channel_names=names, throw=False,
+                           **fit_kwargs)
         for k, i in enumerate(idx):
             m, a, b, sub, x, _, left, right, _, keep = prepared[i]
             raw = jax.tree.map(lambda v: v[k], res.model)
@@ -407,6 +427,10 @@ def fit_motions(
             xhat = fr.synthesize(raw, t)
             pve = _position_ve(sub.skeleton(), representation, jnp.asarray(feats[k], dtype),
                                xhat, jnp.asarray(mask[k]))
+            status = fr.FitStatus(int(res.result[k]))
+            message = "" if status == fr.FitStatus.SUCCESSFUL else (
+                f"fit_motions: clip {i} ({m.source or 'no file'}): {status.message} (fitted "
+                f"fundamental {float(res.omega_fit[k]) / (2 * np.pi):.3f} Hz)")
             results[i] = ClipFit(
                 source=m.source, frame_start=int(a), frame_stop=int(b), frame_time_s=float(dt),
                 model=model, raw_model=raw, alignment=alignment, phase_shift=float(delta),
@@ -417,6 +441,6 @@ def fit_motions(
                 variance_explained_positions=float(pve),
                 left_heel_strikes=tuple(int(v) for v in left),
                 right_heel_strikes=tuple(int(v) for v in right),
-                masked_frames=int(np.sum(~keep)),
+                masked_frames=int(np.sum(~keep)), result=status.name.lower(), message=message,
             )
     return results  # type: ignore[return-value]

@@ -70,6 +70,9 @@ def channel_event_phase(model: FourierModel, channel: int) -> Float[Array, ""]:
         if not -C <= index < C:
             raise UserError(f"{fn}: channel {index} out of range for a model of {C} channel(s) "
                             f"(valid: {-C} .. {C - 1})")
+    else:  # a traced index would be clamped silently: refused at run time instead
+        channel = eqx.error_if(channel, (channel < -C) | (channel >= C),
+                               f"{fn}: channel out of range for a model of {C} channel(s)")
     return wrap_angle(jnp.pi / 2 - model.phase[channel, 0])
 
 

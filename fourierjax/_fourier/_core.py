@@ -17,7 +17,7 @@ from fourierjax._fourier._omega import (
     _odd_energy_fraction,
     _omega_floor,
     _omega_guess,
-    spectral_omega,
+    _spectral_omega,
 )
 from fourierjax._fourier._status import clip_status
 from fourierjax._linalg import matmul as _mm
@@ -50,7 +50,7 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
     mean = _masked_mean(features, w)
     x = features - mean[None, :]
 
-    omega_spec, _, _ = spectral_omega(features, frame_time_s, w, cw, f_min_hz, f_max_hz)
+    omega_spec, _, _ = _spectral_omega(features, frame_time_s, w, cw, f_min_hz, f_max_hz)
     # The search skips frequencies whose cycle is longer than the used frames can show
     # (`_omega_floor`): with many harmonics a period just past the clip fits too well.
     omega_floor = _omega_floor(w, frame_time_s)
@@ -144,7 +144,8 @@ def _fit_arrays(features, mask, frame_time_s, omega_steps, channel_weights, num_
         coef = coef[jnp.asarray(keep)]
 
     offset, amplitude, phase = _model_arrays_from_coef(mean, coef, N)
-    result = clip_status(raw, w, cw, frame_time_s, om, N, MIN_CYCLES, _FLOOR_TOLERANCE)
+    result = clip_status(raw, w, cw, frame_time_s, om, N, MIN_CYCLES, _FLOOR_TOLERANCE,
+                         omega_steps)
     return dict(offset=offset, amplitude=amplitude, phase=phase, omega=om,
                 omega_spectral=omega_spec, omega_steps=omega_steps, omega_guess=omega_guess,
                 **_fit_metrics(sse_c, xwx, cw, n_valid), result=result)

@@ -77,9 +77,9 @@ def root_pose(motion) -> tuple[np.ndarray, np.ndarray]:
     for k, c in enumerate(chans):
         if c.endswith("position"):
             pos[:, _AXES.index(c[0])] = motion.channels[:, base + k]
-    rot = [base + k for k, c in enumerate(chans) if c.endswith("rotation")]
+    idx = [base + k for k, c in enumerate(chans) if c.endswith("rotation")]
     order = topo.rotation_orders[0]
     if order is None or len(order) != 3:
         raise UserError(f"root joint {topo.names[0]!r} needs 3 rotation channels, got {chans}")
-    q = rot("quat_from_euler", np.radians(motion.channels[:, rot]), order=order)
+    q = rot("quat_from_euler", np.radians(motion.channels[:, idx]), order=order)
     return pos, q

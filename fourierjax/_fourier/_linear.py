@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
@@ -170,6 +171,15 @@ def fit_linear(
         raise UserError(f"{fn}: omega must be finite (rad/s), got {float(omega)}")
     features = jnp.asarray(features)
     w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
+    # The host checks above cannot read traced values: those are refused at run time instead.
+    if _is_traced(features, mask):
+        bad = jnp.any(~jnp.isfinite(features) & (w[:, None] > 0))
+        features = eqx.error_if(features, bad, f"{fn}: features hold NaN or infinite values in "
+                                "frames the fit uses; leave such frames out with mask=")
+    if _is_traced(t_s):
+        t_s = eqx.error_if(t_s, ~jnp.all(jnp.isfinite(t_s)), f"{fn}: t_s holds NaN or infinite times")
+    if _is_traced(omega):
+        omega = eqx.error_if(omega, ~jnp.isfinite(omega), f"{fn}: omega must be finite (rad/s)")
     if mask is not None:
         # Frames left out may hold NaN (as in `fit`): 0 * NaN would poison the weighted sums.
         features = jnp.where(w[:, None] > 0, features, jnp.zeros((), features.dtype))

@@ -9,7 +9,7 @@ from jaxtyping import Array, Bool, Float
 from fourierjax._fourier._linear import _masked_mean
 from fourierjax._fourier._model import FourierModel
 from fourierjax._fourier._synthesis import synthesize
-from fourierjax._fourier._validate import _check_frame_time, _check_one_model
+from fourierjax._fourier._validate import _check_one_model, _guard_frame_time
 from fourierjax._linalg import matmul as _mm
 from fourierjax.errors import UserError
 
@@ -88,7 +88,7 @@ def amplitude_spectrum(
     x = jnp.asarray(features)
     if x.ndim < 1 or x.shape[0] < 1:
         raise UserError(f"{fn}: features must be [T, C] with T >= 1, got shape {x.shape}")
-    _check_frame_time(fn, frame_time_s)
+    frame_time_s = _guard_frame_time(fn, frame_time_s)
     T = x.shape[0]
     c = jnp.fft.rfft(x, axis=0) / T
     k = np.arange(T // 2 + 1)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from fourierjax._checks import integer
 from fourierjax._fourier._linear import _masked_mean
-from fourierjax._fourier._validate import _check_frame_time, _is_traced
+from fourierjax._fourier._validate import _guard_frame_time, _is_traced
 from fourierjax._linalg import matmul as _mm
 from fourierjax.errors import UserError
 
@@ -51,7 +52,19 @@ def spectral_omega(
     if not _is_traced(f_min_hz, f_max_hz) and not f_min_hz < f_max_hz:
         raise UserError(f"{fn}: the band f_min_hz={f_min_hz} .. f_max_hz={f_max_hz} Hz is empty")
     pad_factor = integer(pad_factor, f"{fn}: pad_factor", 1)
-    _check_frame_time(fn, frame_time_s)
+    frame_time_s = _guard_frame_time(fn, frame_time_s)
+    if _is_traced(f_min_hz, f_max_hz):
+        frame_time_s = eqx.error_if(frame_time_s, ~(jnp.asarray(f_min_hz) < f_max_hz),
+                                    f"{fn}: the band f_min_hz .. f_max_hz is empty")
+    return _spectral_omega(features, frame_time_s, mask, channel_weights, f_min_hz, f_max_hz,
+                           pad_factor)
+
+
+def _spectral_omega(features, frame_time_s, mask, channel_weights, f_min_hz, f_max_hz,
+                    pad_factor=8):
+    """`spectral_omega` without its argument checks (the fit's own copy: its checks come from
+    `fit` and the per-clip status)."""
+    T, C = features.shape
     w = jnp.ones((T,), features.dtype) if mask is None else jnp.asarray(mask, features.dtype)
     cw = jnp.ones((C,), features.dtype) if channel_weights is None else channel_weights
     # The window spans the used frames, first to last: a mask that leaves out the start of a

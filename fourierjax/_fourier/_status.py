@@ -18,6 +18,8 @@ class FitStatus(enum.IntEnum):
     CONSTANT = 3
     NONFINITE = 4
     BAD_FRAME_TIME = 5
+    ON_SEARCH_FLOOR = 6
+    BAD_WEIGHTS = 7
 
     @property
     def message(self) -> str:
@@ -30,12 +32,16 @@ _MESSAGES = {
     FitStatus.TOO_SHORT: "too few used frames for the number of harmonics (2N + 1 coefficients "
                          "per channel, plus omega)",
     FitStatus.TOO_FEW_CYCLES: "the used frames cover fewer than MIN_CYCLES (0.95) cycles of the "
-                              "fitted fundamental, or the fit ends on the search's floor; give a "
-                              "longer clip (at least one whole cycle)",
+                              "fitted fundamental; give a longer clip (at least one whole cycle)",
+    FitStatus.ON_SEARCH_FLOOR: "the least-squares fundamental lies on the lowest frequency the "
+                               "used frames cover MIN_CYCLES (0.95) times, and the residual falls "
+                               "further below it; give a longer clip (at least one whole cycle)",
     FitStatus.CONSTANT: "features are constant over the used frames on every weighted channel: no "
                         "fundamental frequency to fit",
     FitStatus.NONFINITE: "features hold NaN or infinite values in frames the fit uses",
     FitStatus.BAD_FRAME_TIME: "frame_time_s is not positive and finite",
+    FitStatus.BAD_WEIGHTS: "mask holds negative or NaN weights, omega_steps is not positive (NaN: "
+                           "unknown), or channel_weights are negative, NaN or all zero",
 }
 
 #: Messages by code, for `equinox.branched_error_if`.
@@ -51,6 +57,7 @@ def clip_status(
     num_harmonics: int,
     min_cycles: float,
     floor_tolerance: float,
+    omega_steps: Float[Array, ""],
 ) -> Int[Array, ""]:
     """`FitStatus` code of one clip from its raw features (before masked frames are zeroed) and
     its fitted omega; traceable, so the checks hold under jit and vmap. The first failing check
@@ -59,7 +66,8 @@ def clip_status(
     Arguments:
         features: the clip's samples; w: frame weights (0: left out); channel_weights: the ω
             search's weights; frame_time_s: seconds; omega: the fitted fundamental (rad/s);
-        num_harmonics: N; min_cycles, floor_tolerance: the cycle rule of `fit`.
+        num_harmonics: N; min_cycles, floor_tolerance: the cycle rule of `fit`;
+        omega_steps: the step-based ω (NaN: unknown).
 
     Returns:
         int32 scalar.
@@ -77,12 +85,18 @@ def clip_status(
     first = jnp.argmax(used)
     last = used.shape[0] - 1 - jnp.argmax(used[::-1])
     cycles = (last - first + 1).astype(omega.dtype) * frame_time_s * omega / (2 * np.pi)
-    few_cycles = ~(cycles >= min_cycles * (1 + floor_tolerance))
+    few_cycles = ~(cycles >= min_cycles)
+    on_floor = ~(cycles >= min_cycles * (1 + floor_tolerance))
+    bad_weights = (~jnp.all(jnp.isfinite(w) & (w >= 0))
+                   | ~(jnp.isnan(omega_steps) | (jnp.isfinite(omega_steps) & (omega_steps > 0)))
+                   | ~jnp.all(jnp.isfinite(channel_weights) & (channel_weights >= 0))
+                   | ~jnp.any(channel_weights > 0))
     code = jnp.int32(FitStatus.SUCCESSFUL)
     # Later checks first, so that the earlier (more basic) ones overwrite them.
-    for flag, status in ((few_cycles, FitStatus.TOO_FEW_CYCLES), (constant, FitStatus.CONSTANT),
+    for flag, status in ((on_floor, FitStatus.ON_SEARCH_FLOOR),
+                         (few_cycles, FitStatus.TOO_FEW_CYCLES), (constant, FitStatus.CONSTANT),
                          (nonfinite, FitStatus.NONFINITE), (too_short, FitStatus.TOO_SHORT),
-                         (bad_dt, FitStatus.BAD_FRAME_TIME)):
+                         (bad_dt, FitStatus.BAD_FRAME_TIME), (bad_weights, FitStatus.BAD_WEIGHTS)):
         code = jnp.where(flag, jnp.int32(status), code)
     return code
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -46,6 +47,17 @@ def _check_frame_time(fn: str, frame_time_s) -> np.ndarray | None:
         got = dt.tolist() if dt.size <= 8 else f"{dt.size} values, {bad} of them bad"
         raise UserError(f"{fn}: frame_time_s must be positive seconds, got {got}")
     return dt
+
+
+def _guard_frame_time(fn: str, frame_time_s):
+    """`_check_frame_time` that also holds under jit: a traced frame time is refused at run
+    time (`equinox.error_if`). Returns ``frame_time_s`` (guarded when traced)."""
+    if not _is_traced(frame_time_s):
+        _check_frame_time(fn, frame_time_s)
+        return frame_time_s
+    dt = jnp.asarray(frame_time_s)
+    return eqx.error_if(dt, ~jnp.all(jnp.isfinite(dt) & (dt > 0)),
+                        f"{fn}: frame_time_s must be positive seconds")
 
 
 def _as_float_features(fn: str, features):
