@@ -120,7 +120,7 @@ def test_value_checks_hold_under_jit():
     with pytest.raises(Exception, match="frame_time_s must be positive"):
         jax.block_until_ready(jax.jit(lambda dt: F.spectral_omega(x, dt)[0])(jnp.float32(-1.0)))
     with pytest.raises(Exception, match="frame_time_s must be positive"):
-        jax.block_until_ready(jax.jit(lambda dt: F.amplitude_spectrum(x, dt)[1])(jnp.float32(0.0)))
+        jax.block_until_ready(jax.jit(lambda dt: F.amplitude_spectrum(x, dt)[0])(jnp.float32(0.0)))
     t = jnp.arange(T) * DT
     with pytest.raises(Exception, match="omega must be finite"):
         jax.block_until_ready(jax.jit(lambda om: F.fit_linear(x, t, om, 2).amplitude)(
@@ -150,3 +150,11 @@ def test_channel_model_refuses_a_traced_nonpositive_omega():
     assert float(f(jnp.float32(6.0))) == 6.0
     with pytest.raises(Exception, match="omega must be > 0"):
         jax.block_until_ready(f(jnp.float32(0.0)))
+
+
+def test_nan_under_jit_is_refused_when_only_the_model_is_kept():
+    x = _features()
+    x[9, 1] = np.inf
+    f = jax.jit(lambda a: F.fit(a, DT, N, grid_points=9, golden_iterations=10).model.amplitude)
+    with pytest.raises(Exception, match="NaN or infinite"):
+        jax.block_until_ready(f(jnp.asarray(x)))

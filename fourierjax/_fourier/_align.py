@@ -74,6 +74,3 @@ def channel_event_phase(model: FourierModel, channel: int) -> Float[Array, ""]:
         channel = eqx.error_if(channel, (channel < -C) | (channel >= C),
                                f"{fn}: channel out of range for a model of {C} channel(s)")
     return wrap_angle(jnp.pi / 2 - model.phase[channel, 0])
-
-
-# --------------------------------------------------------------------------------- metrics

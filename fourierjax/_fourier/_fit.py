@@ -321,9 +321,13 @@ def fit(
 
     Arguments:
         features: ``[T, C]`` channel samples (frame 0 at t = 0); frame_time_s: seconds;
-        num_harmonics: N; mask: ``[T]`` frames to use; omega_steps: ω from step events (rad/s).
+        num_harmonics: N; mask: ``[T]`` frames to use; omega_steps: ω from step events (rad/s);
+        kwargs: the options of :func:`fit_batch`, ``throw`` included (default True: a clip that
+        cannot be fitted raises; False: its ``result`` says why).
+
     Returns:
         FitResult (no batch axis).
+
     Raises:
         UserError naming the argument, as :func:`fit_batch`.
     """
@@ -361,9 +365,9 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
         # in-graph status refuses the same clips at run time.
         bad = result.result != FitStatus.SUCCESSFUL
         first = jnp.ravel(result.result)[jnp.argmax(jnp.ravel(bad))]
-        omega = eqx.branched_error_if(result.omega_fit, jnp.any(bad), first,
-                                      tuple(f"{name}: {m}" for m in MESSAGES))
-        return eqx.tree_at(lambda r: r.omega_fit, result, omega)
+        # Every leaf is guarded: a caller that keeps only `model` still gets the check.
+        return eqx.branched_error_if(result, jnp.any(bad), first,
+                                     tuple(f"{name}: {m}" for m in MESSAGES))
     _check_cycles(name, features.shape[-2], mask, frame_time_s, result.omega_fit)
     _check_status(name, result.result)
     return result
@@ -419,6 +423,3 @@ def _check_cycles(name, num_frames, mask, frame_time_s, omega) -> None:
             f"{name}:{where} {what}: with less than one period in view the frequency is not "
             "determined by the data; give a longer clip (at least one whole cycle)"
         )
-
-
-# ---------------------------------------------------------------------------- phase alignment

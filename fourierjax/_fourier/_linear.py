@@ -189,6 +189,3 @@ def fit_linear(
                                      num_harmonics)
     offset, amplitude, phase = _model_arrays_from_coef(mean, coef, num_harmonics)
     return FourierModel(offset, amplitude, phase, omega, representation, tuple(channel_names))
-
-
-# -------------------------------------------------------------------------- fundamental frequency
