@@ -349,6 +349,7 @@ def fit_motions(
     segment: bool = True,
     use_contacts: bool = True,
     dtype=None,
+    throw: bool = False,
     **fit_kwargs,
 ) -> list[ClipFit]:
     """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
@@ -364,7 +365,10 @@ def fit_motions(
     Arguments:
         motions: a sequence of Motions (e.g. after dropping a rest frame).
         num_harmonics: N; representation: "euler" | "expmap".
+        throw: raise a UserError (the first failed clip's message, naming its file) after the
+            fit instead of returning failed clips.
         fit_kwargs: passed on to ``fit_batch`` (search band, grid...).
+
     Returns:
         One :class:`ClipFit` per motion, in order. A clip that cannot be fitted (e.g. too short
         for a cycle) does not stop the others: its ``result`` and ``message`` say why.
@@ -443,4 +447,8 @@ def fit_motions(
                 right_heel_strikes=tuple(int(v) for v in right),
                 masked_frames=int(np.sum(~keep)), result=status.name.lower(), message=message,
             )
+    failed = [r for r in results if r is not None and not r.successful]
+    if throw and failed:
+        more = f" (and {len(failed) - 1} other clip(s))" if len(failed) > 1 else ""
+        raise UserError(failed[0].message + more)
     return results  # type: ignore[return-value]

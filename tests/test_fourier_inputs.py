@@ -1,6 +1,6 @@
 """Input checks of fourierjax.fourier: degenerate or malformed input is a UserError naming the
-argument (before any work), not a silent garbage result or a raw JAX error; traced inputs skip
-the value checks."""
+argument (before any work), not a silent garbage result or a raw JAX error; traced inputs pass
+the host checks and are checked at run time instead (tests/test_fit_status.py)."""
 
 import re
 

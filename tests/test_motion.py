@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from fourierjax import data, fourier
 from fourierjax import motion as M
+from fourierjax.errors import UserError
 from fourierjax.kinematics import fk_frames
 
 CMU_MB = ("02_01", "02_03", "07_01", "07_04", "07_12", "09_01", "09_02")
@@ -527,3 +528,6 @@ def test_fit_motions_one_short_clip_does_not_stop_the_others(motions):
     assert "short_clip.bvh" in fits[2].message and "clip 2" in fits[2].message
     assert fits[0].message == ""
     np.testing.assert_allclose(fits[0].omega_fit, ref.omega_fit, rtol=1e-5)
+    with pytest.raises(UserError,
+                       match=r"clip 2 \(short_clip\.bvh\)"):
+        M.fit_motions([a[0:300], b[0:300], short], 3, "euler", segment=False, throw=True)
