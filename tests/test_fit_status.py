@@ -158,3 +158,26 @@ def test_nan_under_jit_is_refused_when_only_the_model_is_kept():
     f = jax.jit(lambda a: F.fit(a, DT, N, grid_points=9, golden_iterations=10).model.amplitude)
     with pytest.raises(Exception, match="NaN or infinite"):
         jax.block_until_ready(f(jnp.asarray(x)))
+
+
+def test_fit_compiles_once_for_python_float_frame_times_and_steps():
+    """filter_jit makes every non-array argument static: the frame time and step ω given as
+    Python floats must reach it as arrays, or each value would compile a program of its own."""
+    from jax import monitoring
+
+    count = []
+
+    def listen(event, duration_secs, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            count.append(event)
+
+    x = _features(T=96)
+    kw = dict(grid_points=7, golden_iterations=6)
+    F.fit(x, 1 / 60, 2, omega_steps=6.0, **kw)  # compiled here (or by an earlier test)
+    monitoring.register_event_duration_secs_listener(listen)
+    try:
+        for dt, om in ((1 / 50, 5.0), (1 / 70, 7.0), (1 / 65, 6.5)):
+            F.fit(x, dt, 2, omega_steps=om, **kw)
+    finally:
+        monitoring.unregister_event_duration_listener(listen)
+    assert count == []
