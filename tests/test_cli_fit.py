@@ -90,3 +90,21 @@ def test_user_mistakes_exit_2_with_one_line(fitted, tmp_path, args, message):
     assert message in r.stderr
     assert r.stderr.startswith("fourierjax: error:") and r.stderr.count("\n") == 1
     assert "Traceback" not in r.stderr
+
+
+def test_fit_folder_with_one_short_clip_fits_the_others(tmp_path):
+    from fourierjax.io.bvh import read_bvh, write_bvh
+
+    folder = tmp_path / "clips"
+    folder.mkdir()
+    for name in ("02_01", "07_12"):
+        (folder / f"{name}.bvh").write_bytes(data.path(name).read_bytes())
+    m = read_bvh(data.path("07_12"))
+    write_bvh(m[100:130], folder / "short.bvh")  # 30 frames: well under one gait cycle
+    out = tmp_path / "models"
+    r = _run("fit", str(folder), "--harmonics", "3", "--all-frames", "--out", str(out))
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    errors = [line for line in r.stderr.splitlines() if line.startswith("fourierjax: error:")]
+    assert len(errors) == 1 and "short.bvh" in errors[0], r.stderr
+    assert r.stderr.rstrip().splitlines()[-1] == "fourierjax: fitted 2 of 3 clips; 1 failed"
+    assert sorted(p.name for p in out.iterdir()) == ["02_01.npz", "07_12.npz"]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fourierjax import fourier as F
+from fourierjax._linalg import spd_solve
 
 
 def _model(rng, C=5, N=3, omega=2 * np.pi * 1.1, fundamental_scale=3.0, names=()):
@@ -53,15 +54,15 @@ def test_cosine_convention_and_style_vector(x64):
     assert np.all(np.asarray(phc) > -np.pi) and np.all(np.asarray(phc) <= np.pi)
     back = F.FourierModel.from_cosine(off, amp, phc, m.omega)
     np.testing.assert_allclose(back.phase, m.phase, atol=1e-12)
-    v = m.style_vector()
+    v = m.tilmanne_vector()
     assert v.shape == (271,)  # Tilmanne: 54 channels x 5 + omega
     assert float(v[-1]) == float(m.omega) and float(v[0]) == float(m.offset[0])
     for conv in ("sine", "cosine"):
-        r = F.FourierModel.from_style_vector(m.style_vector(conv), 54, 2, convention=conv)
+        r = F.FourierModel.from_tilmanne_vector(m.tilmanne_vector(conv), 54, 2, convention=conv)
         np.testing.assert_allclose(r.amplitude, m.amplitude, atol=1e-12)
         np.testing.assert_allclose(F.wrap_angle(r.phase - m.phase), 0, atol=1e-12)
     with pytest.raises(ValueError, match="vector shape"):
-        F.FourierModel.from_style_vector(v[:-1], 54, 2)
+        F.FourierModel.from_tilmanne_vector(v[:-1], 54, 2)
 
 
 def test_model_validation():
@@ -248,7 +249,7 @@ def test_spd_solve_matches_numpy(x64):
         A = rng.normal(size=(4, P, P))
         G = A @ np.swapaxes(A, -1, -2) + 0.1 * np.eye(P)
         rhs = rng.normal(size=(4, P, 5))
-        got = jax.vmap(F._spd_solve)(jnp.asarray(G), jnp.asarray(rhs))
+        got = jax.vmap(spd_solve)(jnp.asarray(G), jnp.asarray(rhs))
         np.testing.assert_allclose(got, np.linalg.solve(G, rhs), rtol=1e-9, atol=1e-11)
 
 

@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from fourierjax import data, fourier
 from fourierjax import motion as M
+from fourierjax.errors import UserError
 from fourierjax.kinematics import fk_frames
 
 CMU_MB = ("02_01", "02_03", "07_01", "07_04", "07_12", "09_01", "09_02")
@@ -511,3 +512,22 @@ def test_hip_flexion_fallback_lands_near_the_heel_strike(fits, motions):
         nm = motions[n].topology.names
         p = M.model_joint_positions(f.model, motions[n].skeleton(), np.zeros(1))
         assert p[0, nm.index("LeftLeg"), 2] > p[0, nm.index("LeftUpLeg"), 2], n
+
+
+def test_fit_motions_one_short_clip_does_not_stop_the_others(motions):
+    """A clip too short for a cycle gets its status and a message naming its file; the
+    others (in the same channel-layout group, the short one not first) are fitted."""
+    import dataclasses
+
+    a, b = motions["02_01"], motions["07_12"]
+    short = dataclasses.replace(b[100:130], source="short_clip.bvh")
+    ref = M.fit_motions([a[0:300]], 3, "euler", segment=False)[0]
+    fits = M.fit_motions([a[0:300], b[0:300], short], 3, "euler", segment=False)
+    assert [f.result for f in fits] == ["successful", "successful", "too_few_cycles"]
+    assert fits[0].successful and not fits[2].successful
+    assert "short_clip.bvh" in fits[2].message and "clip 2" in fits[2].message
+    assert fits[0].message == ""
+    np.testing.assert_allclose(fits[0].omega_fit, ref.omega_fit, rtol=1e-5)
+    with pytest.raises(UserError,
+                       match=r"clip 2 \(short_clip\.bvh\)"):
+        M.fit_motions([a[0:300], b[0:300], short], 3, "euler", segment=False, throw=True)

@@ -13,7 +13,8 @@ HELP = "Fit Fourier gait models (Unuma eq. 1) to BVH clips: fundamental three wa
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE",
-                        help="BVH files, or names of bundled clips (e.g. 07_12)")
+                        help="BVH files, folders of them (every *.bvh inside), or names of "
+                        "bundled clips (e.g. 07_12)")
     parser.add_argument("--harmonics", required=True, type=int, metavar="N",
                         help="number of harmonics N (Tilmanne: 2; Unuma: 3 to 7)")
     parser.add_argument("--representation", default="euler", choices=("euler", "expmap"),
@@ -87,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--harmonics: must be between 1 and 32, got {args.harmonics}")
     out = None if args.out is None else pathlib.Path(args.out)
     # "--out models/" names a folder even for one clip (it wrote a model file called "models").
-    to_folder = len(args.files) > 1 or (args.out is not None and args.out.endswith(("/", os.sep)))
+    to_folder = (len(args.files) > 1 or any(pathlib.Path(f).is_dir() for f in args.files)
+                 or (args.out is not None and args.out.endswith(("/", os.sep))))
     if out is not None:
         if to_folder:
             if out.exists() and not out.is_dir():
@@ -96,19 +98,32 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--out: {out} is a directory; give a model file name (.npz)")
         elif not out.parent.exists():
             raise UserError(f"--out: {out.parent}: no such directory")
-    paths = [resolve_input(f) for f in args.files]
+    files = _expand_folders(args.files)
+    paths = [resolve_input(f) for f in files]
     if out is not None and to_folder:
         seen: dict[str, str] = {}
-        for text, path in zip(args.files, paths, strict=True):
+        for text, path in zip(files, paths, strict=True):
             if path.stem in seen:  # one would overwrite the other's model
                 raise UserError(f"--out: {seen[path.stem]} and {text} would both be written to "
                                 f"{out / (path.stem + '.npz')}; fit them into separate folders")
             seen[path.stem] = text
-    loaded = [_load(p, args.start_frame) for p in paths]
-    fits = fit_motions([m for m, _ in loaded], args.harmonics, args.representation,
-                       segment=not args.all_frames)
+    # One clip that cannot be read or fitted does not stop the others (reported at the end).
+    failed: list[str] = []
+    loaded = []
+    for text, p in zip(files, paths, strict=True):
+        try:
+            loaded.append((text, p, *_load(p, args.start_frame)))
+        except UserError as err:
+            if len(files) == 1:
+                raise
+            failed.append(f"{text}: {err}")
+    fits = fit_motions([m for _, _, m, _ in loaded], args.harmonics, args.representation,
+                       segment=not args.all_frames) if loaded else []
     rows = []
-    for text, path, (motion, skip), fit in zip(args.files, paths, loaded, fits, strict=True):
+    for (text, path, motion, skip), fit in zip(loaded, fits, strict=True):
+        if not fit.successful:
+            failed.append(f"{text}: {fit.message}")
+            continue
         row = {"file": text, "path": str(path)}
         row.update(fit.summary())
         row.pop("source", None)
@@ -128,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
             row["model"] = str(target)
     if args.json:
         print(json.dumps(rows))
-        return 0
+        return _report_failures(failed, len(files))
     head = (f"{'file':<28} {'frames':>11} {'f_spec':>7} {'f_step':>7} {'f_fit':>7} "
             f"{'rms_deg':>8} {'VE_ang':>7} {'VE_pos':>7}  aligned to")
     print(head)
@@ -141,4 +156,24 @@ def run(args: argparse.Namespace) -> int:
               f"{100 * r['variance_explained_positions']:6.1f}%  {r['alignment']}")
         if "model" in r:
             print(f"  wrote {r['model']}")
-    return 0
+    return _report_failures(failed, len(files))
+
+
+def _expand_folders(files: list[str]) -> list[str]:
+    """FILE arguments with each folder replaced by its ``*.bvh`` files (sorted)."""
+    out = []
+    for text in files:
+        path = pathlib.Path(text)
+        out += sorted(str(p) for p in path.glob("*.bvh")) if path.is_dir() else [text]
+    return out
+
+
+def _report_failures(failed: list[str], total: int) -> int:
+    """One stderr line per clip that failed and a summary; the exit status (1 if any failed)."""
+    if not failed:
+        return 0
+    for line in failed:
+        print(f"fourierjax: error: {line}", file=sys.stderr)
+    print(f"fourierjax: fitted {total - len(failed)} of {total} clips; {len(failed)} failed",
+          file=sys.stderr)
+    return 1

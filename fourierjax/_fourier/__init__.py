@@ -1,0 +1,1 @@
+"""Private implementation of `fourierjax.fourier` (import from there)."""

@@ -1,0 +1,425 @@
+"""`fit` and `fit_batch`: argument checks, the jitted batched program and the cycle check."""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from fourierjax import _jit
+from fourierjax._checks import integer
+from fourierjax._fourier._core import _fit_arrays
+from fourierjax._fourier._model import FourierModel
+from fourierjax._fourier._omega import _FLOOR_TOLERANCE, MIN_CYCLES, _used_range
+from fourierjax._fourier._status import MESSAGES, FitStatus, describe
+from fourierjax._fourier._validate import (
+    _as_array,
+    _as_float_features,
+    _check_finite_used,
+    _check_frame_time,
+    _check_mask_values,
+    _check_real,
+    _check_representation,
+    _check_varies,
+    _is_traced,
+    _used_frames,
+)
+from fourierjax.errors import UserError
+from fourierjax.features import angle_channel_mask
+
+
+class FitResult(eqx.Module):
+    """Outcome of :func:`fit` for one clip (all leaves; a batched fit has a leading axis).
+
+    ``model`` is the fitted model (omega = ``omega_fit``), before phase alignment; the ω
+    estimates are rad/s: ``omega_spectral`` (a), ``omega_steps`` (b; NaN if no step events were
+    given), ``omega_guess`` (the candidate after the subharmonic guard), ``omega_fit`` (c;
+    variable projection). Metrics cover the masked frames: ``rms`` per channel (channel units),
+    ``rms_deg`` (angle channels), ``variance_explained_angles``; ``num_frames`` used.
+    ``result`` is the clip's `FitStatus` code (0: successful); with ``throw=True`` (the default)
+    a fit that is not successful raises instead.
+    """
+
+    model: FourierModel
+    omega_spectral: Float[Array, ""]
+    omega_steps: Float[Array, ""]
+    omega_guess: Float[Array, ""]
+    omega_fit: Float[Array, ""]
+    rms: Float[Array, " C"]
+    rms_deg: Float[Array, ""]
+    variance_explained_angles: Float[Array, ""]
+    num_frames: Int[Array, ""]
+    result: Int[Array, ""]
+
+    @property
+    def successful(self) -> Bool[Array, ""]:
+        """True where the clip was fitted (``result == FitStatus.SUCCESSFUL``)."""
+        return self.result == FitStatus.SUCCESSFUL
+
+    def messages(self) -> list[str] | str:
+        """What went wrong per clip (``"fitted"`` for a successful one); concrete results only."""
+        return describe(self.result)
+
+
+def _fit_batched_impl(features, mask, frame_time_s, omega_steps, channel_weights, **static):
+    # Defaults, broadcasts and dtype casts happen here, inside the one compiled program: done
+    # eagerly, each would compile a small XLA program of its own on the first call.
+    Bn, T, C = features.shape
+    dtype = features.dtype
+    mask = jnp.ones((Bn, T), dtype) if mask is None else jnp.asarray(mask, dtype)
+    frame_time_s = jnp.broadcast_to(jnp.asarray(frame_time_s, dtype), (Bn,))
+    omega_steps = (jnp.full((Bn,), jnp.nan, dtype) if omega_steps is None
+                   else jnp.broadcast_to(jnp.asarray(omega_steps, dtype), (Bn,)))
+    cw = jnp.asarray(channel_weights, dtype)
+    fn = lambda f, m, dt, os: _fit_arrays(f, m, dt, os, cw, **static)  # noqa: E731
+    return jax.vmap(fn)(features, mask, frame_time_s, omega_steps)
+
+
+def _fit_single_impl(features, mask, frame_time_s, omega_steps, channel_weights, **static):
+    add = lambda v: None if v is None else jnp.asarray(v)[None]  # noqa: E731
+    out = _fit_batched_impl(features[None], add(mask), add(frame_time_s), add(omega_steps),
+                            channel_weights, **static)
+    return jax.tree.map(lambda v: v[0], out)
+
+
+# The static options (Python ints, floats) are static arguments of filter_jit; array values
+# (frame times, masks) reach it as arrays (`_check_fit_args`), so they never retrace.
+_fit_batched = _jit.filter_jit(_fit_batched_impl)
+_fit_single = _jit.filter_jit(_fit_single_impl)
+
+
+def _default_channel_weights(channel_names, num_channels):
+    # numpy, not jnp: a constant built eagerly by JAX would compile a program of its own.
+    if not channel_names:
+        return np.ones((num_channels,), np.float32)
+    return np.asarray(angle_channel_mask(channel_names), np.float32)
+
+
+def fit_batch(
+    features: Float[Array, "B T C"],
+    frame_time_s: Float[Array, " B"],
+    num_harmonics: int,
+    *,
+    mask: Bool[Array, "B T"] | None = None,
+    omega_steps: Float[Array, " B"] | None = None,
+    channel_weights: Float[Array, " C"] | None = None,
+    representation: str = "euler",
+    channel_names: tuple[str, ...] = (),
+    f_min_hz: float = 0.4,
+    f_max_hz: float = 3.0,
+    search_halfwidth: float = 0.25,
+    grid_points: int = 33,
+    golden_iterations: int = 40,
+    odd_threshold: float = 0.1,
+    throw: bool = True,
+) -> FitResult:
+    """Fit many clips in one jit/vmap call: ω three ways and the coefficients.
+
+    Clips of different lengths are padded at the end to a common ``T`` and flagged by ``mask``.
+    Per clip: (a) spectral ω (:func:`spectral_omega`), (b) ω from step events if given
+    (``omega_steps`` rad/s, NaN where unknown; Tilmanne §2.2: cycle = two steps), the
+    subharmonic guard, then (c) the nonlinear least-squares ω by variable projection (grid,
+    golden section on :func:`projected_residual`) and the closed-form coefficients.
+    ``channel_weights`` weigh channels in the ω search (default: 1 for rotations, 0 for ``root.*``).
+    Step-based ω picks ω_spectral / 2, ω_spectral or 2 ω_spectral when one lies within 25% of
+    it, and is used itself otherwise (the spectrum is then dominated by drift or style);
+    ``search_halfwidth`` is the relative half-width of the variable-projection search around the chosen candidate.
+    ``golden_iterations`` is an upper bound: steps that would only re-evaluate neighbouring
+    floats of ω are skipped (float32 with the defaults: 27 of 40). The search does not go
+    below the ω whose cycle the used frames cover ``MIN_CYCLES`` (0.95) times (a period longer
+    than the clip is not determined, and many harmonics fit it too well).
+
+    One XLA program per call signature (shapes, dtype, whether ``mask`` / ``omega_steps`` are
+    given, and the static options): batch sizes that differ compile separately, so pad batches
+    to a few fixed sizes when fitting many differently sized sets.
+
+    With ``throw=False`` a clip that cannot be fitted (too few used frames, NaN in used
+    frames, constant features, too few cycles: `FitStatus`) gets its code in ``result`` and
+    the other clips are fitted as usual; the argument errors below still raise. Under a
+    caller's jit, ``throw=True`` refuses such clips at run time (``equinox.error_if``).
+
+    Returns:
+        FitResult with a leading batch axis on every leaf.
+    Raises:
+        UserError naming the argument, before any work: features not ``[B, T, C]`` real numbers
+        (integers are cast to float) with ``C >= 1`` and ``T >= 2N + 2``; ``num_harmonics``,
+        ``grid_points`` (>= 2) or ``golden_iterations`` (>= 0) not integers; an unknown
+        ``representation``; an empty band (``f_min_hz >= f_max_hz``, or ``f_min_hz`` at or
+        above Nyquist); ``search_halfwidth <= 0``; bad shapes. For concrete (untraced) values
+        also: ``frame_time_s`` not positive; a mask leaving a clip fewer than 2N + 2 frames
+        (2N + 1 coefficients per channel, plus omega); NaN in used frames; a clip constant over
+        its used frames on every weighted channel (no fundamental to fit); ``omega_steps`` not
+        positive (NaN: unknown); ``channel_weights`` negative, NaN or all zero. After the
+        fit: a clip whose used frames cover fewer than ``MIN_CYCLES`` cycles of its fitted
+        fundamental, or whose fit ends on the search's floor (see above).
+    """
+    features = _as_array(features)
+    if features.ndim != 3:
+        raise UserError(f"fit_batch: features must be [B, T, C], got shape {features.shape}")
+    return _run_fit(_fit_batched, "fit_batch", features, frame_time_s, num_harmonics, mask=mask,
+                    omega_steps=omega_steps, channel_weights=channel_weights,
+                    representation=representation, channel_names=channel_names, f_min_hz=f_min_hz,
+                    f_max_hz=f_max_hz, search_halfwidth=search_halfwidth, grid_points=grid_points,
+                    golden_iterations=golden_iterations, odd_threshold=odd_threshold,
+                    throw=throw)
+
+
+def _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz, search_halfwidth,
+                       grid_points, golden_iterations, odd_threshold) -> dict:
+    """Checks of the static options of `fit` / `fit_batch` (before any work), naming the
+    argument. Returns them normalised (Python ints and floats)."""
+    num_harmonics = integer(num_harmonics, f"{name}: num_harmonics", 1)
+    _check_representation(name, representation)
+    f_min_hz = _check_real(name, "f_min_hz", f_min_hz)
+    f_max_hz = _check_real(name, "f_max_hz", f_max_hz)
+    if not (f_min_hz < f_max_hz and f_max_hz > 0):
+        raise UserError(f"{name}: the search band f_min_hz={f_min_hz} .. f_max_hz={f_max_hz} Hz "
+                        "is empty: expected f_min_hz < f_max_hz and f_max_hz > 0")
+    search_halfwidth = _check_real(name, "search_halfwidth", search_halfwidth)
+    if not (0 < search_halfwidth < math.inf):
+        raise UserError(f"{name}: search_halfwidth must be a finite relative half-width > 0 "
+                        f"(0.25: omega within [guess / 1.25, guess * 1.25]), got {search_halfwidth}")
+    return dict(num_harmonics=num_harmonics, f_min_hz=f_min_hz, f_max_hz=f_max_hz,
+                search_halfwidth=search_halfwidth,
+                grid_points=integer(grid_points, f"{name}: grid_points", 2),
+                golden_iterations=integer(golden_iterations, f"{name}: golden_iterations", 0),
+                odd_threshold=_check_real(name, "odd_threshold", odd_threshold))
+
+
+def _min_fit_frames(num_harmonics: int) -> int:
+    """Frames a fit needs: 2N + 1 linear coefficients per channel, plus omega."""
+    return 2 * num_harmonics + 2
+
+
+def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
+                    channel_weights):
+    """Trace-time checks naming the argument (``shape``: ``[B, T, C]`` or ``[T, C]``).
+
+    Returns ``(mask, frame_time_s, omega_steps, channel_weights)`` with Python scalars and lists
+    made numpy arrays (JAX arrays, sharded ones included, pass through untouched).
+    """
+    batch, (T, C) = tuple(shape[:-2]), shape[-2:]
+    if C == 0:
+        raise UserError(f"{name}: features have no channels (shape {tuple(shape)})")
+    need = _min_fit_frames(num_harmonics)
+    if T < need:
+        raise UserError(
+            f"{name}: features have {T} frame(s), fewer than the {need} a fit of "
+            f"{num_harmonics} harmonic(s) needs (2N + 1 coefficients per channel, plus omega)"
+        )
+    if channel_names and len(channel_names) != C:
+        raise UserError(f"{name}: {len(channel_names)} channel_names for {C} channels")
+    out = []
+    for arg, value, expected, exact in (("mask", mask, (*batch, T), True),
+                                         ("frame_time_s", frame_time_s, batch, False),
+                                         ("omega_steps", omega_steps, batch, False),
+                                         ("channel_weights", channel_weights, (C,), True)):
+        if value is not None:
+            value = _as_array(value)
+        if value is not None and (np.shape(value) != expected if exact else
+                                  not _broadcasts_to(np.shape(value), expected)):
+            raise UserError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}")
+        out.append(value)
+    return tuple(out)
+
+
+def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
+                      f_min_hz, channel_weights, per_clip: bool = True) -> None:
+    """Value checks where the values are known (not traced), each skipped when its value is
+    traced: frame times positive, with the band's f_min_hz below Nyquist; the mask booleans
+    (or weights >= 0) leaving at least 2N + 2 frames per clip; the frames the fit uses finite
+    (frames left out by ``mask`` may hold NaN) and not constant on every weighted channel;
+    ``omega_steps`` positive or NaN (unknown). A JAX
+    array is read back to the host for this (zero-copy on CPU; small arrays but ``features``)."""
+    dt = _check_frame_time(name, frame_time_s)
+    if dt is not None:
+        nyquist = 0.5 / np.max(dt)
+        if f_min_hz >= nyquist:
+            raise UserError(f"{name}: f_min_hz={f_min_hz} is not below the Nyquist frequency "
+                            f"{nyquist:g} Hz of frame_time_s: the search band holds no frequency")
+    if mask is not None and not _is_traced(mask):
+        mask = np.asarray(mask)  # read back once (JAX arrays: zero-copy on CPU)
+        _check_mask_values(name, mask)
+        used = np.atleast_1d(_used_frames(mask))
+        need = _min_fit_frames(num_harmonics)
+        few = np.flatnonzero(used < need)
+        if few.size and per_clip:
+            i = int(few[0])
+            where = "" if np.ndim(mask) == 1 else f" in clip {i}" + (
+                f" (and {few.size - 1} other clip(s))" if few.size > 1 else "")
+            raise UserError(
+                f"{name}: mask leaves {int(used[i])} used frame(s){where}, fewer than the {need} "
+                f"a fit of {num_harmonics} harmonic(s) needs (2N + 1 coefficients per channel, "
+                "plus omega)"
+            )
+    if omega_steps is not None and not _is_traced(omega_steps):
+        om = np.asarray(omega_steps, float)
+        bad = ~(np.isnan(om) | (np.isfinite(om) & (om > 0)))
+        if bad.any():
+            raise UserError(
+                f"{name}: omega_steps must be positive rad/s, or NaN where no step events are "
+                f"known; got {float(om[bad].ravel()[0])}"
+                + (f" at index {int(np.flatnonzero(bad.ravel())[0])}" if om.ndim else "")
+            )
+    if per_clip and not _is_traced(features, mask):  # last: the checks that read all of the features
+        _check_finite_used(name, features, mask)
+        if not _is_traced(channel_weights):
+            _check_varies(name, features, mask, channel_weights)
+
+
+def _check_channel_weights(name, channel_weights, defaulted: bool) -> None:
+    """Concrete channel weights must be finite, >= 0 and not all zero (they weigh the omega
+    search: all zero, nothing drives it)."""
+    if _is_traced(channel_weights):
+        return
+    try:
+        cw = np.asarray(channel_weights, float)
+    except (TypeError, ValueError):
+        raise UserError(f"{name}: channel_weights must be real numbers, got dtype "
+                        f"{np.asarray(channel_weights).dtype}") from None
+    bad = ~(np.isfinite(cw) & (cw >= 0))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise UserError(f"{name}: channel_weights must be finite and >= 0, got {float(cw[i])} for "
+                        f"channel {i}")
+    if not (cw > 0).any():
+        hint = (" (by default only rotation channels are weighed, and every channel in "
+                "channel_names is root.*: pass channel_weights=)") if defaulted else ""
+        raise UserError(f"{name}: channel_weights are all zero, so no channel drives the omega "
+                        f"search{hint}")
+
+
+def _broadcasts_to(shape, target) -> bool:
+    try:
+        return np.broadcast_shapes(shape, target) == tuple(target)
+    except ValueError:
+        return False
+
+
+def _fit_result(out, representation, channel_names) -> FitResult:
+    model = FourierModel(out["offset"], out["amplitude"], out["phase"], out["omega"],
+                         representation, tuple(channel_names))
+    return FitResult(model, out["omega_spectral"], out["omega_steps"], out["omega_guess"],
+                     out["omega"], out["rms"], out["rms_deg"],
+                     out["variance_explained_angles"], out["num_frames"], out["result"])
+
+
+def fit(
+    features: Float[Array, "T C"],
+    frame_time_s: float,
+    num_harmonics: int,
+    *,
+    mask: Bool[Array, " T"] | None = None,
+    omega_steps: float | None = None,
+    **kwargs,
+) -> FitResult:
+    """Fit one clip (``fit_batch`` with a batch of one; same arguments without the batch axis).
+
+    Arguments:
+        features: ``[T, C]`` channel samples (frame 0 at t = 0); frame_time_s: seconds;
+        num_harmonics: N; mask: ``[T]`` frames to use; omega_steps: ω from step events (rad/s);
+        kwargs: the options of :func:`fit_batch`, ``throw`` included (default True: a clip that
+        cannot be fitted raises; False: its ``result`` says why).
+
+    Returns:
+        FitResult (no batch axis).
+
+    Raises:
+        UserError naming the argument, as :func:`fit_batch`.
+    """
+    features = _as_array(features)
+    if features.ndim != 2:
+        raise UserError(f"fit: features must be [T, C], got shape {features.shape}")
+    return _run_fit(_fit_single, "fit", features, frame_time_s, num_harmonics, mask=mask,
+                    omega_steps=omega_steps, **kwargs)
+
+
+def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None, omega_steps=None,
+             channel_weights=None, representation="euler", channel_names=(), f_min_hz=0.4,
+             f_max_hz=3.0, search_halfwidth=0.25, grid_points=33, golden_iterations=40,
+             odd_threshold=0.1, throw=True) -> FitResult:
+    """Check the arguments of `fit` / `fit_batch` (`name`) and run its jitted `program`."""
+    options = _check_fit_options(name, num_harmonics, representation, f_min_hz, f_max_hz,
+                                 search_halfwidth, grid_points, golden_iterations, odd_threshold)
+    num_harmonics = options["num_harmonics"]
+    features = _as_float_features(name, features)
+    mask, frame_time_s, omega_steps, channel_weights = _check_fit_args(
+        name, features.shape, num_harmonics, channel_names, mask, frame_time_s, omega_steps,
+        channel_weights)
+    defaulted = channel_weights is None
+    if defaulted:
+        channel_weights = _default_channel_weights(channel_names, features.shape[-1])
+    _check_channel_weights(name, channel_weights, defaulted)
+    _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
+                      options["f_min_hz"], channel_weights, per_clip=throw)
+    out = program(features, mask, frame_time_s, omega_steps, channel_weights, **options)
+    result = _fit_result(out, representation, channel_names)
+    if not throw:
+        return result
+    if _is_traced(result.result):
+        # Under the caller's jit the host checks above could not read the values: the
+        # in-graph status refuses the same clips at run time.
+        bad = result.result != FitStatus.SUCCESSFUL
+        first = jnp.ravel(result.result)[jnp.argmax(jnp.ravel(bad))]
+        # Every leaf is guarded: a caller that keeps only `model` still gets the check.
+        return eqx.branched_error_if(result, jnp.any(bad), first,
+                                     tuple(f"{name}: {m}" for m in MESSAGES))
+    _check_cycles(name, features.shape[-2], mask, frame_time_s, result.omega_fit)
+    _check_status(name, result.result)
+    return result
+
+
+def _check_status(name, result) -> None:
+    """Refuse a concrete result that the host checks let through, naming the first clip."""
+    codes = np.atleast_1d(np.asarray(result))
+    bad = np.flatnonzero(codes != FitStatus.SUCCESSFUL)
+    if bad.size:
+        i = int(bad[0])
+        where = "" if np.ndim(result) == 0 else f" clip {i}" + (
+            f" (and {bad.size - 1} other clip(s))" if bad.size > 1 else "") + ":"
+        raise UserError(f"{name}:{where} {FitStatus(int(codes[i])).message}")
+
+
+#: Fewest cycles of its fitted fundamental a clip must cover. With less than one period in
+#: view the period is not identified: a 0.9 Hz signal cut to 0.37 of a cycle was fitted at
+#: 1.85 Hz with 0.9999 of the variance explained, and the first 0.5 s of 07_01 at 1.58 Hz
+#: (0.93 for the whole clip). One whole cycle sampled without its repeated end frame covers
+#: exactly 1; the 5% leeway is for a fitted omega a little off. Where the spectral / step guess
+#: covers more, the least-squares search does not go below it (`_omega_floor`), and an answer on
+
+
+def _check_cycles(name, num_frames, mask, frame_time_s, omega) -> None:
+    """Refuse fits whose clips cover fewer than `MIN_CYCLES` of their fitted fundamental: the
+    span of used frames (first to last) times the frame time, times omega / 2 pi (concrete
+    values only)."""
+    if _is_traced(mask, frame_time_s, omega):
+        return
+    omega = np.asarray(omega, float)
+    if mask is None:
+        span = np.full(omega.shape, float(num_frames))
+    else:
+        first, last = _used_range(np.asarray(mask) > 0, np)
+        span = (last - first + 1).astype(float)
+    cycles = span * np.broadcast_to(np.asarray(frame_time_s, float), omega.shape) * omega / (2 * np.pi)
+    short = np.flatnonzero(np.atleast_1d(cycles < MIN_CYCLES * (1 + _FLOOR_TOLERANCE)))
+    if short.size:
+        i = int(short[0])
+        c, om = float(np.atleast_1d(cycles)[i]), float(np.atleast_1d(omega)[i])
+        others = ", ".join(str(int(j)) for j in short[1:11]) + (", ..." if short.size > 11 else "")
+        where = "" if omega.ndim == 0 else f" clip {i}" + (
+            f" (and {short.size - 1} other clip(s): {others})" if short.size > 1 else "") + ":"
+        if c < MIN_CYCLES:
+            what = (f"the used frames cover {np.floor(c * 100) / 100:.2f} cycle(s) of the fitted fundamental "
+                    f"({om / (2 * np.pi):.3f} Hz), fewer than {MIN_CYCLES}")
+        else:
+            what = (f"the least-squares fundamental ({om / (2 * np.pi):.3f} Hz) lies on the "
+                    f"lowest frequency the used frames cover {MIN_CYCLES} times, and the "
+                    "residual falls further below it")
+        raise UserError(
+            f"{name}:{where} {what}: with less than one period in view the frequency is not "
+            "determined by the data; give a longer clip (at least one whole cycle)"
+        )

@@ -1,0 +1,477 @@
+"""The Fourier feature layout: channel names, Motion <-> features, and poses from features.
+
+Features are one column per channel: ``ROOT_CHANNELS`` (heading-frame root velocity and height)
+first, then every joint's rotation in radians, as Euler angles in the file's order
+(``"<joint>.<Z|Y|X>rotation"``) or a continuous exponential map (``"<joint>.expmap0..2"``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from fourierjax import rotations
+from fourierjax._checks import number
+from fourierjax._fourier._layout import (
+    as_f64 as _np,
+)
+from fourierjax._fourier._layout import (
+    root_pose as _root_pose,
+)
+from fourierjax._fourier._layout import (
+    rot as _rot,
+)
+from fourierjax._fourier._layout import (
+    rotation_joints as _rotation_joints,
+)
+from fourierjax._fourier._layout import (
+    yaw_quat as _yaw_quat,
+)
+from fourierjax.errors import UserError
+from fourierjax.skeleton import Skeleton, Topology
+
+if TYPE_CHECKING:  # imported where used at run time: `fourierjax._fourier` imports this module
+    from fourierjax._fourier._model import FourierModel
+
+#: Feature representations of joint rotations.
+REPRESENTATIONS = ("euler", "expmap")
+#: The root channels that start every feature layout: heading-frame velocity (file units/s) and
+#: root height (file units). Root position is integrated from the velocities when written back.
+ROOT_CHANNELS = ("root.vx", "root.vz", "root.y")
+
+__all__ = [
+    "REPRESENTATIONS",
+    "ROOT_CHANNELS",
+    "angle_channel_mask",
+    "channel_names_for",
+    "heading_of",
+    "features_from_motion",
+    "motion_from_features",
+    "channel_model",
+    "make_euler_continuous",
+    "local_pose_from_features",
+    "root_relative_positions",
+    "joint_expmaps",
+]
+
+
+def angle_channel_mask(channel_names: tuple[str, ...]) -> tuple[bool, ...]:
+    """True for rotation channels, False for the root translation channels ``root.*``.
+
+    Arguments:
+        channel_names: feature channel names.
+
+    Returns:
+        One bool per channel.
+    """
+    return tuple(not name.startswith("root.") for name in channel_names)
+
+
+def channel_names_for(topology: Topology, representation: str) -> tuple[str, ...]:
+    """Feature channel names for a skeleton: ``ROOT_CHANNELS`` then each joint's rotation."""
+    if representation not in REPRESENTATIONS:
+        raise UserError(f"representation: {representation!r} is not one of {REPRESENTATIONS}")
+    names = list(ROOT_CHANNELS)
+    for j, order, _ in _rotation_joints(topology):
+        joint = topology.names[j]
+        if representation == "euler":
+            names += [f"{joint}.{axis}rotation" for axis in order]
+        else:
+            names += [f"{joint}.expmap{k}" for k in range(3)]
+    return tuple(names)
+
+
+def heading_of(motion) -> float:
+    """Circular mean (radians) of the root's facing yaw: its local +Z projected on the floor.
+
+    ``psi = atan2(f_x, f_z)``; a rotation by ``psi`` about +Y takes +Z to the facing direction.
+    """
+    _, q = _root_pose(motion)
+    f = _rot("quat_apply", q, np.tile([0.0, 0.0, 1.0], (len(q), 1)))
+    s, c = f[:, 0].sum(), f[:, 2].sum()
+    if np.hypot(s, c) < 1e-9 * len(f):
+        return 0.0
+    return float(np.arctan2(s, c))
+
+
+def make_euler_continuous(
+    angles: Float[ArrayLike, "F *joints 3"], order: str, valid: Bool[ArrayLike, " F"] | None = None
+) -> Float[np.ndarray, "F *joints 3"]:
+    """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
+
+    Every rotation has two Euler triples (Tait-Bryan ``(a, b, c) ~ (a + pi, pi - b, c + pi)``;
+    proper Euler ``(a, b, c) ~ (a + pi, -b, c + pi)``), each up to 2 pi per angle. ``np.unwrap``
+    only removes the 2 pi jumps; near gimbal lock a clip can switch triples, which looks like a
+    jump of ~pi in two angles. Each frame takes, of the two triples (each unwrapped towards the
+    previous frame), the one closest to the previous frame. The first frame is kept.
+
+    Frames with ``valid`` False (capture glitches) are repaired too but never serve as the
+    reference: the next valid frame follows the last valid one, so a glitch that passes near
+    gimbal lock cannot leave the rest of the clip on the other triple, 2 pi away.
+
+    Arguments:
+        angles: ``[F, ..., 3]`` radians; order: the 3-letter order of the angles;
+        valid: optional ``bool [F]``.
+    Returns:
+        ``[F, ..., 3]`` the same rotations, continuous over the first axis.
+    Raises:
+        UserError: ``order`` not one of ``rotations.EULER_ORDERS``, or ``angles`` not
+        ``[F, ..., 3]``.
+    """
+    if not isinstance(order, str) or order not in rotations.EULER_ORDERS:
+        raise UserError(f"make_euler_continuous: `order` must be one of "
+                        f"{', '.join(rotations.EULER_ORDERS)}, got {order!r}")
+    a = np.array(angles, dtype=np.float64, copy=True)
+    if a.ndim < 2 or a.shape[-1] != 3:
+        raise UserError(f"make_euler_continuous: `angles` must have shape [F, ..., 3], got "
+                        f"{a.shape}")
+    if a.shape[0] < 2:
+        return a
+    two_pi = 2 * np.pi
+    ok = np.ones(a.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    ref = 0
+    for t in range(1, a.shape[0]):
+        prev = a[ref] if ok[t] else a[t - 1]
+        cur = a[t]
+        alt = rotations.euler_twin(cur, order)
+        best = None
+        best_d = None
+        for cand in (cur, alt):
+            cand = cand + two_pi * np.round((prev - cand) / two_pi)
+            d = np.sum((cand - prev) ** 2, axis=-1)
+            if best is None:
+                best, best_d = cand, d
+            else:
+                take = d < best_d - 1e-12
+                best = np.where(take[..., None], cand, best)
+                best_d = np.minimum(d, best_d)
+        a[t] = best
+        if ok[t] or not ok[ref]:
+            ref = t
+    return a
+
+
+def features_from_motion(
+    motion, representation: str = "euler", heading_rad: float | None = None,
+    valid: Bool[ArrayLike, " F"] | None = None,
+) -> tuple[Float[np.ndarray, "F C"], tuple[str, ...]]:
+    """Fitting features of a clip: heading-frame root velocity and height, joint rotations.
+
+    Arguments:
+        motion: a ``fourierjax.io.bvh.Motion`` (at least 2 frames).
+        representation: ``"euler"`` (file Euler angles, made continuous with
+            :func:`make_euler_continuous`) or ``"expmap"`` (exponential maps made continuous,
+            Tilmanne & Dutoit §2.1).
+        heading_rad: yaw of the heading frame; default :func:`heading_of` the clip.
+        valid: optional ``bool [F]``, False at capture glitches (Euler continuity skips them).
+    Returns:
+        ``(features [F, C] float64, channel_names)``: ``root.vx, root.vz`` (file units/s, by
+        central differences), ``root.y`` (file units), then rotations in radians.
+    """
+    names = channel_names_for(motion.topology, representation)
+    if motion.num_frames < 2:
+        raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
+    psi = (heading_of(motion) if heading_rad is None
+           else number(heading_rad, "features_from_motion: `heading_rad`"))
+    pos, q_root = _root_pose(motion)
+    c, s = np.cos(psi), np.sin(psi)
+    # World -> heading frame: rotate by -psi about +Y.
+    x_h = c * pos[:, 0] - s * pos[:, 2]
+    z_h = s * pos[:, 0] + c * pos[:, 2]
+    dt = motion.frame_time_s
+    vx, vz = np.gradient(x_h, dt), np.gradient(z_h, dt)
+    q_rel = _rot("quat_multiply", np.tile(_yaw_quat(-psi), (len(q_root), 1)), q_root)
+    cols = [vx, vz, pos[:, 1]]
+    joints = _rotation_joints(motion.topology)
+    blocks = _joint_rotations(motion, joints, representation, root_quat=q_rel, valid=valid)
+    for j, _, _ in joints:
+        cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
+    return np.stack(cols, axis=1), names
+
+
+def _joint_rotations(motion, joints, representation: str, *, root_quat=None,
+                     valid=None) -> dict[int, np.ndarray]:
+    """Rotation of each of ``joints`` (from :func:`_rotation_joints`) over the clip, ``{joint:
+    [F, 3]}`` radians: continuous Euler angles in the file's order, or continuous exponential
+    maps. ``root_quat [F, 4]`` replaces the root's (joint 0) rotation when given."""
+    blocks: dict[int, np.ndarray] = {}
+    # Joints sharing a rotation order are converted together: [F, J_g, 3].
+    for order in dict.fromkeys(o for _, o, _ in joints):
+        group = [(j, idx) for j, o, idx in joints if o == order]
+        e = np.radians(motion.channels[:, np.array([idx for _, idx in group])])
+        root = group[0][0] == 0 and root_quat is not None
+        if root:  # the root: e.g. its orientation relative to the heading frame
+            e[:, 0] = _rot("euler_from_quat", root_quat, order=order)
+        if representation == "euler":
+            ang = make_euler_continuous(e, order, valid)
+        else:
+            q = _rot("quat_from_euler", e, order=order)
+            if root:
+                q[:, 0] = root_quat
+            ang = _rot("make_expmap_continuous", _rot("expmap_from_quat", q))
+        for k, (j, _) in enumerate(group):
+            blocks[j] = ang[:, k]
+    return blocks
+
+
+def joint_expmaps(motion) -> tuple[Float[np.ndarray, "F K3"], tuple[str, ...]]:
+    """Continuous exponential maps of every non-root joint of a clip (Tilmanne & Dutoit §2.1).
+
+    The root is left out (its rotation includes the walking direction); so are joints without
+    three rotation channels. Each joint's map is made continuous over time
+    (``rotations.make_expmap_continuous``), so that spectra and fits see no 2π jumps.
+
+    Arguments:
+        motion: a ``fourierjax.io.bvh.Motion``.
+    Returns:
+        ``(x [F, 3K] float64 radians, names)`` with names ``"<joint>.expmap0..2"`` (the
+        expmap layout of :func:`channel_names_for`, without the root channels).
+    """
+    joints = [jt for jt in _rotation_joints(motion.topology, strict=False) if jt[0] != 0]
+    names = tuple(f"{motion.topology.names[j]}.expmap{k}" for j, _, _ in joints
+                  for k in range(3))
+    if not joints:
+        return np.zeros((motion.num_frames, 0)), names
+    blocks = _joint_rotations(motion, joints, "expmap")
+    return np.concatenate([blocks[j] for j, _, _ in joints], axis=1), names
+
+
+def _check_names(topology, channel_names, where: str) -> str:
+    names = tuple(channel_names)
+    for rep in REPRESENTATIONS:
+        if names == channel_names_for(topology, rep):
+            return rep
+    raise UserError(
+        f"{where}: channel names do not match this skeleton (expected the layout of "
+        f"channel_names_for(topology, 'euler' | 'expmap'), got {names[:5]}...)"
+    )
+
+
+def motion_from_features(
+    template,
+    features: Float[ArrayLike, "F C"],
+    channel_names: tuple[str, ...],
+    frame_time_s: float,
+    *,
+    heading_rad: float = 0.0,
+    start_xz: tuple[float, float] = (0.0, 0.0),
+):
+    """A writeable Motion from features (e.g. ``synthesize`` output) on a template's skeleton.
+
+    The root position is integrated from ``root.vx, root.vz`` (trapezoid rule, starting at
+    ``start_xz``) in the heading frame rotated by ``heading_rad`` about +Y (0: walking along +Z);
+    its height is ``root.y``. Rotations are converted back to the file's Euler orders in degrees.
+    Position channels of non-root joints keep the template's first-frame values.
+
+    Arguments:
+        template: Motion supplying topology, offsets and channel layout.
+        features: ``[F, C]``; channel_names: their names (the layout of :func:`channel_names_for`).
+        frame_time_s: seconds per frame of the new motion.
+    Returns:
+        Motion with ``F`` frames.
+    Raises:
+        UserError: channel names or feature shape that do not fit the template, NaN or
+        infinite features, a non-finite ``heading_rad`` or ``start_xz``, or a non-finite or
+        non-positive ``frame_time_s``.
+    """
+    where = "motion_from_features"
+    topo = template.topology
+    rep = _check_names(topo, channel_names, where)
+    x = _np(features)
+    if x.ndim != 2 or x.shape[1] != len(channel_names):
+        raise UserError(
+            f"motion_from_features: features shape {x.shape}, expected [F, {len(channel_names)}]"
+        )
+    bad = ~np.isfinite(x)
+    if bad.any():
+        f, c = np.argwhere(bad)[0]
+        raise UserError(f"{where}: `features` holds NaN or infinite values (first at frame {f}, "
+                        f"channel {channel_names[c]!r})")
+    frame_time_s = number(frame_time_s, f"{where}: `frame_time_s`")
+    if frame_time_s <= 0:
+        raise UserError(f"{where}: `frame_time_s` must be positive, got {frame_time_s}")
+    heading_rad = number(heading_rad, f"{where}: `heading_rad`")
+    if np.shape(start_xz) != (2,):
+        raise UserError(f"{where}: `start_xz` must be two numbers (x, z), got {start_xz!r}")
+    start_xz = tuple(number(v, f"{where}: `start_xz`") for v in start_xz)
+    F = x.shape[0]
+    out = np.empty((F, topo.num_channels), np.float64)
+    out[:] = template.channels[:1] if template.num_frames else 0.0
+    vx, vz, y = x[:, 0], x[:, 1], x[:, 2]
+    px = np.concatenate([[0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * frame_time_s)])
+    pz = np.concatenate([[0.0], np.cumsum(0.5 * (vz[1:] + vz[:-1]) * frame_time_s)])
+    c, s = np.cos(heading_rad), np.sin(heading_rad)
+    world = {"X": start_xz[0] + c * px + s * pz, "Y": y, "Z": start_xz[1] - s * px + c * pz}
+    col = 3
+    for j, order, idx in _rotation_joints(topo):
+        ang = x[:, col : col + 3]
+        col += 3
+        if j == 0 or rep == "expmap":
+            q = (_rot("quat_from_euler", ang, order=order) if rep == "euler"
+                 else _rot("quat_from_expmap", ang))
+            if j == 0:
+                q = _rot("quat_multiply", np.tile(_yaw_quat(heading_rad), (F, 1)), q)
+            ang = make_euler_continuous(_rot("euler_from_quat", q, order=order), order)
+        out[:, idx] = np.degrees(ang)
+    base = topo.channel_offsets[0]
+    for k, ch in enumerate(topo.channels[0]):
+        if ch.endswith("position"):
+            out[:, base + k] = world[ch[0]]
+    return dataclasses.replace(template, channels=out, frame_time_s=float(frame_time_s),
+                               source=None)
+
+
+def channel_model(
+    template, model: FourierModel, root_xz: Float[ArrayLike, "*batch 2"] = (0.0, 0.0)
+) -> FourierModel:
+    """A Fourier model of the template's BVH channels from a gait model: a walker in place.
+
+    ``motion_from_features`` in the frequency domain, for models of ``"euler"`` features (e.g.
+    ``fit_motions(..., "euler")``, ``style.interpolate`` of such fits): the result animates
+    every BVH channel of ``template`` in file order and units, which is what
+    ``crowd.make_crowd`` and ``kinematics.joint_positions`` of its synthesis take. Per channel:
+
+    - joint rotations: the features in degrees (offset and amplitudes times 180/pi, phases
+      unchanged; the root's is relative to the heading frame, so every walker faces +Z);
+    - root X / Z position: the integral of ``root.vx`` / ``root.vz`` without their mean (a
+      treadmill: amplitude A_n / (n omega), phase phi_n - pi/2), swaying about ``root_xz``;
+    - root Y position: ``root.y``; other channels (non-root positions, rotations of joints
+      the features leave out): the template's first frame, constant.
+
+    Exact: the synthesis of the result equals ``motion_from_features`` of the model's synthesis
+    up to that function's trapezoid integration and the dropped drift (tested). Pure ``jnp``:
+    leading batch axes of ``model`` (``fourier.stack_models``) and of ``root_xz`` broadcast, and
+    it runs under ``jit``, ``vmap`` and ``grad``.
+
+    Arguments:
+        template: the Motion whose skeleton and channel layout the result animates (the
+            features' skeleton: ``model.channel_names`` must be its ``channel_names_for``).
+        model: a ``FourierModel`` of ``"euler"`` features, optionally batched ``[..., C, N]``.
+        root_xz: ``[..., 2]`` centre of each walker's root on the ground (file units).
+    Returns:
+        A ``FourierModel`` with ``channel_names = template.topology.flat_channel_names``.
+    Raises:
+        UserError naming ``model`` for expmap features, channel names of another skeleton or a
+        non-positive omega, and ``root_xz`` for a last axis other than 2.
+    """
+    from fourierjax._fourier._model import FourierModel
+    from fourierjax._math import wrap_angle
+
+    topo = template.topology
+    if not isinstance(model, FourierModel):
+        raise UserError(f"channel_model: `model` must be a FourierModel, got {type(model).__name__}")
+    rep = _check_names(topo, model.channel_names, "channel_model: `model`")
+    if rep != "euler":
+        raise UserError(
+            "channel_model: `model` has expmap features; BVH channels are Euler angles, which "
+            "are not linear in exponential maps (fit with representation='euler')"
+        )
+    omega = model.omega
+    if isinstance(omega, jax.core.Tracer):  # refused at run time (a value check that holds under jit)
+        omega = eqx.error_if(omega, ~jnp.all(omega > 0), "channel_model: `model` omega must be > 0 (rad/s)")
+    elif not bool(np.all(np.asarray(omega) > 0)):
+        raise UserError(f"channel_model: `model` omega must be > 0 (rad/s), got {np.asarray(omega)}")
+    root_xz = jnp.asarray(root_xz, model.offset.dtype)
+    if root_xz.ndim == 0 or root_xz.shape[-1] != 2:
+        raise UserError(f"channel_model: `root_xz` must be [..., 2] (X, Z), got shape {root_xz.shape}")
+    feature = {n: i for i, n in enumerate(model.channel_names)}
+    root = topo.names[0]
+    position = {f"{root}.Xposition": "root.vx", f"{root}.Yposition": "root.y",
+                f"{root}.Zposition": "root.vz"}  # fmt: skip
+    names = topo.flat_channel_names
+    # Per BVH channel: its feature (or -1 for a constant), scale, and whether it is integrated.
+    src = np.array([feature.get(position.get(n, n), -1) for n in names])
+    scale = np.array([180.0 / np.pi if n.endswith("rotation") else 1.0 for n in names])
+    integrated = np.array([n in (f"{root}.Xposition", f"{root}.Zposition") for n in names])
+    constant = src < 0
+    first = template.channels[0] if template.num_frames else np.zeros(len(names))
+    dtype = model.offset.dtype
+    lead = jnp.broadcast_shapes(model.offset.shape[:-1], root_xz.shape[:-1])
+    C, N = len(names), model.amplitude.shape[-1]
+
+    def full(x, shape):  # a constant table at the rank of `shape` (rank promotion is explicit)
+        x = jnp.asarray(x)
+        return jnp.broadcast_to(x.reshape((1,) * (len(shape) - x.ndim) + x.shape), shape)
+
+    per_channel, per_term = lead + (C,), lead + (C, N)
+    take = np.maximum(src, 0)
+    n_omega = full(jnp.arange(1, N + 1, dtype=dtype), per_term) * full(omega[..., None, None], per_term)
+    amp = full(model.amplitude[..., take, :], per_term) * full(jnp.asarray(scale[:, None], dtype), per_term)
+    amp = jnp.where(full(integrated[:, None], per_term), amp / n_omega, amp)
+    phase = full(model.phase[..., take, :], per_term)
+    phase = jnp.where(full(integrated[:, None], per_term), wrap_angle(phase - 0.5 * jnp.pi), phase)
+    offset = full(model.offset[..., take], per_channel) * full(jnp.asarray(scale, dtype), per_channel)
+    for c, n in enumerate(names):
+        axis = {f"{root}.Xposition": 0, f"{root}.Zposition": 1}.get(n)
+        if axis is not None:  # the integral's constant: the walker's spot
+            offset = offset.at[..., c].set(jnp.broadcast_to(root_xz[..., axis], lead))
+    offset = jnp.where(full(constant, per_channel), full(jnp.asarray(first, dtype), per_channel), offset)
+    amp = jnp.where(full(constant[:, None], per_term), 0.0, amp)
+    phase = jnp.where(full(constant[:, None], per_term), 0.0, phase)
+    omega = jnp.broadcast_to(omega, lead)
+    return FourierModel(offset, amp, phase, omega, "euler", names)
+
+
+def _layout_tables(topology, representation):
+    """Static gather tables: per order, (joints, feature column triples)."""
+    groups: dict[str, tuple[list[int], list[list[int]]]] = {}
+    col = len(ROOT_CHANNELS)
+    for j, order, _ in _rotation_joints(topology):
+        key = order if representation == "euler" else "expmap"
+        js, cols = groups.setdefault(key, ([], []))
+        js.append(j)
+        cols.append([col, col + 1, col + 2])
+        col += 3
+    return {k: (np.asarray(js), np.asarray(cs)) for k, (js, cs) in groups.items()}
+
+
+def local_pose_from_features(
+    skeleton: Skeleton, features: Float[ArrayLike, " C"], representation: str
+) -> tuple[Float[Array, "J 3"], Float[Array, "J 4"]]:
+    """Local translations [J, 3] and rotations [J, 4] of one feature frame (pure JAX).
+
+    The root sits at the origin (root-relative) with its heading-frame orientation; joints
+    without rotation channels keep the identity.
+
+    Arguments:
+        skeleton: ``fourierjax.skeleton.Skeleton``; features: ``[C]`` one frame;
+        representation: the features' representation.
+    Returns:
+        ``(translations [J, 3], quats [J, 4])`` for ``kinematics.forward_kinematics``.
+    """
+    topo = skeleton.topology
+    features = jnp.asarray(features)
+    J = topo.num_joints
+    quats = jnp.zeros((J, 4), features.dtype).at[:, 0].set(1.0)
+    for key, (js, cols) in _layout_tables(topo, representation).items():
+        ang = features[cols]
+        q = rotations.quat_from_expmap(ang) if key == "expmap" else rotations.quat_from_euler(
+            ang, key)
+        quats = quats.at[js].set(q)
+    translations = jnp.asarray(skeleton.offsets, features.dtype).at[0].set(0.0)
+    return translations, quats
+
+
+def root_relative_positions(
+    skeleton: Skeleton, features: Float[ArrayLike, "T C"], representation: str
+) -> Float[Array, "T J 3"]:
+    """Joint positions [T, J, 3] with the root at the origin (heading frame), through FK.
+
+    Arguments:
+        skeleton: the clip's Skeleton; features: ``[T, C]``; representation: of the features.
+    Returns:
+        ``[T, J, 3]`` file units.
+    """
+    from fourierjax.kinematics import forward_kinematics
+
+    def one(f):
+        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f,
+                                                                      representation)).positions
+
+    return jax.vmap(one)(jnp.asarray(features))
