@@ -9,6 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._jit import filter_jit
 from fourierjax._sincos import sincos as _sincos
 from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
@@ -311,7 +312,7 @@ def _fk_flat(skeleton: Skeleton, flat: Float[Array, "M channels"]):
 
 
 
-@jax.jit
+@filter_jit(cpu_compiler_options={})  # XLA's default CPU emitters, as the FK benchmark was measured
 def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     """World positions of every joint for every frame (jitted entry point).
 
@@ -326,7 +327,7 @@ def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     return _fk_batch(skeleton, channels).positions
 
 
-@jax.jit
+@filter_jit(cpu_compiler_options={})  # XLA's default CPU emitters, as the FK benchmark was measured
 def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKResult:
     """`FKResult` for every frame of `[..., C]` BVH channels (jitted entry point).
 
