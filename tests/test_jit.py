@@ -187,4 +187,6 @@ def test_cpu_compiler_options_per_entry_point():
     x = jnp.linspace(0.0, 1.0, 4)
     np.testing.assert_allclose(f(x), _f(x), rtol=1e-6)
     np.testing.assert_allclose(g(x), _f(x), rtol=1e-6)  # unknown options are dropped
+    h = jit(_f, cpu_compiler_options={"xla_cpu_no_such_option_here": True})
+    np.testing.assert_allclose(h(x), _f(x), rtol=1e-6)
     assert _jit._known_options({"xla_cpu_no_such_option_here": True}) == {}
