@@ -92,7 +92,14 @@ def jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None = None
     """`filter_jit`'s mechanism over `jax.jit`: every argument not named in `static_argnums` /
     `static_argnames` is traced (Python numbers included), and a call costs less Python (jax's
     C++ dispatch instead of equinox's filtering): for array-only entry points called per frame.
-    Arguments as for `filter_jit`, plus `jax.jit`'s.
+
+    Arguments:
+        fun: the function; without it, a decorator.
+        cpu_compiler_options: as for `filter_jit`.
+        **jit_kwargs: passed to `jax.jit` (e.g. `static_argnames`).
+
+    Returns:
+        The jitted function, with `.lower(*args)` and `.num_traces()`.
     """
     if fun is None:
         return functools.partial(jit, cpu_compiler_options=cpu_compiler_options, **jit_kwargs)
@@ -100,8 +107,15 @@ def jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None = None
 
 
 def is_entry_point(fun: object) -> bool:
-    """Whether `fun` was made by `filter_jit` (or `jit`): the check behind the tests that every
-    jitted public function goes through the one wrapper."""
+    """Whether `fun` was made by `filter_jit` (or `jit`).
+
+    Arguments:
+        fun: any object.
+
+    Returns:
+        True for the wrapper's functions: the check behind the test that every jitted function
+        of the package goes through the one wrapper.
+    """
     return getattr(fun, "__fourierjax_jit__", False) is True
 
 
