@@ -6,7 +6,7 @@ import math
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._math import wrap_angle
 from fourierjax._rotations._common import (
@@ -148,11 +148,18 @@ def euler_from_matrix(R: Float[Array, "... 3 3"], order: str) -> Float[Array, ".
     return euler_from_quat(quat_from_matrix(R), order)
 
 
-def euler_twin(angles, order: str):
-    """The other Euler triple of the same rotations (not wrapped): Tait-Bryan orders
-    ``(a + pi, pi - b, c + pi)``, proper Euler orders ``(a + pi, -b, c + pi)``.
+def euler_twin(angles: Float[ArrayLike, "... 3"], order: str) -> Float[ArrayLike, "... 3"]:
+    """The other Euler triple of the same rotations (not wrapped).
 
     NumPy in, NumPy out (for per-frame loops at the edges); JAX arrays and tracers stay JAX.
+
+    Arguments:
+        angles: ``[..., 3]`` angles ``(a, b, c)`` in radians.
+        order: one of ``EULER_ORDERS``.
+
+    Returns:
+        ``[..., 3]``: ``(a + pi, pi - b, c + pi)`` for Tait-Bryan orders, ``(a + pi, -b, c + pi)``
+        for proper Euler orders.
     """
     import numpy as np
 
