@@ -33,7 +33,7 @@ def body(argv=None) -> None:
     from fourierjax.stance.solver import solve_stances, stack_problems
 
     cfg, out = parse("stance", __doc__.splitlines()[0], argv)
-    from fourierjax._compile_cache import enable_compile_cache
+    from fourierjax import enable_compile_cache
 
     enable_compile_cache()  # the solver compiles slowly: share it with the demo and notebook
     body_ = make_body(1.75)

@@ -1,4 +1,4 @@
-"""Persistent XLA compilation cache for the command line and the demo (edge-only setting)."""
+"""Persistent XLA compilation cache (public as `fourierjax.enable_compile_cache`)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,11 @@ def enable_compile_cache() -> None:
     """Cache compiled XLA programs across runs (the stance solver takes long to compile).
 
     The folder is ``$FOURIERJAX_CACHE_DIR`` or ``~/.cache/fourierjax/jax``. A folder that cannot
-    be created leaves caching off rather than failing the command.
+    be created leaves caching off rather than failing the command. Used by the command line,
+    the demo and the experiments; a user's script may call it once before its first jit.
+
+    Returns:
+        None.
     """
     import jax
 

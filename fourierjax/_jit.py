@@ -1,5 +1,4 @@
-"""`filter_jit` with the XLA options that keep fourierjax's compile times down on CPU, and
-full-precision matrix products elsewhere."""
+"""`filter_jit`, the one jit wrapper of fourierjax's entry points (CPU compile options, full precision)."""
 
 from __future__ import annotations
 
@@ -23,23 +22,30 @@ CPU_COMPILER_OPTIONS: dict[str, bool] = {"xla_cpu_use_fusion_emitters": False}
 
 @functools.cache
 def _cpu_options() -> dict[str, bool]:
-    """The `CPU_COMPILER_OPTIONS` this jaxlib accepts (one tiny compile per option, once).
+    """The `CPU_COMPILER_OPTIONS` this jaxlib accepts."""
+    return _known_options(CPU_COMPILER_OPTIONS)
+
+
+def _known_options(options: dict) -> dict:
+    """The `options` this jaxlib accepts (one tiny compile per option, cached per option).
 
     An unknown option fails every compilation that names it ("No such compile option"), so
     a newer jaxlib that dropped one would otherwise break every entry point on CPU.
     """
+    return {name: value for name, value in options.items() if _option_known(name, value)}
+
+
+@functools.cache
+def _option_known(name: str, value) -> bool:
     lowered = jax.jit(lambda x: x + 1).lower(jax.ShapeDtypeStruct((), "float32"))
-    accepted = {}
-    for name, value in CPU_COMPILER_OPTIONS.items():
-        try:
-            lowered.compile(compiler_options={name: value})
-        except jax.errors.JaxRuntimeError as err:
-            if "No such compile option" not in str(err):
-                raise
-            _log.info("fourierjax: this jaxlib has no XLA option %s; compiling without it", name)
-        else:
-            accepted[name] = value
-    return accepted
+    try:
+        lowered.compile(compiler_options={name: value})
+    except jax.errors.JaxRuntimeError as err:
+        if "No such compile option" not in str(err):
+            raise
+        _log.info("fourierjax: this jaxlib has no XLA option %s; compiling without it", name)
+        return False
+    return True
 
 
 def _precision_context():
@@ -58,26 +64,64 @@ def _products_are_full_precision() -> bool:
     return jax.default_backend() == "cpu"
 
 
-def filter_jit(fun: Callable | None = None, **jit_kwargs) -> Callable:
-    """`equinox.filter_jit` that compiles with `CPU_COMPILER_OPTIONS` when the backend is CPU.
+def filter_jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None = None, **jit_kwargs) -> Callable:
+    """The one jit wrapper for fourierjax's public entry points: `equinox.filter_jit` (every
+    array argument traced, everything else static) compiled with `CPU_COMPILER_OPTIONS` on CPU.
 
     The backend is read at the first call (not at import, which would initialise JAX before
-    a user could configure it); one jitted function is kept per backend.
+    a user could configure it); one jitted function is kept per backend. A Python number that
+    varies per call is static here: turn it into an array first, or each value retraces.
+
+    Arguments:
+        fun: the function; without it, a decorator.
+        cpu_compiler_options: XLA:CPU options for this entry point instead of
+            `CPU_COMPILER_OPTIONS` (`{}`: XLA's defaults, for graphs that run faster with the
+            new fusion emitters); options the installed jaxlib does not know are dropped.
+        **jit_kwargs: passed to `equinox.filter_jit` (e.g. `donate`).
+
+    Returns:
+        The jitted function, with `.lower(*args)` and `.num_traces()` (how many times it was
+        traced: the retracing guard of the tests).
     """
     if fun is None:
-        return functools.partial(filter_jit, **jit_kwargs)
-    return _per_backend(eqx.filter_jit, fun, jit_kwargs)
+        return functools.partial(filter_jit, cpu_compiler_options=cpu_compiler_options, **jit_kwargs)
+    return _per_backend(eqx.filter_jit, fun, jit_kwargs, cpu_compiler_options)
 
 
-def jit(fun: Callable | None = None, **jit_kwargs) -> Callable:
-    """`jax.jit` (static arguments and all) with `CPU_COMPILER_OPTIONS` on CPU; see `filter_jit`."""
+def jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None = None, **jit_kwargs) -> Callable:
+    """`filter_jit`'s mechanism over `jax.jit`: every argument not named in `static_argnums` /
+    `static_argnames` is traced (Python numbers included), and a call costs less Python (jax's
+    C++ dispatch instead of equinox's filtering): for array-only entry points called per frame.
+
+    Arguments:
+        fun: the function; without it, a decorator.
+        cpu_compiler_options: as for `filter_jit`.
+        **jit_kwargs: passed to `jax.jit` (e.g. `static_argnames`).
+
+    Returns:
+        The jitted function, with `.lower(*args)` and `.num_traces()`.
+    """
     if fun is None:
-        return functools.partial(jit, **jit_kwargs)
-    return _per_backend(jax.jit, fun, jit_kwargs)
+        return functools.partial(jit, cpu_compiler_options=cpu_compiler_options, **jit_kwargs)
+    return _per_backend(jax.jit, fun, jit_kwargs, cpu_compiler_options)
 
 
-def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
+def is_entry_point(fun: object) -> bool:
+    """Whether `fun` was made by `filter_jit` (or `jit`).
+
+    Arguments:
+        fun: any object.
+
+    Returns:
+        True for the wrapper's functions: the check behind the test that every jitted function
+        of the package goes through the one wrapper.
+    """
+    return getattr(fun, "__fourierjax_jit__", False) is True
+
+
+def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict, cpu_options: dict | None) -> Callable:
     jitted: dict[tuple[str, bool], Callable] = {}
+    traces = [0]
 
     def get() -> Callable:
         backend = jax.default_backend()
@@ -87,7 +131,9 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
         top = _trace_state_clean()
         f = jitted.get((backend, top))
         if f is None:
-            opts = {"compiler_options": _cpu_options()} if backend == "cpu" and top else {}
+            opts = {}
+            if backend == "cpu" and top:
+                opts = {"compiler_options": _cpu_options() if cpu_options is None else _known_options(cpu_options)}
             f = jitted[(backend, top)] = make(traced, **opts, **jit_kwargs)
         return f
 
@@ -96,6 +142,7 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
     # inside `default_matmul_precision`, 166 us outside).
     @functools.wraps(fun)
     def traced(*args, **kwargs):
+        traces[0] += 1
         with _precision_context():
             return fun(*args, **kwargs)
 
@@ -104,6 +151,8 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict) -> Callable:
         return get()(*args, **kwargs)
 
     wrapper.lower = lambda *args, **kwargs: get().lower(*args, **kwargs)  # type: ignore[attr-defined]
+    wrapper.num_traces = lambda: traces[0]  # type: ignore[attr-defined]
+    wrapper.__fourierjax_jit__ = True  # type: ignore[attr-defined]
     return wrapper
 
 

@@ -1,5 +1,4 @@
-"""Matrix products at full precision, and small linear solves in plain jnp (no LAPACK: batched
-LAPACK calls hang on 2 CPU cores, STYLE.md)."""
+"""Full-precision matrix products and small SPD solves in plain jnp (batched LAPACK hangs on 2 CPU cores)."""
 
 import jax
 import jax.numpy as jnp
@@ -14,7 +13,15 @@ PRECISION = jax.lax.Precision.HIGHEST
 
 
 def matmul(a: Array, b: Array) -> Array:
-    """`a @ b` at full float32 (or float64) precision on every backend (`PRECISION`)."""
+    """`a @ b` at full float32 (or float64) precision on every backend (`PRECISION`).
+
+    Arguments:
+        a: `[..., n, m]` array.
+        b: `[..., m, p]` array.
+
+    Returns:
+        `[..., n, p]` product.
+    """
     return jnp.matmul(a, b, precision=PRECISION)
 
 
@@ -25,6 +32,13 @@ def spd_solve(G: Float[Array, "P P"], rhs: Float[Array, "P K"]) -> Float[Array, 
     are its positive Schur complements, clamped at ``tiny`` like a Cholesky diagonal). One
     small fori_loop: it compiles in half the time of a Cholesky factorisation and two
     triangular solves (three loops), and it appears once per call site of every fit.
+
+    Arguments:
+        G: `[P, P]` symmetric positive definite matrix.
+        rhs: `[P, K]` right-hand sides.
+
+    Returns:
+        `[P, K]` solutions.
     """
     P = G.shape[-1]
     M = jnp.concatenate([G, rhs], axis=1)

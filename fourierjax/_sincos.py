@@ -29,7 +29,14 @@ def _from_reduced(r: Array, n: Array) -> tuple[Array, Array]:
 
 
 def sincos(x: Array) -> tuple[Array, Array]:
-    """`(sin x, cos x)` of angles in radians; float32 to about 1 ulp for |x| < 1e4."""
+    """`(sin x, cos x)` of angles in radians; float32 to about 1 ulp for |x| < 1e4.
+
+    Arguments:
+        x: angles in radians, any shape.
+
+    Returns:
+        `(sin x, cos x)`, each of `x`'s shape and dtype.
+    """
     if x.dtype != jnp.float32:
         return jnp.sin(x), jnp.cos(x)
     n = jnp.round(x * (2.0 / np.pi))
@@ -38,7 +45,14 @@ def sincos(x: Array) -> tuple[Array, Array]:
 
 
 def sincos_degrees(x: Array) -> tuple[Array, Array]:
-    """`(sin x, cos x)` of angles in degrees; the float32 reduction `x - 90 n` is exact."""
+    """`(sin x, cos x)` of angles in degrees; the float32 reduction `x - 90 n` is exact.
+
+    Arguments:
+        x: angles in degrees, any shape.
+
+    Returns:
+        `(sin x, cos x)`, each of `x`'s shape and dtype.
+    """
     if x.dtype != jnp.float32:
         r = jnp.deg2rad(x)
         return jnp.sin(r), jnp.cos(r)

@@ -91,16 +91,16 @@ def segment_model(
 ) -> SegmentModel:
     """Build a `SegmentModel` for a topology from named segment end points.
 
-    **Arguments:**
+    Arguments:
+        topology: the skeleton topology.
+        segments: segment name -> (proximal joint, distal joint), where the distal point may be
+            `"<joint>/end"` for that joint's End Site. Segment names end in one of the de Leva
+            segments (`head`, `trunk`, `upper_arm`, `forearm`, `hand`, `thigh`, `shank`, `foot`).
+            Defaults to the CMU skeleton's naming.
+        sex: which de Leva table (only `"male"` is transcribed).
 
-    - `topology`: the skeleton topology.
-    - `segments`: segment name -> (proximal joint, distal joint), where the distal point may be
-      `"<joint>/end"` for that joint's End Site. Segment names end in one of the de Leva
-      segments (`head`, `trunk`, `upper_arm`, `forearm`, `hand`, `thigh`, `shank`, `foot`).
-      Defaults to the CMU skeleton's naming.
-    - `sex`: which de Leva table (only `"male"` is transcribed).
-
-    **Returns:** a `SegmentModel`; raises `ValueError` naming a missing joint.
+    Returns:
+        a `SegmentModel`; raises `ValueError` naming a missing joint.
     """
     if sex not in DE_LEVA_1996:
         raise ValueError(f"segment_model: `sex` must be one of {list(DE_LEVA_1996)}, got {sex!r}")
@@ -146,13 +146,13 @@ def center_of_mass(
 ) -> Float[Array, 3]:
     """Whole-body centre of mass of one posed frame (mass-weighted segment centres).
 
-    **Arguments:**
+    Arguments:
+        model: the segment model (`segment_model(topology)`).
+        positions: `[J, 3]` world joint positions (e.g. `FKResult.positions`).
+        end_site_positions: `[E, 3]` End Site positions, needed when a segment ends at one.
 
-    - `model`: the segment model (`segment_model(topology)`).
-    - `positions`: `[J, 3]` world joint positions (e.g. `FKResult.positions`).
-    - `end_site_positions`: `[E, 3]` End Site positions, needed when a segment ends at one.
-
-    **Returns:** `[3]` centre of mass, in the units of `positions`.
+    Returns:
+        `[3]` centre of mass, in the units of `positions`.
     """
     points = positions
     if end_site_positions is not None:

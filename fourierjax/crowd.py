@@ -5,11 +5,11 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from fourierjax import _jit
 from fourierjax._sincos import sincos_degrees as _sincos_degrees
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
@@ -159,17 +159,18 @@ def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
     `fourier.synthesize(model, t[None])[0]`, a valid `kinematics.joint_positions` input. The
     linear coefficients (`FourierModel.sin_cos`) are computed here once, not per frame.
 
-    **Arguments:**
+    Arguments:
+        skeleton: the skeleton every character shares (unbatched offsets `[J, 3]`).
+        models: a `FourierModel` with a leading character axis (`fourier.stack_models`):
+            offset `[B, C]`, amplitude and phase `[B, C, N]`, omega `[B]`, with `C` the skeleton's
+            channel count. Gait fits (`motion.fit_motions`, models of features) become such models
+            with `motion.channel_model`.
 
-    - `skeleton`: the skeleton every character shares (unbatched offsets `[J, 3]`).
-    - `models`: a `FourierModel` with a leading character axis (`fourier.stack_models`):
-      offset `[B, C]`, amplitude and phase `[B, C, N]`, omega `[B]`, with `C` the skeleton's
-      channel count. Gait fits (`motion.fit_motions`, models of features) become such models
-      with `motion.channel_model`.
+    Returns:
+        a `Crowd` of `B` characters (arrays in the models' floating dtype).
 
-    **Returns:** a `Crowd` of `B` characters (arrays in the models' floating dtype).
-
-    **Raises:** `UserError` naming `skeleton` or `models` when the shapes do not fit.
+    Raises:
+        `UserError` naming `skeleton` or `models` when the shapes do not fit.
     """
     if not isinstance(skeleton, Skeleton):
         raise UserError(f"make_crowd: `skeleton` must be a Skeleton, got {type(skeleton).__name__}")
@@ -373,12 +374,12 @@ def crowd_positions(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "B J 3"]:
     for the skeleton and models the crowd was made from. Differentiable in `t` and in the
     crowd's arrays.
 
-    **Arguments:**
+    Arguments:
+        crowd: from `make_crowd`.
+        t: scalar time in seconds (traced: a new time does not recompile).
 
-    - `crowd`: from `make_crowd`.
-    - `t`: scalar time in seconds (traced: a new time does not recompile).
-
-    **Returns:** `[B, J, 3]` joint positions in file units, joints in file order.
+    Returns:
+        `[B, J, 3]` joint positions in file units, joints in file order.
     """
     if not isinstance(crowd, Crowd):
         raise UserError(f"crowd_positions: `crowd` must be a Crowd (make_crowd), got {type(crowd).__name__}")
@@ -398,7 +399,9 @@ def _positions(crowd: Crowd, t: Array) -> Array:
     return flat.T.reshape(-1, num_joints, 3)
 
 
-# Plain `jax.jit`: XLA's default CPU fusion emitters run this graph faster (8.5 vs 12 ms per frame
-# at 10,000 characters) and compile it faster (5.8 vs 7.2 s) than `fourierjax._jit`'s classic ones
-# (measured on the shared 2-core machine).
-_positions_jit = jax.jit(_positions)
+# `_jit.jit` (the one wrapper's mechanism over `jax.jit`; the crowd is all arrays): called once per
+# frame, where `filter_jit`'s argument filtering cost ~150 us a call. XLA's default CPU fusion
+# emitters (`cpu_compiler_options={}`) run this graph faster (8.5 vs 12 ms per frame at 10,000
+# characters) and compile it faster (5.8 vs 7.2 s) than the classic ones of
+# `CPU_COMPILER_OPTIONS` (measured on the shared 2-core machine).
+_positions_jit = _jit.jit(_positions, cpu_compiler_options={})

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from fourierjax import rotations
+from fourierjax import _jit, rotations
 from fourierjax._sincos import sincos as _sincos
 from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
@@ -76,12 +76,12 @@ def pose_from_channels(
     translation; adding them would double every bone in files that repeat the offsets).
     Rotation channels are degrees, applied in the listed order (BVH, intrinsic).
 
-    **Arguments:**
+    Arguments:
+        skeleton: the skeleton the channels belong to.
+        channels: `[C]` one frame of channel values as stored in the file.
 
-    - `skeleton`: the skeleton the channels belong to.
-    - `channels`: `[C]` one frame of channel values as stored in the file.
-
-    **Returns:** `(translations [J, 3], quats [J, 4])`, local to each joint's parent.
+    Returns:
+        `(translations [J, 3], quats [J, 4])`, local to each joint's parent.
     """
     topology = skeleton.topology
     channels = jnp.asarray(channels)
@@ -119,13 +119,13 @@ def forward_kinematics(
     quaternion products, which stays clear of the XLA CPU bug with batched 3x3 matmuls under
     nested vmap (see STYLE.md). Batch over frames and characters with `jax.vmap`.
 
-    **Arguments:**
+    Arguments:
+        skeleton: supplies the topology and the End Site offsets.
+        translations: `[J, 3]` local translation of each joint (the root's is its world position).
+        quats: `[J, 4]` local rotation of each joint (wxyz).
 
-    - `skeleton`: supplies the topology and the End Site offsets.
-    - `translations`: `[J, 3]` local translation of each joint (the root's is its world position).
-    - `quats`: `[J, 4]` local rotation of each joint (wxyz).
-
-    **Returns:** an `FKResult`.
+    Returns:
+        an `FKResult`.
     """
     topology = skeleton.topology
     j = topology.num_joints
@@ -154,7 +154,15 @@ def forward_kinematics(
 
 
 def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) -> FKResult:
-    """`forward_kinematics` of one frame of BVH channel values (see `pose_from_channels`)."""
+    """`forward_kinematics` of one frame of BVH channel values (see `pose_from_channels`).
+
+    Arguments:
+        skeleton: the skeleton the channels belong to.
+        channels: `[C]` one frame of channel values as stored in the file (degrees).
+
+    Returns:
+        The frame's `FKResult`.
+    """
     return forward_kinematics(skeleton, *pose_from_channels(skeleton, channels))
 
 
@@ -311,26 +319,36 @@ def _fk_flat(skeleton: Skeleton, flat: Float[Array, "M channels"]):
 
 
 
-@jax.jit
+# `_jit.jit` (the one wrapper's mechanism over `jax.jit`), not `filter_jit`: equinox's argument
+# filtering cost ~150 us more per call on small batches (2-core machine, jax 0.10.2), which FK
+# is called with per frame. XLA's default CPU emitters (`{}`), as before the wrapper.
+@_jit.jit(cpu_compiler_options={})
 def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     """World positions of every joint for every frame (jitted entry point).
 
-    **Arguments:**
+    Arguments:
+        skeleton: the skeleton (unbatched offsets).
+        channels: `[..., C]` BVH channel values (degrees, file units), e.g. `[F, C]` for one
+            clip or `[B, F, C]` for a batch of clips of this skeleton.
 
-    - `skeleton`: the skeleton (unbatched offsets).
-    - `channels`: `[..., C]` BVH channel values (degrees, file units), e.g. `[F, C]` for one
-      clip or `[B, F, C]` for a batch of clips of this skeleton.
-
-    **Returns:** `[..., J, 3]` joint positions in file units, joints in file order.
+    Returns:
+        `[..., J, 3]` joint positions in file units, joints in file order.
     """
     return _fk_batch(skeleton, channels).positions
 
 
-@jax.jit
+@_jit.jit(cpu_compiler_options={})
 def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKResult:
     """`FKResult` for every frame of `[..., C]` BVH channels (jitted entry point).
 
     Same values as `jax.vmap(fk_from_channels)`, computed in a frame-minor layout (see the
-    notes above `_sincos`); leaves get the leading dims `...` of `channels`.
+    notes above this function).
+
+    Arguments:
+        skeleton: the skeleton (unbatched offsets).
+        channels: `[..., C]` BVH channel values (degrees, file units).
+
+    Returns:
+        An `FKResult` whose leaves get the leading dims `...` of `channels`.
     """
     return _fk_batch(skeleton, channels)

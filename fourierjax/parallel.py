@@ -34,6 +34,13 @@ def data_mesh(devices: Sequence[jax.Device] | None = None, axis_name: str = DATA
     The axis type is `Auto` (sharding propagated by the compiler): `jax.make_mesh` now defaults
     to explicit axes, which optimistix and jaxopt do not support (STYLE.md). Under
     `jax.distributed.initialize`, `jax.devices()` spans all hosts, so the same mesh scales out.
+
+    Arguments:
+        devices: the devices of the mesh (default `jax.devices()`).
+        axis_name: the name of its data axis.
+
+    Returns:
+        A `Mesh` of shape `(len(devices),)`.
     """
     devices = jax.devices() if devices is None else list(devices)
     if not devices:
@@ -42,14 +49,30 @@ def data_mesh(devices: Sequence[jax.Device] | None = None, axis_name: str = DATA
 
 
 def batch_sharding(mesh: Mesh, ndim: int, axis_name: str = DATA_AXIS) -> NamedSharding:
-    """`NamedSharding` splitting axis 0 of an `ndim`-dimensional array over `axis_name`."""
+    """`NamedSharding` splitting axis 0 of an `ndim`-dimensional array over `axis_name`.
+
+    Arguments:
+        mesh: the mesh (`data_mesh()`).
+        ndim: the rank of the arrays (>= 1).
+        axis_name: the mesh axis to split over.
+
+    Returns:
+        The sharding.
+    """
     if ndim < 1:
         raise ValueError(f"batch_sharding: a batched array has ndim >= 1, got {ndim}")
     return NamedSharding(mesh, PartitionSpec(axis_name, *([None] * (ndim - 1))))
 
 
 def replicated(mesh: Mesh) -> NamedSharding:
-    """`NamedSharding` that keeps a full copy on every device of `mesh`."""
+    """`NamedSharding` that keeps a full copy on every device of `mesh`.
+
+    Arguments:
+        mesh: the mesh.
+
+    Returns:
+        The sharding.
+    """
     return NamedSharding(mesh, PartitionSpec())
 
 
@@ -75,7 +98,13 @@ def shard_batch(tree, mesh: Mesh, axis_name: str = DATA_AXIS):
     The leading axes must all have the same length, a multiple of the number of devices on the
     axis (see `fit_batch_sharded` for padding). Non-array leaves are left alone.
 
-    **Returns:** `(tree_on_devices)`: the same structure with sharded `jax.Array` leaves.
+    Arguments:
+        tree: any pytree.
+        mesh: the mesh (`data_mesh()`).
+        axis_name: the mesh axis to split over.
+
+    Returns:
+        `(tree_on_devices)`: the same structure with sharded `jax.Array` leaves.
     """
     n = _num_shards(mesh, axis_name)
     leaves = [x for x in jax.tree.leaves(tree) if eqx.is_array(x)]
@@ -109,11 +138,13 @@ def fit_batch_sharded(
     multiple of the device count by repeating the last clip and the padding is dropped from the
     result, so any batch size works. Results equal an unsharded `fit_batch` to rounding.
 
-    **Arguments:** as `fourier.fit_batch` (`features [B, T, C]`, `frame_time_s [B]` or scalar,
-    `num_harmonics`, `mask [B, T]`, `omega_steps [B]`, keyword options), plus `mesh` (default
-    `data_mesh()`) and the name of its data axis.
+    Arguments:
+        As `fourier.fit_batch` (`features [B, T, C]`, `frame_time_s [B]` or scalar,
+        `num_harmonics`, `mask [B, T]`, `omega_steps [B]`, keyword options), plus `mesh` (default
+        `data_mesh()`) and the name of its data axis.
 
-    **Returns:** a `FitResult` with a leading axis of `B`, sharded over the mesh.
+    Returns:
+        a `FitResult` with a leading axis of `B`, sharded over the mesh.
     """
     mesh = data_mesh() if mesh is None else mesh
     n = _num_shards(mesh, axis_name)
@@ -151,15 +182,15 @@ def synthesize_sharded(
 
     Each device runs `fourier.synthesize_batch` on its share of the characters.
 
-    **Arguments:**
+    Arguments:
+        models: a `FourierModel` whose leaves have a leading character axis `[B, ...]`
+            (`fourier.stack_models`).
+        t_s: `[T]` times in seconds shared by all characters (replicated on every device), or
+            `[B, T]` one row per character (split like the characters).
+        mesh, axis_name: the mesh (default `data_mesh()`) and its data axis.
 
-    - `models`: a `FourierModel` whose leaves have a leading character axis `[B, ...]`
-      (`fourier.stack_models`).
-    - `t_s`: `[T]` times in seconds shared by all characters (replicated on every device), or
-      `[B, T]` one row per character (split like the characters).
-    - `mesh`, `axis_name`: the mesh (default `data_mesh()`) and its data axis.
-
-    **Returns:** `[B, T, C]` channel values, sharded over the mesh along `B`.
+    Returns:
+        `[B, T, C]` channel values, sharded over the mesh along `B`.
     """
     mesh = data_mesh() if mesh is None else mesh
     n = _num_shards(mesh, axis_name)
@@ -195,7 +226,14 @@ def crowd_positions_sharded(
     The batch is padded to a multiple of the device count by repeating the last character and
     the padding is dropped again.
 
-    **Returns:** `[B, J, 3]` positions, sharded along `B`.
+    Arguments:
+        skeleton: a `Crowd`, or the `Skeleton` of the channels.
+        channels: the time `t` (seconds, scalar) with a crowd, or `[B, C]` BVH channel values.
+        mesh: the mesh (default `data_mesh()`).
+        axis_name: its data axis.
+
+    Returns:
+        `[B, J, 3]` positions, sharded along `B`.
     """
     from fourierjax.crowd import Crowd, crowd_positions
 

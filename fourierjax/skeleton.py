@@ -24,15 +24,14 @@ class Topology:
     Hashable and comparable by value, so it can be a `jax.jit` static argument or an equinox
     static field. Joints are in file order and every parent comes before its children.
 
-    **Arguments:**
-
-    - `names`: joint names (End Sites excluded), unique.
-    - `parents`: parent index of each joint, `-1` for the root(s); `parents[i] < i`.
-    - `channels`: BVH channel names of each joint in file order, from `CHANNEL_NAMES`.
-      Rotation channels are applied in the listed order (intrinsic): `("Zrotation",
-      "Yrotation", "Xrotation")` means `R = Rz @ Ry @ Rx`. Position channels replace the
-      matching components of the joint's OFFSET.
-    - `end_site_parents`: the parent joint of each End Site.
+    Arguments:
+        names: joint names (End Sites excluded), unique.
+        parents: parent index of each joint, `-1` for the root(s); `parents[i] < i`.
+        channels: BVH channel names of each joint in file order, from `CHANNEL_NAMES`.
+            Rotation channels are applied in the listed order (intrinsic): `("Zrotation",
+            "Yrotation", "Xrotation")` means `R = Rz @ Ry @ Rx`. Position channels replace the
+            matching components of the joint's OFFSET.
+        end_site_parents: the parent joint of each End Site.
     """
 
     names: tuple[str, ...]
@@ -147,11 +146,10 @@ class Topology:
 class Skeleton(eqx.Module):
     """A topology with its geometry: bone offsets are arrays, so they can be fitted or batched.
 
-    **Arguments:**
-
-    - `topology`: the static `Topology`.
-    - `offsets`: `[J, 3]` local translation of each joint from its parent (file units).
-    - `end_site_offsets`: `[E, 3]` local translation of each End Site from its parent joint.
+    Arguments:
+        topology: the static `Topology`.
+        offsets: `[J, 3]` local translation of each joint from its parent (file units).
+        end_site_offsets: `[E, 3]` local translation of each End Site from its parent joint.
     """
 
     offsets: Float[Array, "joints 3"]

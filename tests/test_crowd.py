@@ -47,10 +47,10 @@ def test_equals_synthesize_then_fk_on_cmu_07_01():
     # Different times give different poses (the test can fail).
     assert float(jnp.abs(crowd.crowd_positions(c, 0.1) - crowd.crowd_positions(c, 0.2)).max()) > 1.0
     # A new time (Python float, numpy or jax scalar) never recompiles.
-    before = crowd._positions_jit._cache_size()
+    before = crowd._positions_jit.num_traces()
     for t in (0.5, np.float32(0.6), jnp.float32(0.7), jnp.asarray(0.8, jnp.float32)):
         crowd.crowd_positions(c, t)
-    assert crowd._positions_jit._cache_size() == before
+    assert crowd._positions_jit.num_traces() == before
 
 
 def _numpy_channels(models, t):

@@ -144,3 +144,13 @@ def test_center_of_mass_on_cmu_tpose():
     assert y["LeftUpLeg"] < com[1] < y["Spine"], (com, y)
     hips = np.asarray(res.positions[motion.topology.index("Hips")])
     assert abs(com[0] - hips[0]) < 0.1
+
+
+def test_joint_positions_entry_point_traces_once_per_shape():
+    topo, offsets, ends, channels = _random_case(5, num_frames=3)
+    skel = Skeleton(topo, offsets, ends)
+    kinematics.joint_positions(skel, jnp.asarray(channels))
+    before = kinematics.joint_positions.num_traces()
+    for k in range(3):  # new values, same shapes: no new trace
+        kinematics.joint_positions(Skeleton(topo, offsets + k, ends), jnp.asarray(channels + k))
+    assert kinematics.joint_positions.num_traces() == before

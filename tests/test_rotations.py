@@ -580,3 +580,52 @@ def test_euler_twin_is_the_same_rotation():
         np.testing.assert_allclose(Rotation.from_euler(order, twin).as_matrix(),
                                    Rotation.from_euler(order, a).as_matrix(), atol=1e-12)
         assert isinstance(rot.euler_twin(jnp.asarray(a, jnp.float32), order), jax.Array)
+
+
+# ----------------------------------------------------------- tiny quaternions (issue 24)
+
+_TINY_FUNCTIONS = {
+    "quat_normalize": rot.quat_normalize,
+    "expmap_from_quat": rot.expmap_from_quat,
+    "quat_power": lambda q: rot.quat_power(q, jnp.asarray(0.3, q.dtype)),
+    "quat_from_axis_angle": lambda q: rot.quat_from_axis_angle(q[1:], q[0] + jnp.asarray(0.7, q.dtype)),
+}
+
+
+def _tiny_quats(dtype: str, lowest: int) -> jnp.ndarray:
+    """Quaternions of norm 10**e for e from `lowest` to 0, in four directions, plus the norms
+    just above and below `zero_norm_threshold`."""
+    dirs = np.array([[1, 0, 0, 0], [0.6, 0.8, 0, 0], [0.1, 0.2, -0.3, 0.9], [-0.5, 0.5, -0.5, 0.5]], float)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    thr = rot.zero_norm_threshold(dtype)
+    norms = np.concatenate([10.0 ** np.linspace(lowest, 0, 4 * abs(lowest) // 5 + 1), [thr * 0.99, thr * 1.01]])
+    return jnp.asarray((norms[:, None, None] * dirs[None]).reshape(-1, 4), dtype)
+
+
+@pytest.mark.parametrize("name", sorted(_TINY_FUNCTIONS))
+@pytest.mark.parametrize("dtype, lowest", [("float32", -30), ("float64", -300)])
+def test_tiny_quaternions_have_finite_values_and_gradients(x64, name, dtype, lowest):
+    f = _TINY_FUNCTIONS[name]
+    q = _tiny_quats(dtype, lowest)
+    value = jax.vmap(f)(q)
+    rev = jax.vmap(jax.jacrev(f))(q)
+    fwd = jax.vmap(jax.jacfwd(f))(q)
+    for what, x in (("value", value), ("jacrev", rev), ("jacfwd", fwd)):
+        bad = ~np.isfinite(np.asarray(x)).reshape(len(q), -1).all(axis=1)
+        assert not bad.any(), (name, what, np.linalg.norm(np.asarray(q, float)[bad], axis=1))
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+def test_tiny_quaternions_below_the_threshold_are_the_identity(x64, dtype):
+    thr = rot.zero_norm_threshold(dtype)
+    assert thr == pytest.approx(float(jnp.finfo(dtype).tiny) ** 0.25)
+    below = jnp.asarray([1e-20 if dtype == "float32" else 1e-200, 0, 0, 0], dtype)
+    np.testing.assert_array_equal(rot.expmap_from_quat(below), np.zeros(3))  # NaN before issue 24
+    np.testing.assert_array_equal(rot.quat_normalize(below * 0.5), [1, 0, 0, 0])
+    np.testing.assert_array_equal(rot.quat_power(below, 0.5), [1, 0, 0, 0])
+    # Just above it, the rotation of a scaled quaternion is the rotation of the unit one.
+    q = jnp.asarray([0.1, 0.2, -0.3, 0.9], dtype) / np.linalg.norm([0.1, 0.2, -0.3, 0.9])
+    rtol = 1e-5 if dtype == "float32" else 1e-12
+    np.testing.assert_allclose(rot.expmap_from_quat(q * thr * 4), rot.expmap_from_quat(q), rtol=rtol)
+    np.testing.assert_allclose(rot.quat_power(q * thr * 4, 0.3), rot.quat_power(q, 0.3), rtol=rtol, atol=1e-7)
+    np.testing.assert_allclose(rot.quat_normalize(q * thr * 4), q, rtol=rtol)

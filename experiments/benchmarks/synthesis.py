@@ -34,9 +34,11 @@ def numpy_synthesize(off, a, b, omega, t_s):
 
 def variants():
     """Per-character formulations measured under `jit(vmap(...))` (`crowd.py` uses "fused_basis")."""
+    import jax
     import jax.numpy as jnp
 
-    from fourierjax._linalg import matmul
+    def matmul(a, b):  # full precision on every backend, as fourierjax's own products
+        return jnp.matmul(a, b, precision=jax.lax.Precision.HIGHEST)
 
     def fused_basis(model, t_s):
         # One [T, 2N] basis and one contraction instead of two matmuls.

@@ -1,0 +1,1 @@
+"""Private implementation of `fourierjax.rotations` (the public face re-exports it)."""
