@@ -2,7 +2,7 @@
 
 `run_demo(out_dir)` writes, under ``out_dir``:
 
-* ``models/<clip>.npz``: fitted Fourier models (versioned model files, `fourierjax.model_io`);
+* ``models/<clip>.npz``: fitted Fourier models (versioned model files, `fourierjax.io.model_io`);
 * ``bvh/*.bvh``: synthesized motions (normal, brisk and tired walks by inter/extrapolation
   (Unuma 1995 eq. 3), a brisk run by superposition (eq. 8), walk->run and run->walk
   transitions, step/speed/gait/jump variants (Unuma §3.1), a shivering walk (§3.3));
@@ -124,7 +124,8 @@ def _crop(motion, multiple: int = 64):
 
 
 def _fit(st: _State) -> None:
-    from fourierjax import __version__, data, model_io
+    from fourierjax import __version__, data
+    from fourierjax.io import model_io
     from fourierjax.motion import fit_motions
 
     starts = {}

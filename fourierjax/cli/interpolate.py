@@ -122,8 +122,8 @@ def _check_path(text: str, argument: str) -> pathlib.Path:
 
 
 def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
-    from fourierjax import model_io
     from fourierjax.errors import UserError
+    from fourierjax.io import model_io
 
     try:
         mf = model_io.load_model(path)
@@ -237,8 +237,9 @@ def run(args: argparse.Namespace) -> int:
     import jax
     import jax.numpy as jnp
 
-    from fourierjax import fourier, model_io, style
+    from fourierjax import fourier, style
     from fourierjax.errors import UserError
+    from fourierjax.io import model_io
 
     s = parse_number(args.s, "--s")
     out = check_out(args.out, (".npz", ".bvh"))

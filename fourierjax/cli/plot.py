@@ -53,8 +53,8 @@ def _num(text: str, name: str, kind=float, lo=None, hi=None):
 def _load(text: str):
     """('bvh', Motion, rest) or ('model', ModelFile, 0) for a path or bundled clip name: a
     BVH file's every frame and the number of its leading rest/T-pose frames."""
-    from fourierjax import model_io
     from fourierjax.cli._paths import resolve_input
+    from fourierjax.io import model_io
     from fourierjax.io.bvh import read_bvh
 
     path = resolve_input(text, expected="a BVH or model file")
