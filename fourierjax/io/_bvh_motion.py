@@ -42,6 +42,10 @@ MIN_FRAME_TIME_S = 1e-6
 # The longest frame time accepted (one frame a minute). A motion file sampled more slowly is a
 # corrupt header: "Frame Time: 1e300" made a clip's duration infinite and its frequencies 0.
 MAX_FRAME_TIME_S = 60.0
+# The largest magnitude of a channel value or OFFSET accepted. Real clips stay far below it (an
+# angle of 1e6 degrees, a position of 1 km in millimetres); 1e308 was accepted and float32
+# forward kinematics then gave inf and NaN.
+MAX_ABS_VALUE = 1e6
 
 
 def _show(s: str, limit: int = 40) -> str:

@@ -10,7 +10,14 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from fourierjax.io._bvh_motion import MAX_FRAME_TIME_S, MIN_FRAME_TIME_S, BVHError, Motion, _show
+from fourierjax.io._bvh_motion import (
+    MAX_ABS_VALUE,
+    MAX_FRAME_TIME_S,
+    MIN_FRAME_TIME_S,
+    BVHError,
+    Motion,
+    _show,
+)
 from fourierjax.skeleton import CHANNEL_NAMES, Topology
 
 _CHANNEL_BY_LOWER = {c.lower(): c for c in CHANNEL_NAMES}
@@ -29,19 +36,26 @@ _FLOAT_RE = re.compile(
 def read_bvh(path: str | os.PathLike) -> Motion:
     """Read a BVH file.
 
-    **Arguments:**
+    Joint names may hold spaces (3ds Max Biped writes ``JOINT Bip01 L Thigh``): every word after
+    ``ROOT`` / ``JOINT`` (up to a ``{``) is part of the name, and each word needs a letter or a
+    digit, so that junk on the line (``JOINT Neck @@``) is an error rather than a name.
 
-    - `path`: the file. UTF-8 (a BOM is allowed); LF, CRLF or CR line endings.
+    Arguments:
+        path: the file. UTF-8 (a BOM is allowed); LF, CRLF or CR line endings.
 
-    **Returns:** a `Motion` (channel values as in the file: degrees and file units).
+    Returns:
+        A `Motion` (channel values as in the file: degrees and file units).
 
-    **Raises:** `BVHError` for anything wrong, naming the file and the 1-based line: a missing
-    or unreadable file (line None), bytes that are not UTF-8, a malformed hierarchy, unknown
-    channel names, a frame count that does not match the rows, rows with the wrong number of
-    values, non-numeric, NaN or infinite values, zero frames, a non-positive frame time or
-    one outside [`MIN_FRAME_TIME_S`, `MAX_FRAME_TIME_S`] (1e-6 s to 60 s). Numbers (OFFSET,
-    Frame Time, frame data) must be ASCII decimals with an optional exponent: Python's laxer
-    `float()` spellings, such as `1_0` or non-ASCII digits, are errors.
+    Raises:
+        BVHError: for anything wrong, naming the file and the 1-based line: a missing or
+            unreadable file (line None), bytes that are not UTF-8, a malformed hierarchy,
+            unknown channel names, junk in a joint name, a frame count that does not match the
+            rows, rows with the wrong number of values, non-numeric, NaN or infinite values,
+            values or OFFSETs beyond +-`MAX_ABS_VALUE` (1e6), zero frames, a frame time outside
+            [`MIN_FRAME_TIME_S`, `MAX_FRAME_TIME_S`] (1e-6 s to 60 s), not enough memory for
+            the frames. Numbers (OFFSET, Frame Time, frame data) must be ASCII decimals with an
+            optional exponent: Python's laxer `float()` spellings (``1_0``, non-ASCII digits)
+            are errors.
     """
     name = os.fspath(path)
     try:
@@ -53,8 +67,12 @@ def read_bvh(path: str | os.PathLike) -> Motion:
         raise BVHError(name, None, "is a directory, not a BVH file") from None
     except OSError as err:
         raise BVHError(name, None, f"cannot read file: {err.strerror or err}") from None
+    except MemoryError:
+        raise BVHError(name, None, "not enough memory to read the file") from None
     try:
         text = raw.decode("utf-8")
+    except MemoryError:
+        raise BVHError(name, None, "not enough memory to decode the file") from None
     except UnicodeDecodeError as err:
         line = raw.count(b"\n", 0, err.start) + 1
         raise BVHError(
@@ -95,6 +113,8 @@ def _number(tok: str, what: str, err) -> float:
         raise err(f"{what}: {_show(tok)} is not a number")
     if not math.isfinite(v):
         raise err(f"{what}: {_show(tok)} is not a finite number")
+    if abs(v) > MAX_ABS_VALUE:
+        raise err(f"{what}: {_show(tok)} is beyond +-{MAX_ABS_VALUE:g}")
     return v
 
 
@@ -204,6 +224,13 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
                     raise err(f"{tok} without a name")
                 if "{" in name or "}" in name:
                     raise err(f"invalid joint name {_show(name)}")
+                # Names may hold spaces (3ds Max Biped writes "Bip01 L Thigh"), so every word
+                # after the keyword is part of the name; a word without a letter or digit is
+                # junk, not a name ("JOINT Neck @@" made a joint named "Neck @@").
+                junk = [w for w in rest if not any(ch.isalnum() for ch in w)]
+                if junk:
+                    raise err(f"unexpected {_show(junk[0])} in the joint name {_show(name)} "
+                              "(every word of a name needs a letter or digit)")
                 if name in seen:
                     raise err(f"duplicate joint name {_show(name)} (first at line {seen[name]})")
                 seen[name] = lineno
@@ -336,17 +363,22 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     if num_channels == 0:
         raise error(motion_line, "the hierarchy declares no channels, so frames carry no data")
 
-    values = _parse_motion_block(
-        text[data_pos:], data_line, num_channels, num_frames, frames_line, error
-    )
-    return Motion(
-        topology=topology,
-        offsets=np.array([j.offset for j in joints], dtype=np.float64).reshape(-1, 3),
-        end_site_offsets=np.array(end_offsets, dtype=np.float64).reshape(-1, 3),
-        channels=values,
-        frame_time_s=frame_time,
-        source=None if source == "<string>" else src,
-    )
+    try:
+        values = _parse_motion_block(
+            text[data_pos:], data_line, num_channels, num_frames, frames_line, error,
+            topology.flat_channel_names,
+        )
+        return Motion(
+            topology=topology,
+            offsets=np.array([j.offset for j in joints], dtype=np.float64).reshape(-1, 3),
+            end_site_offsets=np.array(end_offsets, dtype=np.float64).reshape(-1, 3),
+            channels=values,
+            frame_time_s=frame_time,
+            source=None if source == "<string>" else src,
+        )
+    except MemoryError:
+        raise error(frames_line, f"not enough memory to read {num_frames} frames of "
+                                 f"{num_channels} channels") from None
 
 
 _POW10 = 10.0 ** np.arange(23)  # exact doubles
@@ -398,7 +430,8 @@ def _parse_decimals(data: bytes, a, start_pos, end_pos):
 _DECIMAL_BYTES = b"0123456789.+-\t\n\x0b\x0c\r "  # whitespace: what bytes.split() splits on
 
 
-def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames_line, error):
+def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames_line, error,
+                        channel_names=()):
     """[F, C] float64 from the text after 'Frame Time:'; BVHError naming the first bad line.
 
     The row structure (values per line) comes from vectorised byte tests; the values are
@@ -463,6 +496,17 @@ def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames
             first_line + r,
             f"non-finite value {values[i]} in frame {i // num_channels} "
             f"(channel {i % num_channels})",
+        )
+    big = np.abs(values) > MAX_ABS_VALUE
+    if big.any():
+        i = int(np.argmax(big))
+        c = i % num_channels
+        name = f" {channel_names[c]}" if c < len(channel_names) else ""
+        raise error(
+            first_line + int(rows[i // num_channels]),
+            f"value {values[i]:g} in frame {i // num_channels} (channel {c}{name}) is beyond "
+            f"+-{MAX_ABS_VALUE:g}: float32 forward kinematics would overflow; the file is "
+            "probably corrupt",
         )
     return values.reshape(num_frames, num_channels)
 
