@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import pathlib
 import sys
+
+# Re-exported: synth and transition import them from here.
+from fourierjax.cli._numbers import MAX_FRAMES, frame_count, parse_number  # noqa: F401
 
 HELP = "Inter/extrapolate two gaits (Unuma eq. 3): write the model (.npz) or a motion (.bvh)."
 
@@ -50,40 +52,6 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="REP",
         help="channel representation when fitting a BVH argument: euler (default) or expmap",
     )
-
-
-#: Most frames a command writes (2.3 hours at 120 fps; a BVH of ~0.7 GB for a CMU skeleton):
-#: `synth --seconds 1000000` asked XLA for 46 GB and died with a JAX traceback.
-MAX_FRAMES = 1_000_000
-
-
-def frame_count(seconds: float, dt: float) -> int:
-    """Frames of a `seconds`-long motion at `dt` (at least 2), or a UserError past MAX_FRAMES."""
-    from fourierjax.errors import UserError
-
-    num = max(2, int(round(seconds / dt)))
-    if num > MAX_FRAMES:
-        raise UserError(f"--seconds: {seconds:g} s at {1 / dt:g} fps is {num} frames, more than "
-                        f"the {MAX_FRAMES} a command writes; use fewer seconds or a lower --fps")
-    return num
-
-
-def parse_number(text: str, option: str, *, positive=False, nonnegative=False, integer=False):
-    """A finite float (or int) from a command-line string, else a one-line UserError."""
-    from fourierjax.errors import UserError
-
-    try:
-        value = int(text) if integer else float(text)
-    except ValueError:
-        kind = "an integer" if integer else "a number"
-        raise UserError(f"{option}: {text!r} is not {kind}") from None
-    if not math.isfinite(value):
-        raise UserError(f"{option}: {text!r} is not a finite number")
-    if positive and not value > 0:
-        raise UserError(f"{option}: {text} must be > 0")
-    if nonnegative and value < 0:
-        raise UserError(f"{option}: {text} must be >= 0")
-    return value
 
 
 def _read_clip(path: pathlib.Path):
