@@ -16,6 +16,7 @@ from fourierjax._demo_synth import (
     _State,
     _style_models,
 )
+from fourierjax._jit import filter_jit
 
 
 def _plot_spectrum(st: _State) -> None:
@@ -130,7 +131,7 @@ def _plot_hip_rule(st: _State) -> None:
     feats = fourier.synthesize_phase(run, phase)
     sk = m.skeleton()
 
-    @jax.jit
+    @filter_jit
     def fk_all(sk, feats):
         def one(f):
             fk = forward_kinematics(sk, *local_pose_from_features(sk, f, run.representation))

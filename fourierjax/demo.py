@@ -119,6 +119,9 @@ def run_demo(out_dir, config: DemoConfig | None = None, *, progress: bool = True
     from tqdm import tqdm
 
     cfg = config or DemoConfig()
+    from fourierjax.cli import use_agg
+
+    use_agg()  # the demo writes files: Agg, whatever backend the caller had
     from fourierjax._compile_cache import enable_compile_cache
 
     enable_compile_cache()

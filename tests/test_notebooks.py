@@ -21,10 +21,18 @@ def test_committed_notebook_has_no_outputs(path):
             assert cell.outputs == [] and cell.execution_count is None, path.name
 
 
+def _draws(cell) -> bool:
+    """A code cell that makes a figure (and does not only save it to a file)."""
+    src = cell.source
+    return cell.cell_type == "code" and ("viz.plot_" in src or "plt." in src)
+
+
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_executes(path, tmp_path):
+def test_notebook_executes(path, tmp_path, monkeypatch):
     from nbclient import NotebookClient
 
+    # The kernel chooses Jupyter's inline backend unless MPLBACKEND says otherwise.
+    monkeypatch.delenv("MPLBACKEND", raising=False)
     nb = nbformat.read(path, as_version=4)
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}})
@@ -32,3 +40,10 @@ def test_notebook_executes(path, tmp_path):
     errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
               if o.output_type == "error"]
     assert not errors
+    # Every plotting cell shows its figure as an image (issue 25: viz forced Agg on import,
+    # and the cells showed "<Figure size 640x810 with 6 Axes>" as text).
+    drawing = [c for c in nb.cells if _draws(c)]
+    assert drawing, path.name
+    for c in drawing:
+        kinds = {k for o in c.outputs for k in o.get("data", {})}
+        assert "image/png" in kinds, (path.name, c.source[:80], kinds)

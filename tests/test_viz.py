@@ -160,3 +160,30 @@ def test_crowd_draws_every_bone_coloured_by_value(tmp_path):
         viz.plot_crowd(crowd, PARENTS, values[:3])
     with pytest.raises(ValueError, match="joints"):
         viz.plot_crowd(crowd, PARENTS[:-1], values)
+
+
+def test_importing_viz_leaves_the_matplotlib_backend_alone():
+    """viz called matplotlib.use("Agg") on import, which replaced Jupyter's inline backend."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import matplotlib; import fourierjax.viz; print(matplotlib.get_backend())"
+    env = dict(os.environ, MPLBACKEND="svg", PYTHONPATH=os.getcwd())
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().lower() == "svg", r.stdout
+
+
+def test_the_cli_and_the_demo_choose_agg():
+    import os
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; from fourierjax.cli import main\n"
+            "main(['plot', 'nope', 'x', '--out', 'x.png']); print(matplotlib.get_backend())")
+    env = dict(os.environ, MPLBACKEND="svg", PYTHONPATH=os.getcwd())
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.stdout.strip().lower() == "agg", (r.stdout, r.stderr)
