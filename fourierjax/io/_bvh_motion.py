@@ -77,14 +77,13 @@ class Motion:
     that semantic is applied by `fourierjax.kinematics`, not here. Arrays are read-only copies,
     so a `Motion` can be shared and cached safely; use `with_channels` or slicing for new ones.
 
-    **Arguments:**
-
-    - `topology`: `fourierjax.skeleton.Topology` (names, parents, channel names, End Sites).
-    - `offsets`: `[J, 3]` float64, each joint's OFFSET from its parent (file units).
-    - `end_site_offsets`: `[E, 3]` float64, each End Site's OFFSET from its parent joint.
-    - `channels`: `[F, C]` float64, `C = topology.num_channels`.
-    - `frame_time_s`: seconds per frame (> 0).
-    - `source`: where the clip came from (a path) or None.
+    Arguments:
+        topology: `fourierjax.skeleton.Topology` (names, parents, channel names, End Sites).
+        offsets: `[J, 3]` float64, each joint's OFFSET from its parent (file units).
+        end_site_offsets: `[E, 3]` float64, each End Site's OFFSET from its parent joint.
+        channels: `[F, C]` float64, `C = topology.num_channels`.
+        frame_time_s: seconds per frame (> 0).
+        source: where the clip came from (a path) or None.
     """
 
     topology: Topology

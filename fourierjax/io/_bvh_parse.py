@@ -125,12 +125,12 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
     bulk by NumPy (vectorised byte tests for the row structure, a vectorised exact decimal
     parser for the values, with a generic fallback); a bad row is reported with its line.
 
-    **Arguments:**
+    Arguments:
+        text: the whole file as a string.
+        source: the name used in errors and stored in `Motion.source` (None if left default).
 
-    - `text`: the whole file as a string.
-    - `source`: the name used in errors and stored in `Motion.source` (None if left default).
-
-    **Returns:** a `Motion`.
+    Returns:
+        a `Motion`.
     """
     if not isinstance(text, str):
         raise TypeError(f"parse_bvh expects str, got {type(text).__name__}; use read_bvh(path)")

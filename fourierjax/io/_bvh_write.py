@@ -38,13 +38,13 @@ def _check_writable(topology: Topology) -> None:
 def format_bvh(motion: Motion, precision: int = 6) -> str:
     """The BVH text of `motion` (LF line endings, tab indents, canonical channel names).
 
-    **Arguments:**
+    Arguments:
+        motion: the clip; needs at least one frame and finite values.
+        precision: digits after the decimal point for offsets and channel values.
 
-    - `motion`: the clip; needs at least one frame and finite values.
-    - `precision`: digits after the decimal point for offsets and channel values.
-
-    **Returns:** the file contents. `parse_bvh(format_bvh(m))` gives the same topology and
-    the same values to within `0.5 * 10**-precision`; the frame time round-trips exactly.
+    Returns:
+        the file contents. `parse_bvh(format_bvh(m))` gives the same topology and
+        the same values to within `0.5 * 10**-precision`; the frame time round-trips exactly.
     """
     if not isinstance(motion, Motion):
         raise TypeError(f"format_bvh expects a Motion, got {type(motion).__name__}")
