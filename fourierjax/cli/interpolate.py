@@ -1,8 +1,8 @@
 """`fourierjax interpolate`: a model between (or beyond) two gaits, Unuma 1995 eq. 3.
 
 Also home of the helpers the style commands share (`characteristic`, `transition`): reading a
-gait argument that is either a model file or a BVH clip fitted on the fly, parsing numbers into
-one-line errors, and writing a synthesized motion.
+gait argument that is either a model file or a BVH clip fitted on the fly, and writing a
+synthesized motion (numbers and frame counts: `cli._numbers`, re-exported here).
 """
 
 from __future__ import annotations
