@@ -169,7 +169,7 @@ def test_issue_24_command_line_cases_are_one_line_errors(tmp_path):
     """OverflowError for --seconds/--fps 1e308 (int(round(inf))), matplotlib's ValueError for
     plot --phase 1e308, `info ''` reading the current folder, `demo --clips ''` running the
     whole demo: each must be a one-line error with exit 2 and no traceback."""
-    env = dict(os.environ, PYTHONPATH=os.getcwd())
+    env = dict(os.environ, PYTHONPATH=_ROOT)
     r = subprocess.run([sys.executable, "-c", _ISSUE_24_SCRIPT, str(tmp_path)], capture_output=True,
                        text=True, timeout=600, env=env)
     text = r.stdout + r.stderr
@@ -183,3 +183,6 @@ def test_issue_24_command_line_cases_are_one_line_errors(tmp_path):
                      "an empty name, expected a BVH file", "--clips: '' names no clip"):
         assert any(fragment in e for e in errors), (fragment, errors)
     assert not any((tmp_path / n).exists() for n in ("s.bvh", "i.bvh", "t.bvh", "p.png", "demo"))
+
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this tree, for subprocesses

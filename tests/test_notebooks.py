@@ -1,6 +1,7 @@
 """The tutorial notebooks execute top to bottom (nbclient, kernel python3) and are committed
 without outputs."""
 
+import os
 import pathlib
 
 import nbformat
@@ -31,8 +32,11 @@ def _draws(cell) -> bool:
 def test_notebook_executes(path, tmp_path, monkeypatch):
     from nbclient import NotebookClient
 
-    # The kernel chooses Jupyter's inline backend unless MPLBACKEND says otherwise.
+    # The kernel chooses Jupyter's inline backend unless MPLBACKEND says otherwise; it imports
+    # this tree's fourierjax (it runs in tmp_path, and the environment may install another).
     monkeypatch.delenv("MPLBACKEND", raising=False)
+    root = str(pathlib.Path(__file__).resolve().parent.parent)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
     nb = nbformat.read(path, as_version=4)
     client = NotebookClient(nb, timeout=600, kernel_name="python3",
                             resources={"metadata": {"path": str(tmp_path)}})
