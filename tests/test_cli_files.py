@@ -154,7 +154,9 @@ cases = [
     ["plot", "stick", m, "--phase", "1e308", "--out", f"{out}/p.png"],
     ["info", ""],
     ["demo", "--clips", "", "--out", f"{out}/demo", "--quiet"],
+    ["synth", f"{out}/deep.npz", "--seconds", "2", "--out", f"{out}/s.bvh"],
 ]
+np.savez(f"{out}/deep.npz", header=np.array("[" * 100_000 + "]" * 100_000))
 for argv in cases:
     try:
         rc = main(argv)
@@ -168,19 +170,21 @@ for argv in cases:
 def test_issue_24_command_line_cases_are_one_line_errors(tmp_path):
     """OverflowError for --seconds/--fps 1e308 (int(round(inf))), matplotlib's ValueError for
     plot --phase 1e308, `info ''` reading the current folder, `demo --clips ''` running the
-    whole demo: each must be a one-line error with exit 2 and no traceback."""
+    whole demo, a model file whose header nests 100,000 brackets (RecursionError): each must be
+    a one-line error with exit 2 and no traceback."""
     env = dict(os.environ, PYTHONPATH=_ROOT)
     r = subprocess.run([sys.executable, "-c", _ISSUE_24_SCRIPT, str(tmp_path)], capture_output=True,
                        text=True, timeout=600, env=env)
     text = r.stdout + r.stderr
     assert r.returncode == 0 and "Traceback" not in text, text
     results = [line for line in r.stdout.splitlines() if line.startswith("CASE ")]
-    assert len(results) == 9 and all(line.endswith("rc=2") for line in results), results
+    assert len(results) == 10 and all(line.endswith("rc=2") for line in results), results
     errors = [line for line in r.stderr.splitlines() if line.startswith("fourierjax: error: ")]
-    assert len(errors) == 9, r.stderr
+    assert len(errors) == 10, r.stderr
     for fragment in ("--seconds: 1e+308 s at 120 fps is too many frames",
                      "--seconds: 2 s at 1e+308 fps", "--phase: 1e+308 is outside",
-                     "an empty name, expected a BVH file", "--clips: '' names no clip"):
+                     "an empty name, expected a BVH file", "--clips: '' names no clip",
+                     "deep.npz: header is not valid JSON: nested too deeply"):
         assert any(fragment in e for e in errors), (fragment, errors)
     assert not any((tmp_path / n).exists() for n in ("s.bvh", "i.bvh", "t.bvh", "p.png", "demo"))
 

@@ -528,3 +528,9 @@ def test_the_old_import_path_still_works():
 
     assert old.load_model is model_io.load_model and old.ModelFileError is model_io.ModelFileError
     assert old.save_characteristic is model_io.save_characteristic
+
+
+def test_a_folder_given_as_a_model_is_the_typed_error(tmp_path):
+    (tmp_path / "m.npz").mkdir()
+    with pytest.raises(model_io.ModelFileError, match="m.npz: cannot read the file"):
+        model_io.load_model(tmp_path / "m.npz")

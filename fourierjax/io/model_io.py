@@ -222,8 +222,10 @@ def _load_npz(path: str, kind: str) -> dict:
     except ModelFileError:
         raise
     except _ARCHIVE_ERRORS as err:
-        if isinstance(err, zipfile.BadZipFile | IsADirectoryError):
+        if isinstance(err, zipfile.BadZipFile):
             raise refuse(_not_npz_reason(path, err)) from None
+        if isinstance(err, OSError):  # a directory, no permission, a failing disk
+            raise ModelFileError(path, f"cannot read the file: {err.strerror or err}") from None
         raise refuse(f"damaged archive ({type(err).__name__}: {str(err)[:120]})") from None
 
 
