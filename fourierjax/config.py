@@ -1,20 +1,5 @@
-"""Experiment configurations in TOML (``configs/experiments/*.toml``), validated on load.
-
-A file names its experiment and sets that experiment's keys; a ``[small]`` table overrides
-some of them for the quick setting CI runs::
-
-    experiment = "fit_quality"
-    clips = ["02_01", "07_01"]
-    harmonics = [1, 2, 3, 7]
-
-    [small]
-    clips = ["07_01"]
-
-Every key is checked against the experiment's schema (:data:`SCHEMAS`): an unknown key, a
-missing required key, a wrong type or a value out of range raises :class:`ConfigError` with the
-file and the key in the message (``configs/x.toml: key 'harmonics': expected a list of
-integers >= 1, got ['a']``). Edge module (files); the core never imports it.
-"""
+"""Experiment configurations in TOML (``configs/experiments/*.toml``), validated on load
+against each experiment's schema (:data:`SCHEMAS`), with errors that name the file and the key."""
 
 from __future__ import annotations
 
@@ -201,13 +186,28 @@ def load_experiment_config(path: str | os.PathLike, *, small: bool = False,
                            experiment: str | None = None) -> dict:
     """Read and validate an experiment config (TOML).
 
+    A file names its experiment and sets that experiment's keys; a ``[small]`` table overrides
+    some of them for the quick setting CI runs::
+
+        experiment = "fit_quality"
+        clips = ["02_01", "07_01"]
+        harmonics = [1, 2, 3, 7]
+
+        [small]
+        clips = ["07_01"]
+
     Arguments:
-        path: the ``.toml`` file; small: apply its ``[small]`` table (the CI setting);
+        path: the ``.toml`` file.
+        small: apply its ``[small]`` table (the CI setting).
         experiment: if given, the file's ``experiment`` key must equal it.
+
     Returns:
         The validated settings with defaults, plus ``"experiment"`` and ``"small"``.
+
     Raises:
-        ConfigError (a UserError): the file is missing, not TOML, or a key is wrong.
+        ConfigError: (a UserError) the file is missing, not TOML, or a key is wrong (an unknown
+            key, a missing required key, a wrong type or a value out of range:
+            ``configs/x.toml: key 'harmonics': expected a list of integers >= 1, got ['a']``).
     """
     p = pathlib.Path(path)
     if not p.is_file():

@@ -1,15 +1,8 @@
-"""Plots and stick-figure animations of gaits, spectra, style spaces and stances (matplotlib, Agg).
+"""Plots and stick-figure animations of gaits, spectra, style spaces and stances (matplotlib).
 
-An edge module: NumPy in, matplotlib figures out; the core never imports it. Every function
-takes plain arrays (joint positions ``[J, 3]`` or ``[F, J, 3]`` in file units, Y up, parents as
-a tuple) so it works for BVH clips, synthesized gaits and solved stances alike. Functions that
-draw return the ``matplotlib.figure.Figure``; :func:`save_figure` writes PNGs, :func:`save_gif`
-writes animated GIFs with the pillow writer.
-
-Stick figures are drawn in an oblique orthographic view: the figure walks along +Z, the camera
-looks from the walker's left (+X) rotated by ``azimuth_deg`` about +Y, so the horizontal axis of
-the picture is mostly Z (forward) and the vertical axis is Y (up). Left limbs are blue, right
-limbs red, the trunk grey.
+NumPy in, matplotlib figures out: functions that draw return the `Figure`, `save_figure` writes
+PNGs and `save_gif` animated GIFs. The matplotlib backend is left to the caller (Jupyter's inline
+backend shows the figures; the CLI and `fourierjax.demo` choose Agg).
 """
 
 from __future__ import annotations
@@ -18,15 +11,11 @@ import io
 import os
 from collections.abc import Sequence
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib import animation
 
-matplotlib.use("Agg")  # never open a window; safe on headless CI
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib import animation  # noqa: E402
-
-from fourierjax.io.atomic import temporary_beside, write_bytes_atomic  # noqa: E402
+from fourierjax.io.atomic import temporary_beside, write_bytes_atomic
 
 __all__ = [
     "CMU_UNIT_M",
@@ -119,7 +108,9 @@ def draw_stick_figure(ax, positions, parents: Sequence[int], *, names: Sequence[
                       linewidth: float = 2.0, alpha: float = 1.0, joints: bool = True):
     """Draw one pose ``[J, 3]`` as bones (joint to parent) on ``ax``; returns the Line2D list.
 
-    ``scale`` multiplies lengths (e.g. :data:`CMU_UNIT_M` to draw in metres), ``offset`` shifts the
+    The view is `project`'s oblique orthographic one (the figure walks along +Z, seen from its
+    left); left limbs are blue, right limbs red, the trunk grey (`limb_colors`). ``scale``
+    multiplies lengths (e.g. :data:`CMU_UNIT_M` to draw in metres), ``offset`` shifts the
     projected picture (after scaling).
     """
     p = np.asarray(positions, dtype=np.float64)

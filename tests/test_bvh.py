@@ -250,8 +250,11 @@ def test_writer_rejects_what_bvh_cannot_hold():
         format_bvh(Motion(spaced, np.zeros((2, 3)), np.zeros((0, 3)), np.zeros((1, 2)), 0.1))
 
 
-DECIMAL_TOKEN = st.from_regex(r"\A[+-]?([0-9]{1,8}(\.[0-9]{0,7})?|\.[0-9]{1,7})\Z")
-ANY_TOKEN = DECIMAL_TOKEN | st.sampled_from(["1e3", "-2.5E-2", "1" * 16, "0." + "3" * 15,
+# Up to 15 digits (the exact path's bound) and below MAX_ABS_VALUE (1e6); 16 digits take the
+# generic path.
+DECIMAL_TOKEN = st.from_regex(r"\A[+-]?([0-9]{1,6}(\.[0-9]{0,9})?|\.[0-9]{1,9})\Z")
+ANY_TOKEN = DECIMAL_TOKEN | st.sampled_from(["1e3", "-2.5E-2", "1" * 6 + "." + "1" * 10,
+                                             "0." + "3" * 15,
                                              "+.5", "-0", "-0.000", "007.50"])  # fmt: skip
 
 
@@ -385,6 +388,13 @@ ERRORS = [
     ("inf value", _edit(21, "2 1 2 3 4 5 6 7 -inf"), 21, "non-finite value -inf in frame 2"),
     ("control character", _edit(20, "1 1 2 3 4\x005 6 7 8"), 20, "control character"),
     ("non-ascii value", _edit(19, "0 1 2 3 4 5 6 7 8\u00b0"), 19, "unexpected character"),
+    ("huge value", _edit(20, "1 1 2 3 4 1e308 6 7 8"), 20,
+     "value 1e+308 in frame 1 (channel 5 Hips.Xrotation) is beyond +-1e+06"),
+    ("huge decimal value", _edit(21, "2 1 2 3 4 5 6 7 -1000000.5"), 21, "is beyond +-1e+06"),
+    ("huge offset", _edit(8, "\t\tOFFSET 0 1e7 0"), 8, "OFFSET: '1e7' is beyond +-1e+06"),
+    ("junk in joint name", _edit(6, "\tJOINT Chest @@"), 6,
+     "unexpected '@@' in the joint name 'Chest @@'"),
+    ("junk in root name", _edit(2, "ROOT Hips = {"), 2, "unexpected '='"),
     ("no channels", _edit(5, "\tCHANNELS 0").replace("CHANNELS 3 Zrotation Xrotation Yrotation",
                                                       "CHANNELS 0"), 16, "no channels"),
 ]  # fmt: skip
@@ -555,3 +565,30 @@ def test_bvh_error_is_a_user_error():
     assert issubclass(BVHError, UserError) and issubclass(BVHError, ValueError)
     with pytest.raises(UserError, match="walk.bvh:20"):
         parse_bvh(_edit(20, "1 1 2 3 x4 5 6 7 8"), source="walk.bvh")
+
+
+def test_values_up_to_the_limit_and_spaced_names_are_read():
+    """The rule for names: every word after JOINT is part of the name (3ds Max Biped names have
+    spaces), and a word needs a letter or digit. 1e6 itself is a valid value."""
+    from fourierjax.io.bvh import MAX_ABS_VALUE
+
+    text = _edit(6, "\tJOINT Bip01 L Thigh").replace("0 1 2 3 4 5 6 7 8", "0 1 2 3 4 5 6 7 1e6")
+    m = parse_bvh(text)
+    assert m.topology.names == ("Hips", "Bip01 L Thigh") and m.channels[0, -1] == MAX_ABS_VALUE
+    assert parse_bvh(format_bvh(m)).topology.names == m.topology.names
+    assert parse_bvh(_edit(6, "\tJOINT Neck_2 (left) {").replace("\t{\n\t\tOFFSET 0 5", "\t\tOFFSET 0 5", 1)
+                     ).topology.names[1] == "Neck_2 (left)"
+
+
+def test_a_memory_error_while_reading_becomes_a_bvh_error(monkeypatch, tmp_path):
+    from fourierjax.io import _bvh_parse
+
+    def no_memory(*args, **kwargs):
+        raise MemoryError
+
+    path = tmp_path / "walk.bvh"
+    path.write_text(BASE)
+    monkeypatch.setattr(_bvh_parse, "_parse_motion_block", no_memory)
+    with pytest.raises(BVHError) as e:
+        read_bvh(path)
+    assert (e.value.path, e.value.line) == (str(path), 17) and "not enough memory" in str(e.value)

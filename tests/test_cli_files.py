@@ -125,3 +125,68 @@ def test_absurd_lengths_and_extrapolations_are_one_line_errors(tmp_path, capsys)
     assert main(["interpolate", str(a), str(b), "--s", "1e30", "--out", str(tmp_path / "i.bvh")]) == 2
     _one_error_line(capsys, "--s: 1e+30 extrapolates so far that the model overflows")
     assert not (tmp_path / "s.bvh").exists() and not (tmp_path / "i.bvh").exists()
+
+
+_ISSUE_24_SCRIPT = r"""
+import sys, traceback
+import numpy as np
+from fourierjax import data
+from fourierjax.cli import main
+from fourierjax.fourier import FourierModel
+from fourierjax.io import model_io
+from fourierjax.motion import channel_names_for
+
+out = sys.argv[1]
+clip = data.load("07_01")[:10]
+names = channel_names_for(clip.topology, "euler")
+amp = np.random.default_rng(0).uniform(0, 0.1, (len(names), 2))
+model = FourierModel(np.zeros(len(names)), amp, np.zeros_like(amp), np.asarray(6.0), "euler", names)
+m = f"{out}/m.npz"
+model_io.save_model(m, model, motion=clip)
+cases = [
+    ["synth", m, "--seconds", "1e308", "--out", f"{out}/s.bvh"],
+    ["synth", m, "--seconds", "2", "--fps", "1e308", "--out", f"{out}/s.bvh"],
+    ["interpolate", m, m, "--s", "0.5", "--seconds", "1e308", "--out", f"{out}/i.bvh"],
+    ["interpolate", m, m, "--s", "0.5", "--fps", "1e308", "--out", f"{out}/i.bvh"],
+    ["transition", m, m, "--seconds", "1e308", "--start", "1", "--duration", "1", "--out", f"{out}/t.bvh"],
+    ["transition", m, m, "--seconds", "4", "--fps", "1e308", "--start", "1", "--duration", "1",
+     "--out", f"{out}/t.bvh"],
+    ["plot", "stick", m, "--phase", "1e308", "--out", f"{out}/p.png"],
+    ["info", ""],
+    ["demo", "--clips", "", "--out", f"{out}/demo", "--quiet"],
+    ["synth", f"{out}/deep.npz", "--seconds", "2", "--out", f"{out}/s.bvh"],
+]
+np.savez(f"{out}/deep.npz", header=np.array("[" * 100_000 + "]" * 100_000))
+for argv in cases:
+    try:
+        rc = main(argv)
+    except BaseException:
+        traceback.print_exc()
+        rc = "raised"
+    print(f"CASE {argv[0]} {argv[-1] if argv[0] == 'info' else ' '.join(argv[3:5])!r} rc={rc}", flush=True)
+"""
+
+
+def test_issue_24_command_line_cases_are_one_line_errors(tmp_path):
+    """OverflowError for --seconds/--fps 1e308 (int(round(inf))), matplotlib's ValueError for
+    plot --phase 1e308, `info ''` reading the current folder, `demo --clips ''` running the
+    whole demo, a model file whose header nests 100,000 brackets (RecursionError): each must be
+    a one-line error with exit 2 and no traceback."""
+    env = dict(os.environ, PYTHONPATH=_ROOT)
+    r = subprocess.run([sys.executable, "-c", _ISSUE_24_SCRIPT, str(tmp_path)], capture_output=True,
+                       text=True, timeout=600, env=env)
+    text = r.stdout + r.stderr
+    assert r.returncode == 0 and "Traceback" not in text, text
+    results = [line for line in r.stdout.splitlines() if line.startswith("CASE ")]
+    assert len(results) == 10 and all(line.endswith("rc=2") for line in results), results
+    errors = [line for line in r.stderr.splitlines() if line.startswith("fourierjax: error: ")]
+    assert len(errors) == 10, r.stderr
+    for fragment in ("--seconds: 1e+308 s at 120 fps is too many frames",
+                     "--seconds: 2 s at 1e+308 fps", "--phase: 1e+308 is outside",
+                     "an empty name, expected a BVH file", "--clips: '' names no clip",
+                     "deep.npz: header is not valid JSON: nested too deeply"):
+        assert any(fragment in e for e in errors), (fragment, errors)
+    assert not any((tmp_path / n).exists() for n in ("s.bvh", "i.bvh", "t.bvh", "p.png", "demo"))
+
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this tree, for subprocesses

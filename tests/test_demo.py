@@ -33,7 +33,7 @@ def demo_run(tmp_path_factory):
 
 
 def test_demo_writes_every_part(demo_run):
-    from fourierjax import model_io
+    from fourierjax.io import model_io
     from fourierjax.io.bvh import read_bvh
 
     out, r = demo_run

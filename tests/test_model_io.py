@@ -1,4 +1,4 @@
-"""Tests of fourierjax.model_io: exact round trip, skeleton record, typed errors, no pickle."""
+"""Tests of fourierjax.io.model_io: exact round trip, skeleton record, typed errors, no pickle."""
 
 import io
 import json
@@ -7,8 +7,9 @@ import pathlib
 import numpy as np
 import pytest
 
-from fourierjax import data, model_io
+from fourierjax import data
 from fourierjax.fourier import FourierModel
+from fourierjax.io import model_io
 
 
 def _model(names=("root.vx", "a", "b")):
@@ -380,3 +381,156 @@ def test_template_keeps_the_bones_of_files_with_positions_on_every_joint(tmp_pat
     got = kinematics.joint_positions(template.skeleton(), jnp.asarray(template.channels))
     np.testing.assert_allclose(np.asarray(got), np.asarray(rest), atol=1e-5)
     assert np.ptp(np.asarray(got)[0, :, 1]) > 10  # a body, not a point (CMU units)
+
+
+# -- corrupted files never escape as tracebacks (issue 24) ---------------------------------
+def _good_bytes(tmp_path):
+    good = tmp_path / "good.npz"
+    model_io.save_model(good, _model())
+    return good.read_bytes()
+
+
+def _patch_zip(raw: bytes, **fields) -> bytes:
+    """`raw` with fields of every local and central zip header overwritten (little endian)."""
+    local = {"version": 4, "flags": 6, "method": 8}
+    central = {"version": 6, "flags": 8, "method": 10}
+    out = bytearray(raw)
+    for sig, where in ((b"PK\x03\x04", local), (b"PK\x01\x02", central)):
+        pos = out.find(sig)
+        while pos >= 0:
+            for name, value in fields.items():
+                out[pos + where[name]:pos + where[name] + 2] = value.to_bytes(2, "little")
+            pos = out.find(sig, pos + 4)
+    return bytes(out)
+
+
+def _header_of(tmp_path):
+    with np.load(tmp_path / "good.npz") as z:
+        return {k: z[k] for k in z.files if k != "header"}, json.loads(str(z["header"]))
+
+
+def _huge_member_npz(arrays, header) -> bytes:
+    """A valid archive whose `offset` member declares shape (10**12,) but holds 3 values."""
+    import zipfile
+
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        for k, v in dict(arrays, header=np.array(json.dumps(header))).items():
+            member = io.BytesIO()
+            if k == "offset":
+                np.lib.format.write_array_header_1_0(
+                    member, {"descr": "<f8", "fortran_order": False, "shape": (10**12,)})
+                member.write(np.zeros(3).tobytes())
+            else:
+                np.save(member, v)
+            zf.writestr(k + ".npy", member.getvalue())
+    return buf.getvalue()
+
+
+CORRUPT = [
+    # (id, how the file is made from the good bytes / arrays / header, fragment of the message)
+    ("nested brackets (RecursionError)", "header", "[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ("5000-digit integer (ValueError)", "header",
+     '{"format": "fourierjax.fourier_model", "version": 1' + "0" * 5000 + "}", "not valid JSON"),
+    ("bare .npy (TypeError)", "npy", None, "bare .npy array"),
+    ("shape 10**12 (MemoryError)", "huge", None, "declares shape (1000000000000,)"),
+    ("compression 99 (NotImplementedError)", "patch", {"method": 99}, "compression method 99"),
+    ("zip version 200 (NotImplementedError)", "patch", {"version": 200}, "damaged archive"),
+    ("encrypted flag (RuntimeError)", "patch", {"flags": 1}, "is encrypted"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", CORRUPT, ids=[c[0] for c in CORRUPT])
+def test_corrupted_model_files_raise_the_typed_error(tmp_path, case):
+    _, how, arg, fragment = case
+    raw = _good_bytes(tmp_path)
+    arrays, header = _header_of(tmp_path)
+    bad = tmp_path / "bad.npz"
+    if how == "header":
+        buf = io.BytesIO()
+        np.savez(buf, header=np.array(arg), **arrays)
+        bad.write_bytes(buf.getvalue())
+    elif how == "npy":
+        with open(bad, "wb") as f:
+            np.save(f, np.zeros(3))
+    elif how == "huge":
+        bad.write_bytes(_huge_member_npz(arrays, header))
+    else:
+        bad.write_bytes(_patch_zip(raw, **arg))
+    for load in (model_io.load_model, model_io.load_characteristic):
+        with pytest.raises(model_io.ModelFileError) as e:
+            load(bad)
+        assert e.value.path == str(bad) and fragment in e.value.message, str(e.value)
+        assert "\n" not in str(e.value)
+
+
+def _edited(tmp_path, names=None, representation=None, **arrays):
+    _good_bytes(tmp_path)
+    base, header = _header_of(tmp_path)
+    if names is not None:
+        header["channel_names"] = list(names)
+    if representation is not None:
+        header["representation"] = representation
+    bad = tmp_path / "bad.npz"
+    _write(bad, header, **dict(base, **arrays))
+    return bad, base
+
+
+INCONSISTENT = [
+    ("expmap on Euler names", dict(names=("root.vx", "Hips.Zrotation", "Hips.Xrotation"),
+                                   representation="expmap"), "'Hips.Zrotation' is an Euler channel"),
+    ("euler on expmap names", dict(names=("root.vx", "Hips.expmap0", "Hips.expmap1"),
+                                   representation="euler"), "'Hips.expmap0' is an expmap channel"),
+    ("negative amplitude", dict(amplitude=lambda a: a - 2.0), "is negative"),
+    ("subnormal omega", dict(omega=np.array(5e-324)), "outside the physical range [0.05, 100]"),
+    ("omega 1000 rad/s", dict(omega=np.array(1000.0)), "outside the physical range"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", INCONSISTENT, ids=[c[0] for c in INCONSISTENT])
+def test_inconsistent_model_files_are_refused(tmp_path, case):
+    _, edit, fragment = case
+    _good_bytes(tmp_path)
+    base, _ = _header_of(tmp_path)
+    edit = {k: (v(base[k]) if callable(v) else v) for k, v in edit.items()}
+    bad, _ = _edited(tmp_path, **edit)
+    with pytest.raises(model_io.ModelFileError) as e:
+        model_io.load_model(bad)
+    assert e.value.path == str(bad) and fragment in e.value.message, str(e.value)
+
+
+def test_save_model_refuses_inconsistent_models(tmp_path):
+    from fourierjax.errors import UserError
+
+    m = _model(("root.vx", "Hips.Zrotation", "Hips.Xrotation"))  # expmap on Euler names
+    with pytest.raises(UserError, match="save_model: `model`: representation is 'expmap'"):
+        model_io.save_model(tmp_path / "r.npz", m)
+    ok = _model()
+    slow = FourierModel(ok.offset, ok.amplitude, ok.phase, np.asarray(0.01), ok.representation,
+                        ok.channel_names)
+    with pytest.raises(UserError, match="omega = 0.01 rad/s is outside the physical range"):
+        model_io.save_model(tmp_path / "w.npz", slow)
+    neg = FourierModel(ok.offset, -ok.amplitude, ok.phase, ok.omega, ok.representation,
+                       ok.channel_names)
+    with pytest.raises(UserError, match="is negative"):
+        model_io.save_model(tmp_path / "a.npz", neg)
+    assert not any((tmp_path / n).exists() for n in ("r.npz", "w.npz", "a.npz"))
+    # The range's ends are valid.
+    for omega in (model_io.OMEGA_MIN_RAD_S, model_io.OMEGA_MAX_RAD_S):
+        edge = FourierModel(ok.offset, ok.amplitude, ok.phase, np.asarray(omega),
+                            ok.representation, ok.channel_names)
+        model_io.save_model(tmp_path / "e.npz", edge)
+        assert float(model_io.load_model(tmp_path / "e.npz").model.omega) == omega
+
+
+def test_the_old_import_path_still_works():
+    import fourierjax.model_io as old
+
+    assert old.load_model is model_io.load_model and old.ModelFileError is model_io.ModelFileError
+    assert old.save_characteristic is model_io.save_characteristic
+
+
+def test_a_folder_given_as_a_model_is_the_typed_error(tmp_path):
+    (tmp_path / "m.npz").mkdir()
+    with pytest.raises(model_io.ModelFileError, match="m.npz: cannot read the file"):
+        model_io.load_model(tmp_path / "m.npz")

@@ -1,4 +1,6 @@
-"""Plots and GIFs of fourierjax.viz on small synthetic inputs (Agg backend, no display)."""
+"""Plots and GIFs of fourierjax.viz on small synthetic inputs (Agg backend, chosen here: no display)."""
+
+import os
 
 import matplotlib
 import numpy as np
@@ -6,6 +8,8 @@ import pytest
 from PIL import Image
 
 from fourierjax import viz
+
+matplotlib.use("Agg")  # viz leaves the backend to its caller; these tests draw to files
 
 # A 6-joint stick figure: pelvis, spine, head, left/right hip-knee chains (Y up, facing +Z).
 PARENTS = (-1, 0, 1, 0, 3, 0, 5)
@@ -15,6 +19,11 @@ POSE = np.array([[0, 10, 0], [0, 14, 0], [0, 18, 0], [1, 9, 0], [1, 1, 1], [-1, 
 
 
 def test_backend_is_agg():
+    # The drawing edges (CLI, demo) choose Agg with cli.use_agg; viz itself no longer does.
+    from fourierjax.cli import use_agg
+
+    matplotlib.use("svg")
+    use_agg()
     assert matplotlib.get_backend().lower() == "agg"
 
 
@@ -160,3 +169,33 @@ def test_crowd_draws_every_bone_coloured_by_value(tmp_path):
         viz.plot_crowd(crowd, PARENTS, values[:3])
     with pytest.raises(ValueError, match="joints"):
         viz.plot_crowd(crowd, PARENTS[:-1], values)
+
+
+def test_importing_viz_leaves_the_matplotlib_backend_alone():
+    """viz called matplotlib.use("Agg") on import, which replaced Jupyter's inline backend."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import matplotlib; import fourierjax.viz; print(matplotlib.get_backend())"
+    env = dict(os.environ, MPLBACKEND="svg", PYTHONPATH=_ROOT)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().lower() == "svg", r.stdout
+
+
+def test_the_cli_and_the_demo_choose_agg():
+    import os
+    import subprocess
+    import sys
+
+    code = ("import matplotlib; from fourierjax.cli import main\n"
+            "main(['plot', 'nope', 'x', '--out', 'x.png']); print(matplotlib.get_backend())")
+    env = dict(os.environ, MPLBACKEND="svg", PYTHONPATH=_ROOT)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                       timeout=120)
+    assert r.stdout.strip().lower() == "agg", (r.stdout, r.stderr)
+
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this tree, for subprocesses

@@ -25,6 +25,20 @@ COMMANDS: dict[str, str] = {
 }
 
 
+#: Subcommands that draw with matplotlib: they write files and never open a window.
+_DRAWS = frozenset({"plot", "demo", "stance"})
+
+
+def use_agg() -> None:
+    """Choose matplotlib's Agg backend (files only, no window), as the CLI and the demo do.
+
+    `fourierjax.viz` leaves the backend alone, so that Jupyter's inline backend shows figures.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fourierjax",
@@ -46,6 +60,8 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = _build_parser()
     args = parser.parse_args(argv)
+    if args.command in _DRAWS:
+        use_agg()
     try:
         return int(args._run(args) or 0)
     except FourierJaxError as err:

@@ -13,6 +13,8 @@ def resolve_input(text: str, argument: str = "", expected: str = "a BVH file") -
     from fourierjax.errors import UserError
 
     prefix = f"{argument}: " if argument else ""
+    if not text.strip():  # pathlib.Path("") is ".", the current folder
+        raise UserError(f"{prefix}an empty name, expected {expected}")
     path = pathlib.Path(text)
     if path.exists():
         if path.is_dir():

@@ -1,7 +1,7 @@
 """`fourierjax characteristic`: the Fourier characteristics A − B of two gaits (Unuma 1995, eq. 7).
 
 Writes a characteristic file (format ``fourierjax.fourier_characteristic``, documented and
-read/written by `fourierjax.model_io`: `save_characteristic`, `load_characteristic`). Apply it
+read/written by `fourierjax.io.model_io`: `save_characteristic`, `load_characteristic`). Apply it
 with `fourierjax.style.superpose(base, [characteristic], [weight])` or ``fourierjax synth --add``.
 """
 
@@ -12,7 +12,7 @@ import argparse
 import numpy as np
 
 # Re-exported: `fourierjax.cli.synth` and older callers import them from here.
-from fourierjax.model_io import load_characteristic, save_characteristic
+from fourierjax.io.model_io import load_characteristic, save_characteristic
 
 __all__ = ["HELP", "add_arguments", "run", "load_characteristic", "save_characteristic"]
 
@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     add_gait_arguments(parser)
     parser.add_argument(
-        "--out", required=True, metavar="C.npz", help="characteristic file to write (format: fourierjax.model_io)"
+        "--out", required=True, metavar="C.npz", help="characteristic file to write (format: fourierjax.io.model_io)"
     )
 
 

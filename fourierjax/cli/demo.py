@@ -37,8 +37,13 @@ def run(args: argparse.Namespace) -> int:
     kw = dict(harmonics=_number(args.harmonics, "--harmonics", int),
               seconds=_number(args.seconds, "--seconds"),
               gifs=not args.no_gifs, stance=not args.no_stance)
-    if args.clips:
+    if args.clips is not None:  # `--clips ''` names no clip; it ran the whole demo
         kw["clips"] = tuple(c.strip() for c in args.clips.split(",") if c.strip())
+        if not kw["clips"]:
+            from fourierjax.errors import UserError
+
+            raise UserError(f"--clips: {args.clips!r} names no clip; give bundled clip names "
+                            "separated by commas (e.g. 07_01,07_04)")
     summary = run_demo(args.out, DemoConfig(**kw), progress=not args.quiet)
     print(f"{'clip':<7} {'f0 (Hz)':>8} {'rms_deg':>8} {'VE_ang':>7} {'VE_pos':>7}")
     for clip, f in summary["fits"].items():

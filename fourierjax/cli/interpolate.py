@@ -1,17 +1,19 @@
 """`fourierjax interpolate`: a model between (or beyond) two gaits, Unuma 1995 eq. 3.
 
 Also home of the helpers the style commands share (`characteristic`, `transition`): reading a
-gait argument that is either a model file or a BVH clip fitted on the fly, parsing numbers into
-one-line errors, and writing a synthesized motion.
+gait argument that is either a model file or a BVH clip fitted on the fly, and writing a
+synthesized motion (numbers and frame counts: `cli._numbers`, re-exported here).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
-import math
 import pathlib
 import sys
+
+# Re-exported: synth and transition import them from here.
+from fourierjax.cli._numbers import MAX_FRAMES, frame_count, parse_number  # noqa: F401
 
 HELP = "Inter/extrapolate two gaits (Unuma eq. 3): write the model (.npz) or a motion (.bvh)."
 
@@ -52,40 +54,6 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-#: Most frames a command writes (2.3 hours at 120 fps; a BVH of ~0.7 GB for a CMU skeleton):
-#: `synth --seconds 1000000` asked XLA for 46 GB and died with a JAX traceback.
-MAX_FRAMES = 1_000_000
-
-
-def frame_count(seconds: float, dt: float) -> int:
-    """Frames of a `seconds`-long motion at `dt` (at least 2), or a UserError past MAX_FRAMES."""
-    from fourierjax.errors import UserError
-
-    num = max(2, int(round(seconds / dt)))
-    if num > MAX_FRAMES:
-        raise UserError(f"--seconds: {seconds:g} s at {1 / dt:g} fps is {num} frames, more than "
-                        f"the {MAX_FRAMES} a command writes; use fewer seconds or a lower --fps")
-    return num
-
-
-def parse_number(text: str, option: str, *, positive=False, nonnegative=False, integer=False):
-    """A finite float (or int) from a command-line string, else a one-line UserError."""
-    from fourierjax.errors import UserError
-
-    try:
-        value = int(text) if integer else float(text)
-    except ValueError:
-        kind = "an integer" if integer else "a number"
-        raise UserError(f"{option}: {text!r} is not {kind}") from None
-    if not math.isfinite(value):
-        raise UserError(f"{option}: {text!r} is not a finite number")
-    if positive and not value > 0:
-        raise UserError(f"{option}: {text} must be > 0")
-    if nonnegative and value < 0:
-        raise UserError(f"{option}: {text} must be >= 0")
-    return value
-
-
 def _read_clip(path: pathlib.Path):
     from fourierjax.data import detect_rest_frames
     from fourierjax.errors import UserError
@@ -122,8 +90,8 @@ def _check_path(text: str, argument: str) -> pathlib.Path:
 
 
 def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
-    from fourierjax import model_io
     from fourierjax.errors import UserError
+    from fourierjax.io import model_io
 
     try:
         mf = model_io.load_model(path)
@@ -237,8 +205,9 @@ def run(args: argparse.Namespace) -> int:
     import jax
     import jax.numpy as jnp
 
-    from fourierjax import fourier, model_io, style
+    from fourierjax import fourier, style
     from fourierjax.errors import UserError
+    from fourierjax.io import model_io
 
     s = parse_number(args.s, "--s")
     out = check_out(args.out, (".npz", ".bvh"))

@@ -46,15 +46,15 @@ def _num(text: str, name: str, kind=float, lo=None, hi=None):
     if kind is float and not math.isfinite(v):
         raise UserError(f"{name}: must be finite, got {text!r}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise UserError(f"{name}: {v} is outside [{lo}, {hi}]")
+        raise UserError(f"{name}: {v:g} is outside [{lo:g}, {hi:g}]")
     return v
 
 
 def _load(text: str):
     """('bvh', Motion, rest) or ('model', ModelFile, 0) for a path or bundled clip name: a
     BVH file's every frame and the number of its leading rest/T-pose frames."""
-    from fourierjax import model_io
     from fourierjax.cli._paths import resolve_input
+    from fourierjax.io import model_io
     from fourierjax.io.bvh import read_bvh
 
     path = resolve_input(text, expected="a BVH or model file")
@@ -136,13 +136,19 @@ def run(args: argparse.Namespace) -> int:
             title = f"{pathlib.Path(args.input).name}, frame {k}"
             topo = obj.topology
         else:
+            import math
+
             from fourierjax.motion import model_joint_positions
 
-            ph = _num(args.phase, "--phase")
+            # Wrapped in float64 (float32 sin of a large phase is imprecise); beyond +-1e6 rad
+            # it is a typo (1e308 made NaN poses and a matplotlib ValueError).
+            ph = math.remainder(_num(args.phase, "--phase", float, -1e6, 1e6), 2 * math.pi)
             template = obj.template_motion()
             if template is None:
                 raise UserError(f"{args.input}: the model file carries no skeleton to draw")
             p = model_joint_positions(obj.model, template.skeleton(), np.array([ph]))[0]
+            if not np.isfinite(p).all():
+                raise UserError(f"{args.input}: the pose at phase {ph:g} rad is not finite")
             title = f"{pathlib.Path(args.input).name}, phase {ph:.2f} rad"
             topo = template.topology
         fig = viz.plot_stick_figure(p, topo.parents, names=topo.names, title=title)

@@ -132,12 +132,13 @@ def path(name: str) -> pathlib.Path:
 def describe(name: str) -> dict:
     """What is known about clip `name`, as a JSON-serialisable dict.
 
-    **Returns:** keys `name`, `group` (`"cmu_mb"` or `"cmu_stylized"`), `subject` (CMU subject
-    number as a string, e.g. `"07"`), `trial`, `description` (from the CMU index: `"walk"`,
-    `"run/jog"`, `"slow walk"`, `"brisk walk"`, `"run"`, `"stylized walk (clumsy)"`, ...),
-    `fps` (nominal, 120.0), `frames_in_file`, `rest_frames` (leading synthetic frames that
-    `load` drops), `frames` (frames after `load`), `notes`, `source` (repository@commit:path
-    it was copied from), `sha256` (of the bundled file), `path`.
+    Returns:
+        keys `name`, `group` (`"cmu_mb"` or `"cmu_stylized"`), `subject` (CMU subject
+        number as a string, e.g. `"07"`), `trial`, `description` (from the CMU index: `"walk"`,
+        `"run/jog"`, `"slow walk"`, `"brisk walk"`, `"run"`, `"stylized walk (clumsy)"`, ...),
+        `fps` (nominal, 120.0), `frames_in_file`, `rest_frames` (leading synthetic frames that
+        `load` drops), `frames` (frames after `load`), `notes`, `source` (repository@commit:path
+        it was copied from), `sha256` (of the bundled file), `path`.
     """
     entry = dict(_entry(name))
     entry["frames"] = entry["frames_in_file"] - entry["rest_frames"]
@@ -153,13 +154,13 @@ def _read(name: str) -> Motion:
 def load(name: str, *, raw: bool = False) -> Motion:
     """Load bundled clip `name` as a `Motion` (degrees, CMU units, 120 fps).
 
-    **Arguments:**
+    Arguments:
+        name: one of `list()`, e.g. `"07_01"`.
+        raw: keep every frame of the file. By default the leading synthetic frames (the
+            T-pose of `cmu_mb` clips, and the zero frame of `07_12`) are dropped.
 
-    - `name`: one of `list()`, e.g. `"07_01"`.
-    - `raw`: keep every frame of the file. By default the leading synthetic frames (the
-      T-pose of `cmu_mb` clips, and the zero frame of `07_12`) are dropped.
-
-    **Returns:** the `Motion`; UserError (listing the valid names) for an unknown name.
+    Returns:
+        the `Motion`; UserError (listing the valid names) for an unknown name.
     """
     entry = _entry(name)
     motion = _read(entry["name"])
@@ -175,11 +176,11 @@ def detect_rest_frames(motion: Motion) -> int:
     numbers. Counting stops at the first captured frame; a clip made only of such frames
     returns `motion.num_frames`.
 
-    **Arguments:**
+    Arguments:
+        motion: a `Motion` with at least one rotation channel.
 
-    - `motion`: a `Motion` with at least one rotation channel.
-
-    **Returns:** the count (0 if frame 0 is captured motion).
+    Returns:
+        the count (0 if frame 0 is captured motion).
     """
     rotation = [
         k

@@ -69,17 +69,17 @@ def load_many(
     NumPy-bound and holds the GIL, so processes, not threads, are what scale). Workers are
     started with the "spawn" method: forking a process that has initialised JAX can deadlock.
 
-    **Arguments:**
+    Arguments:
+        paths: BVH file paths, one path, or a folder (its `*.bvh` files, sorted).
+        workers: number of worker processes; `None` uses every CPU this process may run on
+            (at most one per file); `1` (or `0`) reads in this process without a pool.
+        progress: show a tqdm progress bar (files done, errors so far) on stderr.
+        chunk_size: files per task; default about 4 tasks per worker, at most 16 files each.
 
-    - `paths`: BVH file paths, one path, or a folder (its `*.bvh` files, sorted).
-    - `workers`: number of worker processes; `None` uses every CPU this process may run on
-      (at most one per file); `1` (or `0`) reads in this process without a pool.
-    - `progress`: show a tqdm progress bar (files done, errors so far) on stderr.
-    - `chunk_size`: files per task; default about 4 tasks per worker, at most 16 files each.
-
-    **Returns:** `(motions, errors)`: the motions that loaded, in input order (each carries its
-    path as `Motion.source`), and one `BVHError` per file that did not (`err.path`,
-    `err.line`, `str(err)` = "path:line: message"), in input order.
+    Returns:
+        `(motions, errors)`: the motions that loaded, in input order (each carries its
+        path as `Motion.source`), and one `BVHError` per file that did not (`err.path`,
+        `err.line`, `str(err)` = "path:line: message"), in input order.
     """
     paths = _expand(paths)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 0):
