@@ -31,7 +31,7 @@ def body(argv=None) -> None:
     cfg, out = parse("fit_quality", __doc__.splitlines()[0], argv)
     rep = cfg["representation"]
     motions = [data.load(c) for c in cfg["clips"]]
-    fits = fit_motions(motions, cfg["reference_harmonics"], rep)
+    fits = fit_motions(motions, cfg["reference_harmonics"], rep, throw=True)
     rr = jax.jit(root_relative_positions, static_argnums=2)
     rows = []
     for clip, m, f in zip(cfg["clips"], motions, fits, strict=True):

@@ -27,7 +27,7 @@ def body(argv=None) -> None:
     cfg, out = parse("hip_rule", __doc__.splitlines()[0], argv)
     names = [cfg["walk"], cfg["run"]]
     motions = {c: data.load(c) for c in names}
-    fits = dict(zip(names, fit_motions([motions[c] for c in names], cfg["harmonics"]),
+    fits = dict(zip(names, fit_motions([motions[c] for c in names], cfg["harmonics"], throw=True),
                     strict=True))
 
     def ground(clip):

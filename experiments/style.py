@@ -47,7 +47,7 @@ def body(argv=None) -> None:
 
     cfg, out = parse("style", __doc__.splitlines()[0], argv)
     clips = [cfg["normal"], cfg["tired"], cfg["brisk"], cfg["run"]]
-    fits = dict(zip(clips, fit_motions([data.load(c) for c in clips], cfg["harmonics"]),
+    fits = dict(zip(clips, fit_motions([data.load(c) for c in clips], cfg["harmonics"], throw=True),
                     strict=True))
     normal, tired = fits[cfg["normal"]].model, fits[cfg["tired"]].model
     brisk, run = fits[cfg["brisk"]].model, fits[cfg["run"]].model

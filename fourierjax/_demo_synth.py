@@ -83,7 +83,7 @@ def _fit(st: _State) -> None:
     for c in st.cfg.clips:
         st.motions[c], starts[c] = _crop(data.load(c))
     fits = fit_motions([st.motions[c] for c in st.cfg.clips], st.cfg.harmonics, "euler",
-                       segment=False)
+                       segment=False, throw=True)
     for c, f in zip(st.cfg.clips, fits, strict=True):
         st.fits[c] = f
         rest = data.describe(c)["rest_frames"]

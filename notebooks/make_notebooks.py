@@ -25,7 +25,7 @@ from fourierjax.motion import fit_motions
 clips = ["07_01", "07_04", "07_12", "09_01"]   # normal, slow ('tired'), brisk walk; a run
 # Cut to 256 frames each: equal shapes share compiled functions (faster on a small CPU).
 motions = [data.load(c)[:256] for c in clips]
-fits = dict(zip(clips, fit_motions(motions, num_harmonics=3, segment=False)))
+fits = dict(zip(clips, fit_motions(motions, num_harmonics=3, segment=False, throw=True)))
 for c, f in fits.items():
     print(f"{c}: f0 = {f.fundamental_hz:.3f} Hz, RMS {f.rms_deg:.2f} deg, "
           f"variance explained {100 * f.variance_explained_positions:.1f}% (positions)")"""),
@@ -83,7 +83,7 @@ from fourierjax.motion import fit_motions, foot_positions_of
 
 clips = ["07_01", "09_01"]
 motions = {c: data.load(c)[:128] for c in clips}
-fits = dict(zip(clips, fit_motions([motions[c] for c in clips], 3, segment=False)))
+fits = dict(zip(clips, fit_motions([motions[c] for c in clips], 3, segment=False, throw=True)))
 
 def ground(m):
     pts = contacts.foot_points(m.topology)

@@ -74,7 +74,7 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
     from fourierjax import motion as fmotion
 
     clips = [_read_clip(p) for p in paths]
-    fits = fmotion.fit_motions([m for m, _ in clips], harmonics, representation)
+    fits = fmotion.fit_motions([m for m, _ in clips], harmonics, representation, throw=True)
     gaits = []
     for path, (motion, rest), fit in zip(paths, clips, fits):
         provenance = fit.summary()

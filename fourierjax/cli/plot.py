@@ -211,7 +211,7 @@ def _decomposition(what, obj, args, out) -> None:
         n = _num(args.harmonics, "--harmonics", int, 1, 16)
         if obj.num_frames < 16:
             raise UserError(f"{args.input}: only {obj.num_frames} frames; need at least 16")
-        fit = fit_motions([obj], n, "euler")[0]
+        fit = fit_motions([obj], n, "euler", throw=True)[0]
         sub = obj[fit.frame_start:fit.frame_stop]
         x, names = features_from_motion(sub, "euler")
         model = fit.raw_model
