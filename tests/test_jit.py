@@ -102,12 +102,9 @@ def test_entry_points_run_third_party_products_at_full_precision(monkeypatch):
 # Modules whose owners are converting them to `filter_jit` on their own branches (issue 19);
 # their parameters are expected to fail until those branches land.
 _CONVERSION_PENDING = {
-    "fourierjax.gait",
-    "fourierjax.motion",
     "fourierjax.stance.fit",
     "fourierjax.stance.reference",
     "fourierjax.stance.skeleton48",
-    "fourierjax.style",
 }
 
 
