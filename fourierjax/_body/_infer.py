@@ -28,6 +28,8 @@ _LEG_LENGTH_M = 0.8
 _COINCIDENT = 0.02
 #: A clip travels when its trajectory joint moves this many leg lengths across the ground.
 _TRAVELS = 0.5
+#: The ankle turns the chain by more than this (radians); knees bend less in a mean pose.
+_FOOT_TURN = np.deg2rad(40.0)
 
 
 def infer(topology, positions, end_site_positions, rotations, moving, *, up=None, overrides=None) -> BodyMap:
@@ -289,9 +291,12 @@ def _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J):
     if len(kept_joints) < 3:
         return None
     ankle_at = None
-    for k in range(2, len(kept) - 1):  # the foot: the first bone closer to the ground plane than to up
-        seg = local[kept[k + 1]] - local[kept[k]]
-        if kept[k] < J and abs(seg @ u) < np.cos(np.pi / 4) * np.linalg.norm(seg):
+    for k in range(2, len(kept) - 1):
+        # The foot: the first bone that lies closer to the ground plane than to up, or that turns
+        # sharply from the bone before it (a knee in a mean pose bends less; a twist joint not at all).
+        seg, prev = local[kept[k + 1]] - local[kept[k]], local[kept[k]] - local[kept[k - 1]]
+        turn = (seg @ prev) / (np.linalg.norm(seg) * np.linalg.norm(prev))
+        if kept[k] < J and (abs(seg @ u) < np.cos(np.pi / 4) * np.linalg.norm(seg) or turn < np.cos(_FOOT_TURN)):
             ankle_at = k
             break
     if ankle_at is None:
