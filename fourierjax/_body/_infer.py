@@ -306,14 +306,15 @@ def _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J):
 
 
 def _facing_from_points(local, u, chains, tips) -> np.ndarray:
-    """Where the feet point (ankle to toe tip), or else where the knees point, in the ground plane."""
+    """Where the feet (ankle to toe tip) and the knees (off the hip-ankle line) point, in the ground plane.
+
+    Both count: a walker's feet point forward, a runner's mean foot points down while the knees
+    lead by a tenth of the leg, and a straight-legged rest pose has only its feet.
+    """
     v = np.zeros(3)
     for ch, tip in zip(chains, tips):
-        if tip != ch["ankle"]:
-            v += local[tip] - local[ch["ankle"]]
-        else:
-            mid = 0.5 * (local[ch["hip"]] + local[ch["ankle"]])
-            v += local[ch["knee"]] - mid
+        v += local[tip] - local[ch["ankle"]]
+        v += local[ch["knee"]] - 0.5 * (local[ch["hip"]] + local[ch["ankle"]])
     v = v - u * (u @ v)
     return _unit(v)
 
