@@ -58,6 +58,9 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
         if all(k in given for k in ("hip", "knee", "ankle")):
             legs[side] = {k: (resolve_joint(names, given[k], f"legs.{side}.{k}") if given.get(k) else None)
                           for k in _LEG_FIELDS}
+            kids = topology.children(legs[side]["ankle"])
+            if "toe" not in given and len(kids) == 1:  # `toe = ""` says there is none
+                legs[side]["toe"] = kids[0]
     if len(legs) == 2:
         sources["legs"] = "file"
     else:
