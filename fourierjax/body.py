@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from jaxtyping import Float
 
+from fourierjax._body._infer import from_stored as _from_stored
 from fourierjax._body._infer import infer as _infer
 from fourierjax._body._map import (
     BODY_MAP_VERSION,
@@ -14,7 +15,6 @@ from fourierjax._body._map import (
     BodyMapError,
     Leg,
     parse_overrides,
-    resolve_joint,
 )
 from fourierjax.skeleton import Topology
 
@@ -109,47 +109,9 @@ def body_map_from_dict(d: dict, topology: Topology) -> BodyMap:
         BodyMapError: a version this fourierjax does not read, a missing field, or a joint the
             skeleton does not have.
     """
-    return _from_complete(parse_overrides(dict(d)), topology, "stored")
+    return _from_stored(parse_overrides(dict(d)), topology, "stored")
 
 
 def body_map_from_toml(text_or_path, topology: Topology) -> BodyMap:
     """The map a complete TOML file (as written by `BodyMap.to_toml`) describes, for `topology`."""
-    return _from_complete(parse_overrides(text_or_path), topology, "file")
-
-
-def _from_complete(d: dict, topology: Topology, how: str) -> BodyMap:
-    from fourierjax._body._infer import _LEG_FIELDS, _arms, _leg
-    from fourierjax._body._map import parse_units, parse_up
-
-    required = ("up", "forward", "facing", "units", "metres_per_unit", "leg_length", "height", "trajectory",
-                "pelvis", "spine", "legs")
-    missing = [k for k in required if k not in d]
-    if missing:
-        raise BodyMapError(f"body map: field(s) {missing} missing; a stored map names every field")
-    names = topology.names
-    legs = []
-    for side in ("left", "right"):
-        g = d["legs"].get(side, {})
-        chain = {k: (resolve_joint(names, g[k], f"legs.{side}.{k}") if g.get(k) else None) for k in _LEG_FIELDS}
-        if any(chain[k] is None for k in ("hip", "knee", "ankle")):
-            raise BodyMapError(f"body map: legs.{side} needs hip, knee and ankle")
-        legs.append(_leg(chain, names, topology.end_site_parents, d, side))
-    stored = dict(d.get("sources", {}))
-    sources: dict[str, str] = {}
-    left_arm, right_arm = _arms(d, names, topology.parents, sources) if "arms" in d else (None, None)
-    up_axis, up_sign = parse_up(d["up"])
-    units, _ = parse_units(d["units"]) if d["units"] != "custom" else ("custom", 0.0)
-    return BodyMap(
-        joint_names=names, left=legs[0], right=legs[1],
-        trajectory=resolve_joint(names, d["trajectory"], "trajectory"),
-        pelvis=resolve_joint(names, d["pelvis"], "pelvis"),
-        spine=tuple(resolve_joint(names, n, "spine") for n in d["spine"]),
-        neck=resolve_joint(names, d["neck"], "neck") if d.get("neck") else -1,
-        head=resolve_joint(names, d["head"], "head") if d.get("head") else -1,
-        left_arm=left_arm, right_arm=right_arm, up_axis=up_axis, up_sign=up_sign,
-        forward=tuple(float(x) for x in d["forward"]),  # type: ignore[arg-type]
-        facing=tuple(float(x) for x in d["facing"]),  # type: ignore[arg-type]
-        leg_length=float(d["leg_length"]), height=float(d["height"]), units=units,
-        metres_per_unit=float(d["metres_per_unit"]),
-        sources=tuple(sorted((k, stored.get(k, how) if how == "stored" else how) for k in stored)),
-    )
+    return _from_stored(parse_overrides(text_or_path), topology, "file")

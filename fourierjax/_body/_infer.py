@@ -206,7 +206,7 @@ def _subtree(point_parents, root: int) -> list[int]:
 def _branching_joint(parents) -> int:
     """The shallowest joint with at least three child joints (two legs and a spine), or -1."""
     counts = np.bincount([p for p in parents if p >= 0], minlength=len(parents))
-    depth = _names._depths(parents)
+    depth = _names.depths(parents)
     cands = [j for j in range(len(parents)) if counts[j] >= 3]
     return min(cands, key=lambda j: (depth[j], j)) if cands else -1
 
@@ -416,3 +416,39 @@ def _arms(ov, names, parents, sources) -> tuple[Arm | None, Arm | None]:
                        names=tuple(names[chain[k]] if chain[k] is not None else "" for k in _ARM_FIELDS)))
     sources.setdefault("arms", "names")
     return out[0], out[1]
+
+
+def from_stored(d: dict, topology, how: str) -> BodyMap:
+    """A map whose every field `d` names (a stored map or a complete TOML file), for `topology`."""
+    required = ("up", "forward", "facing", "units", "metres_per_unit", "leg_length", "height", "trajectory",
+                "pelvis", "spine", "legs")
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise BodyMapError(f"body map: field(s) {missing} missing; a stored map names every field")
+    names = topology.names
+    legs = []
+    for side in ("left", "right"):
+        g = d["legs"].get(side, {})
+        chain = {k: (resolve_joint(names, g[k], f"legs.{side}.{k}") if g.get(k) else None) for k in _LEG_FIELDS}
+        if any(chain[k] is None for k in ("hip", "knee", "ankle")):
+            raise BodyMapError(f"body map: legs.{side} needs hip, knee and ankle")
+        legs.append(_leg(chain, names, topology.end_site_parents, d, side))
+    stored = dict(d.get("sources", {}))
+    sources: dict[str, str] = {}
+    left_arm, right_arm = _arms(d, names, topology.parents, sources) if "arms" in d else (None, None)
+    up_axis, up_sign = parse_up(d["up"])
+    units, _ = parse_units(d["units"]) if d["units"] != "custom" else ("custom", 0.0)
+    return BodyMap(
+        joint_names=names, left=legs[0], right=legs[1],
+        trajectory=resolve_joint(names, d["trajectory"], "trajectory"),
+        pelvis=resolve_joint(names, d["pelvis"], "pelvis"),
+        spine=tuple(resolve_joint(names, n, "spine") for n in d["spine"]),
+        neck=resolve_joint(names, d["neck"], "neck") if d.get("neck") else -1,
+        head=resolve_joint(names, d["head"], "head") if d.get("head") else -1,
+        left_arm=left_arm, right_arm=right_arm, up_axis=up_axis, up_sign=up_sign,
+        forward=tuple(float(x) for x in d["forward"]),  # type: ignore[arg-type]
+        facing=tuple(float(x) for x in d["facing"]),  # type: ignore[arg-type]
+        leg_length=float(d["leg_length"]), height=float(d["height"]), units=units,
+        metres_per_unit=float(d["metres_per_unit"]),
+        sources=tuple(sorted((k, stored.get(k, how) if how == "stored" else how) for k in stored)),
+    )

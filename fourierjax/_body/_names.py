@@ -107,7 +107,7 @@ def match_chain(
             return None
         cands.append(c)
     best, best_score = None, None
-    depth = _depths(parents)
+    depth = depths(parents)
     for combo in itertools.product(*cands):
         present = [j for j in combo if j is not None]
         if any(not _is_ancestor(parents, a, b) for a, b in itertools.pairwise(present)):
@@ -134,7 +134,7 @@ def match_centre(names: tuple[str, ...], role: str) -> list[int]:
     return [j for _, j in sorted(hits)]
 
 
-def _depths(parents: tuple[int, ...]) -> list[int]:
+def depths(parents: tuple[int, ...]) -> list[int]:
     d: list[int] = []
     for p in parents:
         d.append(0 if p < 0 else d[p] + 1)
