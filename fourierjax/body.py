@@ -39,7 +39,7 @@ def infer_body_map(motion, *, up=None, overrides=None, max_frames: int = MAX_FRA
         up: the up axis ("y", "z", "-z", 0/1/2 or `(axis, sign)`); None to infer it.
         overrides: fields set by joint name: a dict, TOML text, or the path of a TOML file
             (the layout `BodyMap.to_toml` writes; any subset of its fields).
-        max_frames: at most this many evenly spaced frames are posed.
+        max_frames: this many evenly spaced frames are posed (a short clip repeats some).
 
     Returns:
         A `BodyMap` for `motion.topology`.
@@ -51,7 +51,8 @@ def infer_body_map(motion, *, up=None, overrides=None, max_frames: int = MAX_FRA
     from fourierjax import kinematics
 
     channels = np.asarray(motion.channels)
-    frames = np.unique(np.linspace(0, len(channels) - 1, min(len(channels), max_frames)).round().astype(int))
+    # Always `max_frames` rows (short clips repeat frames), so that FK compiles once per skeleton.
+    frames = np.linspace(0, len(channels) - 1, max_frames).round().astype(int)
     fk = kinematics.fk_frames(motion.skeleton(), channels[frames])
     topo = motion.topology
     offsets = topo.channel_offsets
