@@ -97,7 +97,8 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
             if k in legs_ov.get(side, {}):
                 v = legs_ov[side][k]
                 legs[side][k] = resolve_joint(names, v, f"legs.{side}.{k}") if v else None
-                sources["legs"] = "file" if sources["legs"] == "file" else sources["legs"] + "+file"
+                if not sources["legs"].endswith("file"):
+                    sources["legs"] += "+file"
     pelvis_ov = ov.get("pelvis")
     if pelvis_ov is not None:
         pelvis, sources["pelvis"] = resolve_joint(names, pelvis_ov, "pelvis"), "file"

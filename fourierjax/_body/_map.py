@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
+import pathlib
 import tomllib
 
 from fourierjax.errors import UserError
@@ -141,7 +143,7 @@ class BodyMap:
         return dict(self.sources).get(field, "geometry")
 
     def name(self, joint: int) -> str:
-        """The name of a joint index, or of an End Site index `J + e` ("<parent>/End Site")."""
+        """The name of joint `joint`, "" for -1 (a part the rig does not have)."""
         return self.joint_names[joint] if joint >= 0 else ""
 
     # -- storage ------------------------------------------------------------------------
@@ -238,9 +240,6 @@ def _toml_value(v) -> str:
 
 def parse_overrides(overrides) -> dict:
     """An override mapping from a dict, TOML text, or a path to a TOML file (`str` ending in .toml or a Path)."""
-    import os
-    import pathlib
-
     if overrides is None:
         return {}
     if isinstance(overrides, dict):
