@@ -1,0 +1,1 @@
+"""Private implementation of `fourierjax.body`: name tables, the map and its inference."""

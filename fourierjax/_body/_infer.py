@@ -1,0 +1,455 @@
+"""Inference of a `BodyMap` from joint names first and from the geometry of the motion where names do not decide."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fourierjax._body import _names
+from fourierjax._body._map import (
+    UNITS,
+    Arm,
+    BodyMap,
+    BodyMapError,
+    Leg,
+    missing_legs_message,
+    parse_overrides,
+    parse_units,
+    parse_up,
+    point_name,
+    resolve_joint,
+    resolve_point,
+)
+
+_LEG_FIELDS = ("hip", "knee", "ankle", "toe")
+_ARM_FIELDS = ("collar", "shoulder", "elbow", "wrist")
+#: Hip to ankle of an adult, metres: the reference for guessing a file's units.
+_LEG_LENGTH_M = 0.8
+#: A bone shorter than this fraction of its chain counts as no bone (CMU's LHipJoint sits on Hips).
+_COINCIDENT = 0.02
+#: A clip travels when its trajectory joint moves this many leg lengths across the ground.
+_TRAVELS = 0.5
+#: Hip to ankle as a fraction of hip to toe tip along a leg chain.
+_ANKLE_ARC = 0.85
+
+
+def infer(topology, positions, end_site_positions, rotations, moving, *, up=None, overrides=None) -> BodyMap:
+    """The map of one clip. `positions` `[F, J, 3]`, `end_site_positions` `[F, E, 3]` and
+    `rotations` `[F, J, 4]` (wxyz world quaternions, or None) are NumPy; `moving` lists the joints
+    with moving position channels, in file order (None: judge from `positions`)."""
+    names, parents, esp = topology.names, topology.parents, topology.end_site_parents
+    J = len(names)
+    ov = parse_overrides(overrides)
+    sources: dict[str, str] = {}
+    points = np.concatenate([positions, end_site_positions], axis=1)  # [F, J+E, 3]
+    point_parents = tuple(parents) + tuple(esp)
+
+    # -- up axis given -------------------------------------------------------------------
+    up_given = None
+    if up is not None:
+        up_given, sources["up"] = parse_up(up), "argument"
+    elif "up" in ov:
+        up_given, sources["up"] = parse_up(ov["up"]), "file"
+
+    # -- legs: the override file, then names, then geometry ------------------------------
+    legs: dict[str, dict[str, int | None]] = {}
+    legs_ov = ov.get("legs", {})
+    for side in ("left", "right"):
+        given = legs_ov.get(side, {})
+        if all(k in given for k in ("hip", "knee", "ankle")):
+            legs[side] = {k: (resolve_joint(names, given[k], f"legs.{side}.{k}") if given.get(k) else None)
+                          for k in _LEG_FIELDS}
+            kids = topology.children(legs[side]["ankle"])
+            if "toe" not in given and len(kids) == 1:  # `toe = ""` says there is none
+                legs[side]["toe"] = kids[0]
+    if len(legs) == 2:
+        sources["legs"] = "file"
+    else:
+        by_name = {s: _names.match_chain(names, parents, s, _names.LEG_ROLES, ("toe",)) for s in ("left", "right")}
+        if all(by_name.values()) and not set(_present(by_name["left"])) & set(_present(by_name["right"])):
+            legs, sources["legs"] = by_name, "names"  # type: ignore[assignment]
+        else:
+            legs = {}
+    if legs:
+        pelvis = _common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
+        if pelvis < 0:
+            raise BodyMapError(missing_legs_message("the two hips have no common ancestor", names))
+        mean_world = _mean_relative(points, pelvis)
+        up_axis, up_sign = up_given or _up_from_legs(mean_world, pelvis, legs)
+    else:
+        pelvis = _branching_joint(parents)
+        if pelvis < 0:
+            raise BodyMapError(missing_legs_message("no joint has three branches (two legs and a spine)", names))
+        mean_world = _mean_relative(points, pelvis)
+        subtrees = [_subtree(point_parents, c) for c in range(len(point_parents)) if point_parents[c] == pelvis]
+        up_axis, up_sign = up_given or _up_from_reach(mean_world, subtrees)
+    if "up" not in sources:
+        sources["up"] = "geometry"
+    u = np.zeros(3)
+    u[up_axis] = up_sign
+
+    # Mean pose in the pelvis's frame (a clip that turns around keeps its legs apart there).
+    local, u_local = _mean_local(points, rotations, pelvis, u)
+    if not legs:
+        legs = _legs_from_geometry(local, u_local, point_parents, pelvis, J, names)
+        sources["legs"] = "geometry"
+    for side in ("left", "right"):  # single fields of the override file win
+        for k in _LEG_FIELDS:
+            if k in legs_ov.get(side, {}):
+                v = legs_ov[side][k]
+                legs[side][k] = resolve_joint(names, v, f"legs.{side}.{k}") if v else None
+                if not sources["legs"].endswith("file"):
+                    sources["legs"] += "+file"
+    pelvis_ov = ov.get("pelvis")
+    if pelvis_ov is not None:
+        pelvis, sources["pelvis"] = resolve_joint(names, pelvis_ov, "pelvis"), "file"
+    else:
+        sources["pelvis"] = "names" if pelvis in _names.match_centre(names, "pelvis") else "geometry"
+
+    left_leg = _leg(legs["left"], names, esp, ov, "left")
+    right_leg = _leg(legs["right"], names, esp, ov, "right")
+
+    # -- facing, forward, trajectory -----------------------------------------------------
+    facing_local = _facing_local(local, u_local, left_leg, right_leg)
+    facing = _world_facing(rotations, pelvis, facing_local, u)
+    trajectory, sources["trajectory"] = _trajectory(ov, names, positions, moving)
+    seg = np.linalg.norm(positions[:, left_leg.knee] - positions[:, left_leg.hip], axis=-1) + np.linalg.norm(
+        positions[:, left_leg.ankle] - positions[:, left_leg.knee], axis=-1)
+    leg_length = float(ov.get("leg_length", np.median(seg)))
+    travel = positions[-1, trajectory] - positions[0, trajectory]
+    travel = travel - u * (u @ travel)
+    if "forward" in ov:
+        forward, sources["forward"] = _unit(np.asarray(ov["forward"], float)), "file"
+    elif np.linalg.norm(travel) > _TRAVELS * leg_length:
+        forward, sources["forward"] = _unit(travel), "geometry"
+    else:
+        forward, sources["forward"] = facing, "geometry"
+    if "facing" in ov:
+        facing = _unit(np.asarray(ov["facing"], float))
+
+    # -- trunk and arms ------------------------------------------------------------------
+    leg_joints = set(_present(legs["left"])) | set(_present(legs["right"]))
+    head, neck = _head_and_neck(ov, names, parents, esp, local, u_local, pelvis, leg_joints, sources)
+    stop = neck if neck >= 0 else head
+    spine = tuple(_path(parents, pelvis, stop)[1:-1]) if stop >= 0 else ()
+    if "spine" in ov:
+        spine = tuple(resolve_joint(names, n, "spine") for n in ov["spine"])
+    left_arm, right_arm = _arms(ov, names, parents, sources)
+
+    # -- scale and units -----------------------------------------------------------------
+    heights = local @ u_local
+    height = float(ov.get("height", heights.max() - heights.min()))
+    if "units" in ov or "metres_per_unit" in ov:
+        units, mpu = parse_units(ov["units"] if "units" in ov else ov["metres_per_unit"])
+        if "metres_per_unit" in ov:
+            mpu = float(ov["metres_per_unit"])
+        sources["units"] = "file"
+    else:
+        units = min(UNITS, key=lambda k: abs(np.log(leg_length * UNITS[k] / _LEG_LENGTH_M)))
+        mpu, sources["units"] = UNITS[units], "geometry"
+    if "leg_length" in ov:
+        sources["leg_length"] = "file"
+    return BodyMap(
+        joint_names=names, left=left_leg, right=right_leg, trajectory=trajectory, pelvis=pelvis, spine=spine,
+        neck=neck, head=head, left_arm=left_arm, right_arm=right_arm, up_axis=up_axis, up_sign=up_sign,
+        forward=_tuple3(forward), facing=_tuple3(facing), leg_length=leg_length, height=height, units=units,
+        metres_per_unit=mpu, sources=tuple(sorted(sources.items())),
+    )
+
+
+# ------------------------------------------------------------------------------ geometry
+
+
+def _present(chain: dict) -> list[int]:
+    return [j for j in chain.values() if j is not None]
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if not np.isfinite(n) or n == 0.0:
+        raise BodyMapError(f"body map: cannot normalise the direction {v.tolist()}")
+    return v / n
+
+
+def _tuple3(v) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _path(parents, a: int, b: int) -> list[int]:
+    """Joints from ancestor `a` down to `b`, both included ([] when `a` is not an ancestor)."""
+    out = [b]
+    while out[-1] != a:
+        p = parents[out[-1]]
+        if p < 0:
+            return []
+        out.append(p)
+    return out[::-1]
+
+
+def _common_ancestor(parents, a: int, b: int) -> int:
+    up = set()
+    while a >= 0:
+        up.add(a)
+        a = parents[a]
+    while b >= 0 and b not in up:
+        b = parents[b]
+    return b
+
+
+def _subtree(point_parents, root: int) -> list[int]:
+    """Points of the subtree at `root` (parents come before children, so one pass finds them)."""
+    inside = {root}
+    for i in range(root + 1, len(point_parents)):
+        if point_parents[i] in inside:
+            inside.add(i)
+    return sorted(inside)
+
+
+def _branching_joint(parents) -> int:
+    """The shallowest joint with at least three child joints (two legs and a spine), or -1."""
+    counts = np.bincount([p for p in parents if p >= 0], minlength=len(parents))
+    depth = _names.depths(parents)
+    cands = [j for j in range(len(parents)) if counts[j] >= 3]
+    return min(cands, key=lambda j: (depth[j], j)) if cands else -1
+
+
+def _mean_relative(points: np.ndarray, pelvis: int) -> np.ndarray:
+    return (points - points[:, pelvis : pelvis + 1]).mean(axis=0)
+
+
+def _up_from_legs(mean: np.ndarray, pelvis: int, legs) -> tuple[int, int]:
+    d = -0.5 * (mean[legs["left"]["ankle"]] + mean[legs["right"]["ankle"]])  # pelvis minus feet
+    axis = int(np.argmax(np.abs(d)))
+    return axis, int(np.sign(d[axis]) or 1)
+
+
+def _up_from_reach(mean: np.ndarray, subtrees: list[list[int]]) -> tuple[int, int]:
+    """The signed axis along which two branches of the pelvis (the legs) reach farthest down."""
+    if len(subtrees) < 2:
+        raise BodyMapError("body map: the pelvis has fewer than two branches")
+    best, best_score = (1, 1), -np.inf
+    for axis in range(3):
+        for sign in (1, -1):
+            reach = sorted((float((-sign * mean[s, axis]).max()) for s in subtrees), reverse=True)
+            if reach[1] > best_score:
+                best, best_score = (axis, sign), reach[1]
+    return best
+
+
+def _mean_local(points, rotations, pelvis: int, u: np.ndarray):
+    """Mean pose relative to the pelvis in its own frame, and the up direction in that frame."""
+    rel = points - points[:, pelvis : pelvis + 1]
+    if rotations is None:
+        return rel.mean(axis=0), u
+    R = _matrices(rotations[:, pelvis])  # [F, 3, 3] world from pelvis
+    local = np.einsum("fji,fpj->fpi", R, rel).mean(axis=0)
+    return local, _unit(np.einsum("fji,j->fi", R, u).mean(axis=0))
+
+
+def _matrices(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = np.moveaxis(q / np.linalg.norm(q, axis=-1, keepdims=True), -1, 0)
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def _legs_from_geometry(local, u, point_parents, pelvis: int, J: int, names) -> dict:
+    """The two branches of the pelvis that reach lowest, split into hip, knee, ankle and toe."""
+    branches = [c for c in range(len(point_parents)) if point_parents[c] == pelvis]
+    lows = []
+    for c in branches:
+        pts = _subtree(point_parents, c)
+        leaves = [p for p in pts if p not in point_parents]
+        lows.append((float((local[leaves] @ u).min()), c, min(leaves, key=lambda p: float(local[p] @ u))))
+    lows.sort()
+    if len(lows) < 2:
+        raise BodyMapError(missing_legs_message("the pelvis has fewer than two branches", names))
+    chains = []
+    for _, c, leaf in lows[:2]:
+        chain = _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J)
+        if chain is None:
+            raise BodyMapError(missing_legs_message(
+                f"the branch at {names[c]!r} has no hip, knee and ankle that geometry can tell apart", names))
+        chains.append(chain)
+    a, b = chains
+    lat = local[a["hip"]] - local[b["hip"]]
+    facing = _facing_from_points(local, u, [a, b], [leaf for _, _, leaf in lows[:2]])
+    left_dir = np.cross(u, facing)
+    return {"left": a, "right": b} if lat @ left_dir > 0 else {"left": b, "right": a}
+
+
+def _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J):
+    path = [leaf]
+    while path[-1] != c:
+        path.append(point_parents[path[-1]])
+    path = path[::-1]
+    pts = [local[pelvis]] + [local[p] for p in path]
+    scale = sum(float(np.linalg.norm(b - a)) for a, b in zip(pts[:-1], pts[1:]))
+    kept, last = [], local[pelvis]
+    for p in path:  # drop joints that sit on the previous one (no bone)
+        if np.linalg.norm(local[p] - last) > _COINCIDENT * scale:
+            kept.append(p)
+            last = local[p]
+    kept_joints = [p for p in kept if p < J]
+    if len(kept_joints) < 3:
+        return None
+    # The ankle ends the second long bone: hip to ankle is ~85% of the way from the hip to the toe
+    # tip along the chain (CMU 83%, Bandai 87%) whatever the pose; a twist joint or a toe is not.
+    arc = np.cumsum([0.0] + [float(np.linalg.norm(local[b] - local[a])) for a, b in zip(kept[:-1], kept[1:])])
+    ankle_at = min((k for k in range(2, len(kept)) if kept[k] < J), key=lambda k: abs(arc[k] / arc[-1] - _ANKLE_ARC))
+    hip, ankle = kept[0], kept[ankle_at]
+    between = [p for p in kept[1:ankle_at] if p < J]
+    if hip >= J or not between:
+        return None
+    line = _unit(local[ankle] - local[hip])
+    off = [np.linalg.norm((local[p] - local[hip]) - line * ((local[p] - local[hip]) @ line)) for p in between]
+    knee = between[int(np.argmax(off))]
+    toe = kept[ankle_at + 1] if ankle_at + 1 < len(kept) and kept[ankle_at + 1] < J else None
+    return {"hip": hip, "knee": knee, "ankle": ankle, "toe": toe}
+
+
+def _facing_from_points(local, u, chains, tips) -> np.ndarray:
+    """Where the feet (ankle to toe tip) and the knees (off the hip-ankle line) point, in the ground plane.
+
+    Both count: a walker's feet point forward, a runner's mean foot points down while the knees
+    lead by a tenth of the leg, and a straight-legged rest pose has only its feet.
+    """
+    v = np.zeros(3)
+    for ch, tip in zip(chains, tips):
+        v += local[tip] - local[ch["ankle"]]
+        v += local[ch["knee"]] - 0.5 * (local[ch["hip"]] + local[ch["ankle"]])
+    v = v - u * (u @ v)
+    return _unit(v)
+
+
+def _facing_local(local, u, left: Leg, right: Leg) -> np.ndarray:
+    """Facing in the pelvis frame: `left hip − right hip` crossed with up (forward = left × up)."""
+    lat = local[left.hip] - local[right.hip]
+    f = np.cross(lat, u)
+    f = f - u * (u @ f)
+    return _unit(f)
+
+
+def _world_facing(rotations, pelvis: int, facing_local, u) -> np.ndarray:
+    """The pelvis-frame facing in world axes, averaged over frames in the ground plane."""
+    if rotations is None:
+        f = facing_local
+    else:
+        per_frame = np.einsum("fij,j->fi", _matrices(rotations[:, pelvis]), facing_local)
+        per_frame = per_frame - np.outer(per_frame @ u, u)
+        f = per_frame.mean(axis=0)
+        if np.linalg.norm(f) < 0.25 * np.linalg.norm(per_frame, axis=-1).mean():
+            f = per_frame[0]  # a clip that turns around: its first frame's facing
+    return _unit(f - u * (u @ f))
+
+
+def _trajectory(ov, names, positions, moving) -> tuple[int, str]:
+    if "trajectory" in ov:
+        return resolve_joint(names, ov["trajectory"], "trajectory"), "file"
+    if moving is None:
+        span = np.ptp(positions, axis=0).max(axis=-1)  # [J]
+        moving = [j for j in range(len(names)) if span[j] > 1e-6 * (1.0 + np.abs(positions).max())]
+    if 0 in moving or not moving:
+        return 0, "geometry"
+    return moving[0], "geometry"
+
+
+def _leg(chain, names, esp, ov, side) -> Leg:
+    J = len(names)
+    tip_of = chain["toe"] if chain["toe"] is not None else chain["ankle"]
+    fp_ov = ov.get("legs", {}).get(side, {}).get("foot_points")
+    if fp_ov is not None:
+        fp = tuple(resolve_point(names, esp, s, f"legs.{side}.foot_points") for s in fp_ov)
+    else:
+        ends = [J + e for e, p in enumerate(esp) if p == tip_of][:1]
+        fp = tuple([chain["ankle"]] + ([chain["toe"]] if chain["toe"] is not None else []) + ends)
+    leg_names = tuple(names[chain[k]] if chain[k] is not None else "" for k in _LEG_FIELDS)
+    return Leg(hip=chain["hip"], knee=chain["knee"], ankle=chain["ankle"],
+               toe=-1 if chain["toe"] is None else chain["toe"], foot_points=fp,
+               names=leg_names,  # type: ignore[arg-type]
+               foot_point_names=tuple(point_name(names, esp, p) for p in fp))
+
+
+def _head_and_neck(ov, names, parents, esp, local, u, pelvis, leg_joints, sources) -> tuple[int, int]:
+    below = [j for j in range(len(names)) if j != pelvis and _path(parents, pelvis, j) and j not in leg_joints]
+    if "head" in ov:
+        head, sources["head"] = resolve_joint(names, ov["head"], "head"), "file"
+    else:
+        named = [j for j in _names.match_centre(names, "head") if j in below]
+        if named:
+            head, sources["head"] = named[0], "names"
+        elif below:
+            # The joint (or End Site's joint) highest above the pelvis in the mean pose.
+            J = len(names)
+            pts = [p for p in range(len(names) + len(esp)) if (p if p < J else esp[p - J]) in below]
+            top = max(pts, key=lambda p: float(local[p] @ u))
+            head, sources["head"] = (top if top < J else esp[top - J]), "geometry"
+        else:
+            return -1, -1
+    if "neck" in ov:
+        neck, sources["neck"] = resolve_joint(names, ov["neck"], "neck"), "file"
+        return head, neck
+    route = _path(parents, pelvis, head)[1:-1]
+    named = [j for j in _names.match_centre(names, "neck") if j in route]
+    if named:
+        sources["neck"] = "names"
+        return head, min(named, key=route.index)
+    sources["neck"] = "geometry"
+    return head, (route[-1] if route else -1)
+
+
+def _arms(ov, names, parents, sources) -> tuple[Arm | None, Arm | None]:
+    arms_ov = ov.get("arms", {})
+    out = []
+    for side in ("left", "right"):
+        given = arms_ov.get(side)
+        if given is not None:
+            chain = {k: (resolve_joint(names, given[k], f"arms.{side}.{k}") if given.get(k) else None)
+                     for k in _ARM_FIELDS}
+            sources["arms"] = "file"
+        else:
+            chain = _names.match_chain(names, parents, side, _names.ARM_ROLES, ("collar",))
+        if chain is None or any(chain[k] is None for k in _ARM_FIELDS[1:]):
+            return None, None
+        out.append(Arm(collar=-1 if chain["collar"] is None else chain["collar"], shoulder=chain["shoulder"],
+                       elbow=chain["elbow"], wrist=chain["wrist"],
+                       names=tuple(names[chain[k]] if chain[k] is not None else "" for k in _ARM_FIELDS)))
+    sources.setdefault("arms", "names")
+    return out[0], out[1]
+
+
+def from_stored(d: dict, topology, how: str) -> BodyMap:
+    """A map whose every field `d` names (a stored map or a complete TOML file), for `topology`."""
+    required = ("up", "forward", "facing", "units", "metres_per_unit", "leg_length", "height", "trajectory",
+                "pelvis", "spine", "legs")
+    missing = [k for k in required if k not in d]
+    if missing:
+        raise BodyMapError(f"body map: field(s) {missing} missing; a stored map names every field")
+    names = topology.names
+    legs = []
+    for side in ("left", "right"):
+        g = d["legs"].get(side, {})
+        chain = {k: (resolve_joint(names, g[k], f"legs.{side}.{k}") if g.get(k) else None) for k in _LEG_FIELDS}
+        if any(chain[k] is None for k in ("hip", "knee", "ankle")):
+            raise BodyMapError(f"body map: legs.{side} needs hip, knee and ankle")
+        legs.append(_leg(chain, names, topology.end_site_parents, d, side))
+    stored = dict(d.get("sources", {}))
+    sources: dict[str, str] = {}
+    left_arm, right_arm = _arms(d, names, topology.parents, sources) if "arms" in d else (None, None)
+    up_axis, up_sign = parse_up(d["up"])
+    units, _ = parse_units(d["units"]) if d["units"] != "custom" else ("custom", 0.0)
+    return BodyMap(
+        joint_names=names, left=legs[0], right=legs[1],
+        trajectory=resolve_joint(names, d["trajectory"], "trajectory"),
+        pelvis=resolve_joint(names, d["pelvis"], "pelvis"),
+        spine=tuple(resolve_joint(names, n, "spine") for n in d["spine"]),
+        neck=resolve_joint(names, d["neck"], "neck") if d.get("neck") else -1,
+        head=resolve_joint(names, d["head"], "head") if d.get("head") else -1,
+        left_arm=left_arm, right_arm=right_arm, up_axis=up_axis, up_sign=up_sign,
+        forward=tuple(float(x) for x in d["forward"]),  # type: ignore[arg-type]
+        facing=tuple(float(x) for x in d["facing"]),  # type: ignore[arg-type]
+        leg_length=float(d["leg_length"]), height=float(d["height"]), units=units,
+        metres_per_unit=float(d["metres_per_unit"]),
+        sources=tuple(sorted((k, stored.get(k, how) if how == "stored" else how) for k in stored)),
+    )
