@@ -156,3 +156,15 @@ def euler_zxy(z, x, y):
 def columns(ex, ey, ez):
     """The matrix with columns ex, ey, ez."""
     return jnp.stack([ex, ey, ez], axis=-1)
+
+
+def zero_tangent(tree):
+    """Zero tangents for a pytree: zeros for inexact leaves, float0 for the others."""
+
+    def zero(x):
+        x = jnp.asarray(x)
+        if jnp.issubdtype(x.dtype, jnp.inexact):
+            return jnp.zeros_like(x)
+        return np.zeros(x.shape, jax.dtypes.float0)
+
+    return jax.tree.map(zero, tree)
