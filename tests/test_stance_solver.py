@@ -8,10 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from experiments.benchmarks.stance_reference import solve_reference
 from fourierjax.errors import UserError
 from fourierjax.stance.balance import inside_polygon_margin, monitor_points_world, support_polygon
 from fourierjax.stance.problem import desired_balance_point
-from fourierjax.stance.reference import solve_reference
 from fourierjax.stance.shape_sets import get_shape_set
 from fourierjax.stance.skeleton48 import ANKLE, DOF_NAMES, dof_vector, make_body, pose_fk
 from fourierjax.stance.solver import solve_stances, stack_problems
