@@ -25,6 +25,14 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
     so an elbow bent past 90 degrees is (0, -102, 0), not (180, -78, 180); later frames follow it
     continuously (`motion.make_euler_continuous`), so an animation never jumps by 180 degrees
     on two axes (which Blender would interpolate as a spin).
+
+    Arguments:
+        body: the character (`make_body`).
+        poses: a `StancePose`, one pose or frames (`animate`).
+        frame_time_s: seconds per frame.
+
+    Returns:
+        A `Motion` (numpy, degrees).
     """
     root = np.asarray(poses.root_position, np.float64)
     quats = np.asarray(poses.quats, np.float64)
@@ -46,6 +54,10 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
 
 def write_stance_bvh(path, body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0):
     """Write a pose or an animation (see `pose_to_motion`) to a BVH file that opens in Blender.
+
+    Arguments:
+        path: the BVH file to write.
+        body, poses, frame_time_s: as for `pose_to_motion`.
 
     Raises:
         UserError: the pose holds NaN, or the file cannot be written (e.g. its directory does

@@ -14,7 +14,7 @@ from fourierjax.stance import _util as u
 from fourierjax.stance.balance import balance_point, inside_polygon_margin, monitor_points_world, support_polygon
 from fourierjax.stance.ik import Feet, make_feet, pelvis_frame_desired
 from fourierjax.stance.penalties import HermitePenalty, check_penalty, quadratic_penalty, reach_penalty
-from fourierjax.stance.skeleton48 import ELBOW, LEFT, RIGHT, WRIST, Body, make_body
+from fourierjax.stance.skeleton48 import ELBOW, LEFT, RIGHT, WRIST, Body
 from fourierjax.stance.torso import class_weights, collar_sign
 
 #: The numeric shape vector (Neff & Fiume sec. 6): all zeros is the neutral pose. The first
@@ -243,15 +243,17 @@ def check_bends(shape, where: str) -> None:
 
 
 def substitute_invalid(problem: StanceProblem) -> tuple[StanceProblem, Bool[Array, ""]]:
-    """`(problem or a neutral stand-in, invalid)`: `make_problem`'s value checks, which its
-    traced path cannot make, as a flag for the solvers' `result`.
+    """`(problem, invalid)`: `make_problem`'s value checks, which its traced path cannot make,
+    as a flag for the solvers' `result`.
 
     Invalid: a knee or elbow bend outside [`BEND_MIN_RAD`, `BEND_MAX_RAD`], a NaN or infinity
     in any array, foot quaternions that are not unit, `amplitude_scale <= 0` or
-    `reach_weight < 0`. (Crossed feet are only refused when concrete.) An invalid problem is
-    replaced by the neutral problem of the default body (`make_body()`), so that the solve and
-    its implicit derivatives stay finite (a 722-degree knee bend gave an all-NaN gradient with
-    converged=True), and its derivatives are zero.
+    `reach_weight < 0` (crossed feet are only refused when concrete). Where invalid, the
+    shape vector becomes the neutral one (zeros) and the targets and gaze point their finite
+    parts (NaN and infinity become 0), so that a bad shape vector or target (a 722-degree knee
+    bend gave an all-NaN gradient with converged=True) solves to a finite pose with zero
+    derivatives. Not replaced (a whole neutral problem made the first call seconds slower):
+    NaN in the body or the feet still gives NaN values, flagged.
 
     Arguments:
         problem: one `StanceProblem` (no batch axis).
@@ -267,18 +269,19 @@ def substitute_invalid(problem: StanceProblem) -> tuple[StanceProblem, Bool[Arra
         jnp.all(problem.amplitude_penalty.widths > 0.0),
         jnp.all(problem.reach_weights >= 0.0),
     ]
-    arrays, static = eqx.partition(problem, eqx.is_inexact_array)
-    checks += [jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(arrays)]
+    checks += [jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(eqx.filter(problem, eqx.is_inexact_array))]
     invalid = ~functools.reduce(jnp.logical_and, checks)
-    neutral = eqx.filter(_neutral_problem(problem.dominant), eqx.is_inexact_array)
-    arrays = jax.tree.map(lambda x, n: u.where(invalid, n.astype(x.dtype), x), arrays, neutral)
-    return eqx.combine(arrays, static), invalid
-
-
-@functools.cache
-def _neutral_problem(dominant: str) -> StanceProblem:
-    with jax.ensure_compile_time_eval():  # concrete constants, even when first asked under jit
-        return make_problem(make_body(), dominant=dominant)
+    keep = ~invalid
+    problem = eqx.tree_at(
+        lambda p: (p.shape, p.targets, p.gaze_point),
+        problem,
+        (
+            u.where(invalid, 0.0, s),
+            u.where(jnp.isfinite(problem.targets) & keep, problem.targets, 0.0),
+            u.where(jnp.isfinite(problem.gaze_point) & keep, problem.gaze_point, 0.0),
+        ),
+    )
+    return problem, invalid
 
 def _positive_scalar(x, name: str, dtype, allow_zero: bool) -> Array:
     """`make_problem`'s argument `name` as a scalar, checked finite and > 0 (>= 0 with

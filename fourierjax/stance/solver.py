@@ -200,8 +200,13 @@ def solve_stances(
     solves/s one by one, 81-90 in chunks of 2 or 4, 25 vmapped at once (same objectives to
     float32 round-off).
 
-    `throw` as for `solve_stance` (False: a batch never fails for one problem; read each
-    problem's `result`).
+    Arguments:
+        problems: `StanceProblem`s stacked along a leading axis (`stack_problems`, or a
+            shape set's `problem` under `jax.vmap`).
+        rtol, atol, max_steps: as for `solve_stance`, shared by every problem.
+        batch_size: "auto", None or a positive int (above).
+        throw: as for `solve_stance`; the default False means a batch never fails for one
+            problem: read each problem's `result`.
 
     Returns:
         A `StanceSolution` whose leaves have a leading batch axis.
@@ -224,6 +229,12 @@ def solve_stances(
 
 def stack_problems(problems: list[StanceProblem]) -> StanceProblem:
     """Stack same-structure problems along a new leading axis (for `solve_stances`).
+
+    Arguments:
+        problems: one or more `StanceProblem`s with the same static settings.
+
+    Returns:
+        One `StanceProblem` whose leaves have a leading axis of `len(problems)`.
 
     Raises:
         UserError: no problems, something that is not a `StanceProblem`, or problems whose
