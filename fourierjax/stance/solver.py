@@ -101,7 +101,9 @@ def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
             _loop_objective, solver, y, args=problem, max_steps=max_steps, has_aux=True, throw=False
         )
         ok = sol.result == optx.RESULTS.successful
-        maxed = sol.result == optx.RESULTS.max_steps_reached
+        maxed = (sol.result == optx.RESULTS.nonlinear_max_steps_reached) | (
+            sol.result == optx.RESULTS.max_steps_reached
+        )
         f_info = sol.state.f_info
         stuck = jnp.linalg.norm(f_info.grad) > _RESTART_GRAD * jnp.maximum(1.0, jnp.abs(f_info.f))
         return sol.value, steps + sol.stats["num_steps"], ok, maxed, sol.state.aux, stuck, runs + 1
