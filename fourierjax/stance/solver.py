@@ -136,7 +136,7 @@ def _optimum_jvp(rtol, atol, max_steps, primals, tangents):
     return (y, steps, ok, maxed, built), (dy, zero, zero, zero, d_built)
 
 
-def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int, throw: bool):
+def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int, throw: bool = False):
     # A problem refused here is solved in its place (neutral shape) and flagged: see
     # `substitute_invalid`. Concrete problems were refused already by `make_problem`.
     problem, invalid = substitute_invalid(problem)
