@@ -2,7 +2,7 @@
 
 For each shape set and intensity, one batched gradient-based solve (`stance.solver.solve_stances`,
 BFGS with balance and analytic IK inside) and, for comparison, the paper's method: coordinate
-direction-set with Brent line minimisation (`stance.reference.solve_reference`, scipy Powell).
+direction-set with Brent line minimisation (`benchmarks.stance_reference.solve_reference`, scipy Powell).
 Reported per problem: objective (eq. 5) of both, iterations of both, COM error, and the time per
 solve. Recoil sets use an object 0.7 m ahead, 0.4 m to the left, at 1.2 m.
 
@@ -26,8 +26,8 @@ def body(argv=None) -> None:
     import jax.numpy as jnp
 
     from fourierjax import viz
+    from fourierjax.io.stance_bvh import pose_to_motion
     from fourierjax.motion import motion_joint_positions
-    from fourierjax.stance.bvh_export import pose_to_motion
     from fourierjax.stance.shape_sets import get_shape_set
     from fourierjax.stance.skeleton48 import make_body
     from fourierjax.stance.solver import solve_stances, stack_problems
@@ -53,7 +53,7 @@ def body(argv=None) -> None:
     per_solve = (time.perf_counter() - t0) / len(problems)
     ref = {}
     if cfg["reference"]:
-        from fourierjax.stance.reference import solve_reference
+        from experiments.benchmarks.stance_reference import solve_reference
 
         for k in range(min(len(problems), cfg["reference_max_problems"])):
             ref[k] = solve_reference(problems[k])

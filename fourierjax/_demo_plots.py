@@ -267,8 +267,8 @@ def _stance(st: _State) -> None:
     _import("fourierjax.stance")
     shape_sets = _import("fourierjax.stance.shape_sets")
     from fourierjax import viz
+    from fourierjax.io.stance_bvh import pose_to_motion, write_stance_bvh
     from fourierjax.motion import motion_joint_positions
-    from fourierjax.stance.bvh_export import pose_to_motion, write_stance_bvh
     from fourierjax.stance.skeleton48 import make_body
     from fourierjax.stance.solver import solve_stances, stack_problems
 

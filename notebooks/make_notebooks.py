@@ -140,7 +140,7 @@ jax.config.update("jax_compilation_cache_dir", os.environ.get(
     "FOURIERJAX_CACHE_DIR", os.path.expanduser("~/.cache/fourierjax/jax")))
 from fourierjax import viz
 from fourierjax.motion import motion_joint_positions
-from fourierjax.stance.bvh_export import pose_to_motion
+from fourierjax.io.stance_bvh import pose_to_motion
 from fourierjax.stance.shape_sets import builtin_shape_sets, get_shape_set
 from fourierjax.stance.skeleton48 import make_body
 from fourierjax.stance.solver import solve_stances, stack_problems

@@ -10,13 +10,14 @@ import pytest
 ENV = {**os.environ, "JAX_PLATFORMS": "cpu"}
 
 
-def _run(*args, env=None):
+def _run(*args, env=None, cwd=None):
     return subprocess.run(
         [sys.executable, "-m", "fourierjax", "stance", *args],
         capture_output=True,
         text=True,
         timeout=1200,
         env=env or ENV,
+        cwd=cwd,
     )
 
 
@@ -47,6 +48,26 @@ def test_user_mistakes_give_one_line_and_exit_2(args, message, tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fourierjax: error:")
     assert message in lines[0]
+
+
+@pytest.mark.parametrize("name", ["m.npz", "m.toml", "ABSOLUTE"])
+def test_binary_shape_set_file_gives_one_line_and_exit_2(name, tmp_path):
+    """A binary file (here a NumPy array) given as a shape set: a UnicodeDecodeError traceback
+    before; now one line naming the file. A bare name that is an existing file counts as a path."""
+    import numpy as np
+
+    path = tmp_path / ("abs.npz" if name == "ABSOLUTE" else name)
+    with open(path, "wb") as f:
+        np.save(f, np.arange(5.0))  # starts with b"\x93NUMPY": not UTF-8
+    arg = str(path) if name == "ABSOLUTE" else name
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {**ENV, "PYTHONPATH": os.pathsep.join([repo, ENV.get("PYTHONPATH", "")])}
+    r = _run("--shape-set", arg, "--out", str(tmp_path / "x.bvh"), env=env, cwd=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fourierjax: error:"), r.stderr
+    assert path.name in lines[0] and "not UTF-8" in lines[0]
 
 
 @pytest.mark.slow

@@ -134,10 +134,11 @@ def _primitives(jaxpr) -> set[str]:
 
 def test_pose_builder_can_be_traced_with_jit_disabled():
     """The solver traces the pose builder under `jax.disable_jit` (no nested jits to trace,
-    `problem._build_with_residual`), which is only safe while the builder holds no `lax` loop
+    `_pose.build_with_residual`), which is only safe while the builder holds no `lax` loop
     or conditional: with jit disabled those run in Python (a loop unrolled into the solver's
     program). And the numbers are the same."""
-    from fourierjax.stance.problem import _build_with_residual, build_rotations, make_problem
+    from fourierjax.stance._pose import build_with_residual
+    from fourierjax.stance.problem import build_rotations, make_problem
 
     prob = make_problem(BODY, {"knee_right": 0.3, "gaze_weight": 0.7},
                         target_right=jnp.array([-0.3, 1.2, 0.4]))
@@ -146,7 +147,7 @@ def test_pose_builder_can_be_traced_with_jit_disabled():
     assert {"mul", "sin", "select_n"} <= names  # it looked inside
     assert not names & {"scan", "while", "cond", "switch"}, names
     jitted = jax.jit(build_rotations)(prob, a, b)
-    _, built = jax.jit(_build_with_residual)(prob, a, b)
+    _, built = jax.jit(build_with_residual)(prob, a, b)
     for x, y in zip(jax.tree.leaves(jitted), jax.tree.leaves(built), strict=True):
         np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6)
 

@@ -9,8 +9,8 @@ import pytest
 
 from fourierjax import rotations
 from fourierjax.errors import UserError
+from fourierjax.io.stance_bvh import animate, write_stance_bvh
 from fourierjax.stance import _util as u
-from fourierjax.stance.bvh_export import animate, write_stance_bvh
 from fourierjax.stance.fit import fit_torso, torso_directions
 from fourierjax.stance.ik import Feet, lower_body_ik, make_feet
 from fourierjax.stance.problem import BEND_MAX_RAD, BEND_MIN_RAD, SHAPE_PARAMS, P, make_problem

@@ -7,8 +7,8 @@ import pytest
 
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import read_bvh
+from fourierjax.io.stance_bvh import animate, ease_in_out, write_stance_bvh
 from fourierjax.kinematics import forward_kinematics
-from fourierjax.stance.bvh_export import animate, ease_in_out, write_stance_bvh
 from fourierjax.stance.problem import MAGNITUDE_PARAMS, SHAPE_PARAMS, P
 from fourierjax.stance.shape_sets import (
     anticipation,
@@ -255,8 +255,8 @@ def test_bvh_channels_take_the_small_euler_triple_and_stay_continuous():
     """An elbow bent past 90 degrees was written (180, -78, 180) in Z X Y, and an animation
     through 90 degrees jumped by 180 on Z and Y (X going -60 -> -90 -> -60 for a -60 -> -120
     bend): now (0, -102, 0), and the animation's X runs monotonically with Z = Y = 0."""
+    from fourierjax.io.stance_bvh import pose_to_motion
     from fourierjax.kinematics import joint_positions
-    from fourierjax.stance.bvh_export import pose_to_motion
     from fourierjax.stance.skeleton48 import JOINT_NAMES
 
     m = pose_to_motion(BODY, _elbow_bent(-102.0))

@@ -8,10 +8,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from experiments.benchmarks.stance_reference import solve_reference
 from fourierjax.errors import UserError
 from fourierjax.stance.balance import inside_polygon_margin, monitor_points_world, support_polygon
 from fourierjax.stance.problem import desired_balance_point
-from fourierjax.stance.reference import solve_reference
 from fourierjax.stance.shape_sets import get_shape_set
 from fourierjax.stance.skeleton48 import ANKLE, DOF_NAMES, dof_vector, make_body, pose_fk
 from fourierjax.stance.solver import solve_stances, stack_problems
@@ -209,11 +209,12 @@ def test_random_posture_reaches_its_balance():
 def test_converged_requires_the_balance(monkeypatch):
     # One Newton evaluation cannot solve the balance of a shifted weight: BFGS may still meet
     # its tolerances, but the solution must not claim convergence with the COM off its goal.
+    from fourierjax.stance import _pose
     from fourierjax.stance import problem as P
     from fourierjax.stance import solver as S
 
     prob = P.make_problem(make_body(1.75), {"weight_shift": 0.6})
-    monkeypatch.setattr(P, "BALANCE_EVALUATIONS", 1)
+    monkeypatch.setattr(_pose, "BALANCE_EVALUATIONS", 1)  # where the balance solve reads it
     jax.clear_caches()  # inner jits (optimistix's) would reuse a trace with 5 evaluations
     try:
         sol = jax.jit(lambda p: S._solve_one(p, 1e-6, 1e-6, 200))(prob)
@@ -221,6 +222,7 @@ def test_converged_requires_the_balance(monkeypatch):
         jax.clear_caches()  # and later tests must not reuse this one
     assert float(sol.com_error_m) > S.COM_TOLERANCE_M
     assert not bool(sol.converged)
+    assert bool(sol.result != S.StanceResult.successful)
 
 
 def test_balance_margin_by_hand():

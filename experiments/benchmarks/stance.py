@@ -30,7 +30,7 @@ def run(size: str) -> list[Record]:
     try:
         import jax
 
-        from fourierjax.stance.reference import solve_reference
+        from experiments.benchmarks.stance_reference import solve_reference
         from fourierjax.stance.solver import solve_stance, solve_stances
     except ImportError as err:
         return [not_measured("stance_1024", "solves/s", f"fourierjax.stance not available ({err})",
@@ -73,7 +73,7 @@ def run(size: str) -> list[Record]:
     tol = 1e-5 * (1.0 + np.abs(ref_obj))  # float32 objectives: ~10 ulp at 100 (as test_stance_solver)
     rec1 = Record("stance_1", 1.0 / single["median"], 1.0 / np.median(ref_sec), "solves/s",
                   description="one stance solve (jitted solve_stance) vs one scipy Powell solve",
-                  baseline_name="stance.reference.solve_reference (scipy Powell, coordinate "
+                  baseline_name="stance_reference.solve_reference (scipy Powell, coordinate "
                                 "directions, Brent line search)",
                   ours_stats=single, baseline_stats={"seconds": ref_sec.tolist()})
     rec = Record(

@@ -93,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     enable_compile_cache()
     import numpy as np
 
-    from fourierjax.stance.bvh_export import write_stance_bvh
+    from fourierjax.io.stance_bvh import write_stance_bvh
     from fourierjax.stance.skeleton48 import make_body
     from fourierjax.stance.solver import solve_stance
 

@@ -1,6 +1,6 @@
 """Expressive stance (Neff & Fiume 2004): 48-DOF skeleton, lower-body IK, balance, shape solver."""
 
-from fourierjax.stance.bvh_export import animate, ease_in_out, pose_to_motion, write_stance_bvh
+from fourierjax.stance.animation import animate, ease_in_out
 from fourierjax.stance.fit import TorsoFit, cmu_torso_directions, fit_torso, torso_directions
 from fourierjax.stance.ik import Feet, LowerBody, lower_body_ik, make_feet
 from fourierjax.stance.penalties import HermitePenalty, hermite_penalty, quadratic_penalty, reach_penalty
@@ -38,6 +38,7 @@ from fourierjax.stance.skeleton48 import (
     rest_pose,
 )
 from fourierjax.stance.solver import (
+    StanceResult,
     StanceSolution,
     objective,
     solve_stance,
@@ -47,7 +48,8 @@ from fourierjax.stance.solver import (
 
 __all__ = [
     "AMPLITUDES", "DOFS", "DOF_NAMES", "SHAPE_PARAMS", "TOPOLOGY", "Body", "Feet",
-    "BalancedBuild", "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem", "StanceSolution",
+    "BalancedBuild", "HermitePenalty", "LowerBody", "ShapeSet", "StancePose", "StanceProblem",
+    "StanceResult", "StanceSolution",
     "TorsoFit", "animate", "anticipation", "balance_margin_m", "balance_offsets", "balanced_pose",
     "balanced_rotations", "build_pose",
     "builtin_shape_sets", "center_of_mass", "cmu_torso_directions", "dof_vector",
@@ -59,9 +61,14 @@ __all__ = [
 
 
 def __getattr__(name):
-    # jaxopt (for the bounded solver only) is imported on first use, not with the package.
+    # jaxopt (for the bounded solver only) is imported on first use, not with the package; so
+    # are the BVH writers, which live at the edge (`fourierjax.io.stance_bvh`).
     if name == "solve_stance_bounded":
         from fourierjax.stance.bounded import solve_stance_bounded
 
         return solve_stance_bounded
+    if name in ("pose_to_motion", "write_stance_bvh"):
+        from fourierjax.io import stance_bvh
+
+        return getattr(stance_bvh, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

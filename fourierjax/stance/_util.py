@@ -45,12 +45,6 @@ def safe_normalize(v: Float[Array, "... n"], fallback: Float[Array, "... n"]) ->
     return where(small, fallback, v * rsqrt_where(sq, small))
 
 
-def safe_sqrt(x: Float[Array, "..."], floor: float = 0.0) -> Float[Array, "..."]:
-    """sqrt(max(x, floor)) with a zero gradient where x <= floor (and at 0)."""
-    lo = x <= max(floor, 1e-30)
-    return where(lo, float(np.sqrt(max(floor, 0.0))), x * rsqrt_where(x, lo))
-
-
 def where(cond, x, y):
     """`jnp.where` for the traced stance code: a bare `select_n`, without `jnp.where`'s nested
     jit (about 120 of them were traced into the stance solver's loop); same broadcasting."""
@@ -156,3 +150,15 @@ def euler_zxy(z, x, y):
 def columns(ex, ey, ez):
     """The matrix with columns ex, ey, ez."""
     return jnp.stack([ex, ey, ez], axis=-1)
+
+
+def zero_tangent(tree):
+    """Zero tangents for a pytree: zeros for inexact leaves, float0 for the others."""
+
+    def zero(x):
+        x = jnp.asarray(x)
+        if jnp.issubdtype(x.dtype, jnp.inexact):
+            return jnp.zeros_like(x)
+        return np.zeros(x.shape, jax.dtypes.float0)
+
+    return jax.tree.map(zero, tree)

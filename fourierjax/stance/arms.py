@@ -4,6 +4,7 @@
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from fourierjax._math import safe_sqrt
 from fourierjax.stance import _util as u
 
 _EY = jnp.array([0.0, 1.0, 0.0])
@@ -77,7 +78,7 @@ def arm_to_target(
     dist = u.safe_norm(axis)
     c = u.safe_normalize(axis, -_EY)
     cos_elbow, cos_a = _arm_cosines(upper, fore, dist)
-    sin_elbow, sin_a = u.safe_sqrt(1.0 - cos_elbow * cos_elbow), u.safe_sqrt(1.0 - cos_a * cos_a)
+    sin_elbow, sin_a = safe_sqrt(1.0 - cos_elbow * cos_elbow), safe_sqrt(1.0 - cos_a * cos_a)
     ref = -_EY + 0.25 * outward
     ref = ref - u.dot(ref, c) * c
     e0 = u.safe_normalize(ref, u.safe_normalize(u.cross(c, _EY), outward))

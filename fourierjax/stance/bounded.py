@@ -12,15 +12,10 @@ from jaxtyping import Array, Float
 from fourierjax._jit import filter_jit
 from fourierjax._linalg import matmul
 from fourierjax.errors import UserError
-from fourierjax.stance.problem import NUM_AMPLITUDES, StanceProblem, balanced_rotations
-from fourierjax.stance.solver import (
-    StanceSolution,
-    _finish,
-    _implicit_terms,
-    _solve_spd,
-    _value_grad_build,
-    amplitudes_from_unknowns,
-)
+from fourierjax.stance._implicit import implicit_terms, solve_spd
+from fourierjax.stance._objective import StanceSolution, amplitudes_from_unknowns, finish, value_grad_build
+from fourierjax.stance._pose import balanced_rotations
+from fourierjax.stance._problem import NUM_AMPLITUDES, StanceProblem, substitute_invalid
 
 with warnings.catch_warnings():
     # jaxopt announces on import that it is no longer maintained (STYLE.md); it is used here
@@ -37,10 +32,10 @@ def _bounded_optimum(problem: StanceProblem, lower, upper, tol: float, maxiter: 
 
     Derivatives by the implicit function theorem on the active set: components on a bound
     follow the bound; the free ones solve the Hessian system restricted to them (the 6x6
-    `solver._solve_spd`). No derivative runs through jaxopt's iterations.
+    `_implicit.solve_spd`). No derivative runs through jaxopt's iterations.
     """
     def value_and_grad(y, p):
-        value, grad, _ = _value_grad_build(y, p)
+        value, grad, _ = value_grad_build(y, p)
         return value, grad
 
     solver = jaxopt.LBFGSB(
@@ -56,7 +51,7 @@ def _bounded_optimum_jvp(tol, maxiter, primals, tangents):
     problem, lower, upper = primals
     dp, dlo, dhi = tangents
     y, steps, ok = _bounded_optimum(problem, lower, upper, tol, maxiter)
-    H, mixed = _implicit_terms(y, problem, dp)
+    H, mixed = implicit_terms(y, problem, dp)
     span = jnp.maximum(upper - lower, 1.0)
     at_lo, at_hi = y <= lower + 1e-6 * span, y >= upper - 1e-6 * span
     active = at_lo | at_hi
@@ -64,7 +59,7 @@ def _bounded_optimum_jvp(tol, maxiter, primals, tangents):
     rhs = mixed + matmul(H, dy_active)
     mask = active[:, None] | active[None, :]
     M = jnp.where(mask, jnp.eye(y.shape[0], dtype=y.dtype), H)
-    dy = -_solve_spd(M, jnp.where(active, 0.0, rhs)) + dy_active
+    dy = -solve_spd(M, jnp.where(active, 0.0, rhs)) + dy_active
     zero = np.zeros((), jax.dtypes.float0)
     return (y, steps, ok), (dy, zero, zero)
 
@@ -98,8 +93,10 @@ def solve_stance_bounded(
             is about 1e-4: ask for less only in float64).
 
     Returns:
-        A `StanceSolution` (`iterations` counts L-BFGS-B iterations).
+        A `StanceSolution` (`iterations` counts L-BFGS-B iterations; `result` as for
+        `solver.solve_stance`, never raised).
     """
+    problem, invalid = substitute_invalid(problem)  # flagged in `result` (see `solve_stance`)
     lower, upper = jnp.asarray(lower, problem.shape.dtype), jnp.asarray(upper, problem.shape.dtype)
     for name, b in (("lower", lower), ("upper", upper)):
         if b.shape != (NUM_AMPLITUDES,):
@@ -113,5 +110,5 @@ def solve_stance_bounded(
     lo = eqx.error_if(lo, bad, "solve_stance_bounded: bounds must be numbers with lower <= upper")
     y, steps, ok = _bounded_optimum(problem, lo, hi, tol, maxiter)
     built = balanced_rotations(problem, amplitudes_from_unknowns(problem, y))
-    return _finish(problem, y, steps, ok, built)
+    return finish(problem, y, steps, ok, ~ok & (steps >= maxiter), invalid, built)
 

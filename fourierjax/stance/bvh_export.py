@@ -1,90 +1,18 @@
-"""Solved stance poses (or an eased animation between them) as a BVH `Motion` for Blender."""
+"""Deprecated: moved to `fourierjax.io.stance_bvh` (the stance core does not import io)."""
 
-import os
+import importlib
+import warnings
 
-import jax.numpy as jnp
-import numpy as np
-
-from fourierjax import rotations
-from fourierjax.errors import UserError
-from fourierjax.io.bvh import Motion, write_bvh
-from fourierjax.stance.skeleton48 import ROTATION_ORDER, TOPOLOGY, Body, StancePose, dof_euler_frames
+_NAMES = ("animate", "ease_in_out", "pose_to_motion", "write_stance_bvh")
 
 
-def ease_in_out(t):
-    """The ease-in, ease-out curve used for all transitions (Neff & Fiume, sec. 7): 3t^2 - 2t^3."""
-    t = jnp.clip(jnp.asarray(t), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
-
-
-def animate(poses: list[StancePose], frames_per_transition: int = 30) -> StancePose:
-    """Frames easing from each pose to the next (root lerp, joint slerp on the eased time).
-
-    Arguments:
-        poses: two or more poses to pass through (e.g. anticipation, then the action).
-        frames_per_transition: frames from one pose to the next (>= 1).
-
-    Returns:
-        A `StancePose` with a leading frame axis (`root_position [F, 3]`, `quats [F, J, 4]`).
-    """
-    if len(poses) < 2:
-        raise UserError("animate: give at least two poses")
-    n = frames_per_transition
-    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
-        raise UserError(f"animate: frames_per_transition must be a whole number >= 1, got {n!r}")
-    t = ease_in_out(jnp.arange(frames_per_transition) / frames_per_transition)
-    roots, quats = [], []
-    for a, b in zip(poses[:-1], poses[1:]):
-        roots.append(a.root_position[None] + t[:, None] * (b.root_position - a.root_position)[None])
-        quats.append(rotations.quat_slerp(a.quats[None], b.quats[None], t[:, None]))
-    roots.append(poses[-1].root_position[None])
-    quats.append(poses[-1].quats[None])
-    return StancePose(jnp.concatenate(roots), jnp.concatenate(quats))
-
-
-def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0) -> Motion:
-    """A BVH `Motion` of one pose (leaves `[3]`, `[J, 4]`) or of frames (`[F, 3]`, `[F, J, 4]`).
-
-    Every joint gets Z X Y rotation channels in degrees (the 48 DOFs plus zeros on the
-    non-DOF axes), the root also X Y Z positions; offsets in metres, Y up, facing +Z.
-
-    Each rotation has two Euler triples, (z, x, y) and (z + 180, 180 - x, y + 180). The first
-    frame takes, per joint, the one with the smaller non-DOF angles (`skeleton48._dof_euler`),
-    so an elbow bent past 90 degrees is (0, -102, 0), not (180, -78, 180); later frames follow it
-    continuously (`motion.make_euler_continuous`), so an animation never jumps by 180 degrees
-    on two axes (which Blender would interpolate as a spin).
-    """
-    from fourierjax.motion import make_euler_continuous
-
-    root = np.asarray(poses.root_position, np.float64)
-    quats = np.asarray(poses.quats, np.float64)
-    if root.ndim == 1:
-        root, quats = root[None], quats[None]
-    eul = np.asarray(dof_euler_frames(jnp.asarray(quats)), np.float64)
-    eul = np.degrees(make_euler_continuous(eul, ROTATION_ORDER))
-    frames = root.shape[0]
-    channels = np.concatenate([root, eul.reshape(frames, -1)], axis=1)
-    return Motion(
-        topology=TOPOLOGY,
-        offsets=np.asarray(body.offsets, np.float64),
-        end_site_offsets=np.asarray(body.skeleton.end_site_offsets, np.float64),
-        channels=channels,
-        frame_time_s=frame_time_s,
-        source=None,
-    )
-
-
-def write_stance_bvh(path, body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30.0):
-    """Write a pose or an animation (see `pose_to_motion`) to a BVH file that opens in Blender.
-
-    Raises:
-        UserError: the pose holds NaN, or the file cannot be written (e.g. its directory does
-            not exist: it is not created, as with `io.bvh.write_bvh`).
-    """
-    if not np.isfinite(np.asarray(poses.quats)).all():
-        raise UserError("write_stance_bvh: the pose holds NaN values")
-    motion = pose_to_motion(body, poses, frame_time_s)
-    try:
-        write_bvh(motion, path)
-    except OSError as err:
-        raise UserError(f"write_stance_bvh: cannot write {os.fspath(path)}: {err.strerror or err}") from None
+def __getattr__(name):
+    # Lazy: importing this module imports neither io nor motion; each name warns once per use.
+    if name in _NAMES:
+        warnings.warn(
+            f"fourierjax.stance.bvh_export is deprecated; import {name} from fourierjax.io.stance_bvh",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return getattr(importlib.import_module("fourierjax.io.stance_bvh"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -9,6 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.skeleton48 import SHOULDER, Body
@@ -105,7 +106,7 @@ def fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
     return _fit_torso(body, dirs)
 
 
-@eqx.filter_jit
+@filter_jit
 def _fit_torso(body: Body, target_dirs: Float[Array, "6 3"]) -> TorsoFit:
     """`fit_torso` on checked input."""
     sag, cor, sig = _combo_arrays()

@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._math import safe_sqrt
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
 from fourierjax.stance.skeleton48 import ANKLE, HIP, KNEE, LEFT, RIGHT, Body
@@ -148,7 +149,7 @@ def _ankle_from_vector(w: Float[Array, "3"], v: Float[Array, "3"]) -> Float[Arra
     """
     (_, wy, wz), (vx, vy, vz) = (jnp.split(x, 3, axis=-1) for x in (w, v))
     # Rz(-z) w = (wy sin z, wy cos z, wz): its x must equal v_x.
-    cz = u.safe_sqrt(wy * wy - vx * vx, floor=1e-12)  # = wy cos z  (>= 0: |z| <= pi/2)
+    cz = safe_sqrt(wy * wy - vx * vx, floor=1e-12)  # = wy cos z  (>= 0: |z| <= pi/2)
     cos_z, sin_z = _unit2(cz, vx)
     # Rx(-x) rotates (wy cos z, wz) onto (v_y, v_z) in the YZ plane: x = angle(cz, wz) -
     # angle(vy, vz).
@@ -197,7 +198,7 @@ def free_hip_position(
     Ahat = u.safe_normalize(A, -_EY)
     W, C = hip_width, free_leg_length
     a = (W * W - C * C + nA * nA) / (2.0 * jnp.maximum(nA, 1e-9))
-    r = u.safe_sqrt(W * W - a * a)
+    r = safe_sqrt(W * W - a * a)
     a_clamped = u.clip(a, -W, W)
     gap = jnp.maximum(nA - (W + C), 0.0) + jnp.maximum(jnp.abs(W - C) - nA, 0.0)
     centre = root_hip + a_clamped * Ahat

@@ -1,36 +1,4 @@
-"""Shape sets (Neff & Fiume 2004, sec. 6): one intensity knob over a shape vector, as TOML data.
-
-Format (see `fourierjax/stance/shape_sets/*.toml`; `configs/shape_sets/slouch.toml` is a user
-example loaded by path). Top level: `name`, `description`, `object` ("none", "optional" or
-"required"). Then a `[positive]` table (used for intensity >= 0) and an optional
-`[negative]` table (intensity < 0; without it negative intensities point the positive side
-the other way: its directions negated, its knee and elbow bends and gaze weight kept, see
-`problem.MAGNITUDE_PARAMS`). Each side has:
-
-- states: `sagittal_class`, `coronal_class` (`torso.SHAPE_CLASSES`), `collar_y`, `collar_z`
-  ("aligned"/"opposed"), optional `gaze = "object"` (look at the object) and
-  `abdomen_offset = true` (let the solver move the abdomen X offset);
-- `[side.vector]`: shape-vector values (`problem.SHAPE_PARAMS`) at |intensity| = 1;
-- `[side.away]`: object-directed values, `name = { forward = a, lateral = b }` adds
-  `a * u_z + b * u_x` where `u` is the horizontal unit direction from the character (at the
-  origin, facing +Z) to the object; "away" because the recoil sets lean against `u`;
-- `[side.curves]`: per-parameter interpolation, `{ kind = "linear" }` (default) or
-  `{ kind = "late", start = s }`: zero until |intensity| = s, then ((t - s) / (1 - s))^2
-  (the knee bend that only comes near the hunched end of the posture scale).
-
-Values scale with the intensity from the neutral origin (all zeros) and extrapolate beyond
-|intensity| = 1 (a weight or forward shift past +-1 can put the balance point off the feet:
-`problem.balance_margin_m` says how far). The class states switch with the sign of the
-intensity, where all desired amplitudes are zero, so poses stay continuous in the intensity when no reach target is
-active. With an active target the solver moves the amplitudes off their desired values, so
-they are not zero at intensity 0 and the class switch shows as a jump in the pose there
-(measured, posture set, right-hand target (-0.35, 1.05, 0.55): objective 25.21 and
-sagittal amplitude 0.215 at intensity -1e-5, 21.13 and 0.366 at +1e-5). Neff & Fiume switch
-the sagittal class "as the sagittal amplitude passes through zero" (sec. 6); switching on
-the solved amplitudes inside the solver is not implemented. Everything after loading is jnp:
-the intensity and the object can be traced (vmap over intensities; differentiate through
-the solver).
-"""
+"""Shape sets (Neff & Fiume 2004, sec. 6): one intensity knob over a shape vector, as TOML data."""
 
 import dataclasses
 import os
@@ -292,7 +260,49 @@ def _table(source, key, v) -> dict:
 
 
 def parse_shape_set(text: str, source: str = "<string>") -> ShapeSet:
-    """Parse and validate a shape set from TOML text (errors name the source and the key)."""
+    """Parse and validate a shape set from TOML text (errors name the source and the key).
+
+    Format (see `fourierjax/stance/shape_sets/*.toml`; `configs/shape_sets/slouch.toml` is a user
+    example loaded by path). Top level: `name`, `description`, `object` ("none", "optional" or
+    "required"). Then a `[positive]` table (used for intensity >= 0) and an optional
+    `[negative]` table (intensity < 0; without it negative intensities point the positive side
+    the other way: its directions negated, its knee and elbow bends and gaze weight kept, see
+    `problem.MAGNITUDE_PARAMS`). Each side has:
+
+    - states: `sagittal_class`, `coronal_class` (`torso.SHAPE_CLASSES`), `collar_y`, `collar_z`
+      ("aligned"/"opposed"), optional `gaze = "object"` (look at the object) and
+      `abdomen_offset = true` (let the solver move the abdomen X offset);
+    - `[side.vector]`: shape-vector values (`problem.SHAPE_PARAMS`) at |intensity| = 1;
+    - `[side.away]`: object-directed values, `name = { forward = a, lateral = b }` adds
+      `a * u_z + b * u_x` where `u` is the horizontal unit direction from the character (at the
+      origin, facing +Z) to the object; "away" because the recoil sets lean against `u`;
+    - `[side.curves]`: per-parameter interpolation, `{ kind = "linear" }` (default) or
+      `{ kind = "late", start = s }`: zero until |intensity| = s, then ((t - s) / (1 - s))^2
+      (the knee bend that only comes near the hunched end of the posture scale).
+
+    Values scale with the intensity from the neutral origin (all zeros) and extrapolate beyond
+    |intensity| = 1 (a weight or forward shift past +-1 can put the balance point off the feet:
+    `problem.balance_margin_m` says how far). The class states switch with the sign of the
+    intensity, where all desired amplitudes are zero, so poses stay continuous in the intensity when no reach target is
+    active. With an active target the solver moves the amplitudes off their desired values, so
+    they are not zero at intensity 0 and the class switch shows as a jump in the pose there
+    (measured, posture set, right-hand target (-0.35, 1.05, 0.55): objective 25.21 and
+    sagittal amplitude 0.215 at intensity -1e-5, 21.13 and 0.366 at +1e-5). Neff & Fiume switch
+    the sagittal class "as the sagittal amplitude passes through zero" (sec. 6); switching on
+    the solved amplitudes inside the solver is not implemented. Everything after loading is jnp:
+    the intensity and the object can be traced (vmap over intensities; differentiate through
+    the solver).
+
+    Arguments:
+        text: the TOML text.
+        source: where it came from, for error messages (a path or "<string>").
+
+    Returns:
+        The `ShapeSet`.
+
+    Raises:
+        UserError: invalid TOML or an invalid shape set, naming `source` and the key.
+    """
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -318,12 +328,28 @@ def parse_shape_set(text: str, source: str = "<string>") -> ShapeSet:
 
 
 def load_shape_set(path: str | os.PathLike) -> ShapeSet:
-    """Load a shape set from a TOML file."""
+    """Load a shape set from a TOML file.
+
+    Arguments:
+        path: the `.toml` file (UTF-8 text).
+
+    Returns:
+        The `ShapeSet`.
+
+    Raises:
+        UserError: the file cannot be read, is not UTF-8 text (e.g. a binary `.npz` given by
+            mistake), or is not a valid shape set.
+    """
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
         raise UserError(f"{path}: cannot read shape set: {err.strerror}") from None
+    except UnicodeDecodeError as err:
+        raise UserError(
+            f"{path}: not a shape set: a shape set is a UTF-8 TOML text file, and byte "
+            f"{err.start} is not UTF-8 (a binary file?)"
+        ) from None
     return parse_shape_set(text, str(path))
 
 
@@ -337,10 +363,13 @@ def builtin_shape_sets() -> dict[str, ShapeSet]:
 
 
 def get_shape_set(name_or_path: str) -> ShapeSet:
-    """A built-in shape set by name, or a shape set file by path (ends with .toml)."""
+    """A built-in shape set by name, or a shape set file by path (ends with .toml, holds a
+    directory separator, or names an existing file that is not a built-in name)."""
     if name_or_path.endswith(".toml") or os.sep in name_or_path:
         return load_shape_set(name_or_path)
     sets = builtin_shape_sets()
+    if name_or_path not in sets and os.path.isfile(name_or_path):
+        return load_shape_set(name_or_path)
     if name_or_path not in sets:
         raise UserError(
             f"unknown shape set {name_or_path!r}; choose one of {', '.join(sets)} "

@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 from fourierjax.kinematics import FKResult, forward_kinematics
 from fourierjax.skeleton import Skeleton, Topology
@@ -317,7 +318,7 @@ def _dof_euler(quats: Float[Array, "joints 4"]) -> Float[Array, "joints 3"]:
 
 
 #: `_dof_euler` over frames, compiled once (for the BVH export).
-dof_euler_frames = jax.jit(jax.vmap(_dof_euler))
+dof_euler_frames = filter_jit(jax.vmap(_dof_euler))
 
 
 def dof_vector(pose: StancePose) -> Float[Array, "48"]:

@@ -7,153 +7,40 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Float
 
 from fourierjax._jit import filter_jit
-from fourierjax._linalg import PRECISION, matmul, spd_solve
+from fourierjax._linalg import PRECISION
 from fourierjax.errors import UserError
-from fourierjax.stance.penalties import hermite_penalty
-from fourierjax.stance.problem import (
-    NUM_AMPLITUDES,
-    BalancedBuild,
-    StanceProblem,
-    _build_output_like,
-    _zero_tangent,
-    balanced_rotations,
-    balanced_rotations_with_tangents,
-    desired_balance_point,
+from fourierjax.stance._implicit import implicit_terms, solve_spd
+from fourierjax.stance._objective import (
+    COM_TOLERANCE_M,
+    StanceResult,
+    StanceSolution,
+    amplitudes_from_unknowns,
+    finish,
+    objective,
+    value_grad_build,
 )
-from fourierjax.stance.skeleton48 import StancePose
+from fourierjax.stance._pose import BalancedBuild, balanced_rotations, build_output_like
+from fourierjax.stance._problem import NUM_AMPLITUDES, StanceProblem, substitute_invalid
 
-
-def amplitudes_from_unknowns(problem: StanceProblem, y: Float[Array, "6"]) -> Float[Array, "6"]:
-    """Torso amplitudes: desired values plus the solver's offsets where they are free."""
-    return problem.shape[:NUM_AMPLITUDES] + problem.free * y
-
-
-def _objective_given_shoulders(y: Float[Array, "6"], problem: StanceProblem, shoulders) -> Float[Array, ""]:
-    """Eq. 5 from the offsets and the two shoulder positions of the balanced pose."""
-    pen = hermite_penalty(problem.amplitude_penalty, problem.free * y)
-    total = jnp.sum(problem.amplitude_weights * problem.free * pen)
-    total = total + 0.5 * jnp.sum((1.0 - problem.free) * y * y)
-    dist = jnp.sqrt(jnp.sum((shoulders - problem.targets) ** 2, axis=-1) + 1e-12)
-    reach = hermite_penalty(problem.reach, dist)
-    return total + jnp.sum(problem.target_active * problem.reach_weights * reach)
-
-
-def _value_grad_build(y: Float[Array, "6"], problem: StanceProblem):
-    """`(objective, grad_y objective, balanced pose)` in forward mode from one traced pose builder.
-
-    The six amplitude directions ride along the balance solve's own derivatives
-    (`problem.balanced_rotations_with_tangents`), so the solver's loop holds one copy of the
-    pose builder (primal plus 8 batched tangents) instead of a balance loop, a linearisation,
-    its 2-direction balance Jacobian and a transposed copy for reverse mode: about half the
-    XLA kernels for value and gradient, and 1.4x faster per evaluation (2 cores).
-    Derivatives with respect to the problem are NOT defined here (the implicit derivatives
-    of the solve use `objective`).
-    """
-    directions = jnp.diag(problem.free)  # d amplitudes / d y
-    built, d_built = balanced_rotations_with_tangents(
-        problem, amplitudes_from_unknowns(problem, y), directions
-    )
-    value, vjp = jax.vjp(lambda yy, sh: _objective_given_shoulders(yy, problem, sh), y,
-                         built.info.shoulders)
-    g_y, g_sh = vjp(jnp.ones_like(value))
-    grad = g_y + jnp.einsum("ihx,hx->i", d_built.info.shoulders, g_sh, precision=PRECISION)
-    return value, grad, built
+__all__ = [
+    "COM_TOLERANCE_M", "StanceResult", "StanceSolution", "amplitudes_from_unknowns", "objective",
+    "solve_stance", "solve_stances", "stack_problems",
+]  # fmt: skip
 
 
 def _loop_objective(y: Float[Array, "6"], problem: StanceProblem):
-    """`(objective, pose)` for optimistix, whose derivative in y is `_value_grad_build`'s gradient.
+    """`(objective, pose)` for optimistix, whose derivative in y is `value_grad_build`'s gradient.
 
     The value is f + g . (y - y), with f and g computed from a stopped copy of y: linearising
     this gives exactly g, so BFGS's `jax.linearize` + transpose never traces the pose
     builder again. Only for the solver's loop: no derivatives with respect to `problem`.
     """
     y_s = jax.lax.stop_gradient(y)
-    value, grad, built = _value_grad_build(y_s, jax.lax.stop_gradient(problem))
+    value, grad, built = value_grad_build(y_s, jax.lax.stop_gradient(problem))
     return value + jnp.dot(grad, y - y_s, precision=PRECISION), built
-
-
-def objective(y: Float[Array, "6"], problem: StanceProblem) -> Float[Array, ""]:
-    """Eq. 5, obj = sum_i w_i f_i: amplitude penalties plus active reach penalties.
-
-    `y` are offsets of the six torso amplitudes from their desired points. Held amplitudes
-    (`free == 0`) get a unit quadratic on their (ignored) offset, which keeps the minimiser
-    and its Hessian well defined.
-    """
-    built = balanced_rotations(problem, amplitudes_from_unknowns(problem, y))
-    return _objective_given_shoulders(y, problem, built.info.shoulders)
-
-
-class StanceSolution(eqx.Module):
-    """A solved stance (one problem; batched solutions have a leading batch axis).
-
-    - `amplitudes`: `[6]` sagittal, coronal, transverse, collar Y, collar Z, abdomen X.
-    - `pose`: the `StancePose`; `balance_xz`: `[2]` dominant-ankle X/Z offsets (rad).
-    - `objective`: eq. 5 at the solution; `iterations`: solver steps; `converged`: bool, BFGS
-      met its tolerances AND the balance was solved (`com_error_m <= COM_TOLERANCE_M`).
-    - `com_error_m`: distance of the COM ground projection from the desired point.
-    - `reach_error_m`: `[2]` wrist-to-target distance (0 for an inactive hand; see
-      `target_active`); `reach_gap_m`: `[2]` how far a target lies beyond the arm.
-    - `free_foot_gap_m`: > 0 if the free foot could not be planted.
-    """
-
-    amplitudes: Float[Array, "6"]
-    pose: StancePose
-    balance_xz: Float[Array, "2"]
-    objective: Float[Array, ""]
-    iterations: Int[Array, ""]
-    converged: Array
-    com_error_m: Float[Array, ""]
-    reach_error_m: Float[Array, "2"]
-    reach_gap_m: Float[Array, "2"]
-    target_active: Float[Array, "2"]
-    free_foot_gap_m: Float[Array, ""]
-
-
-#: Largest COM error (m) of a converged solution. Newton's balance solve reaches float32
-#: round-off (worst 1.8e-7 m over the posture sweeps); more means it did not converge.
-COM_TOLERANCE_M = 1e-4
-
-
-def _finish(problem: StanceProblem, y, steps, ok, built: BalancedBuild) -> StanceSolution:
-    # `built` is the pose of the solver's last accepted step (`_optimum`), which carries
-    # derivatives by the implicit function theorem: the pose is not built again.
-    obj = _objective_given_shoulders(y, problem, built.info.shoulders)
-    info, b = built.info, built.balance_xz
-    goal = desired_balance_point(problem)
-    com_err = jnp.sqrt((info.com[0] - goal[0]) ** 2 + (info.com[2] - goal[1]) ** 2)
-    reach_err = problem.target_active * jnp.sqrt(
-        jnp.sum((info.wrists - problem.targets) ** 2, axis=-1) + 1e-24
-    )
-    return StanceSolution(
-        amplitudes=amplitudes_from_unknowns(problem, y),
-        pose=built.pose(),
-        balance_xz=b,
-        objective=obj,
-        iterations=steps,
-        converged=ok & (com_err <= COM_TOLERANCE_M),
-        com_error_m=com_err,
-        reach_error_m=reach_err,
-        reach_gap_m=info.reach_gaps,
-        target_active=problem.target_active,
-        free_foot_gap_m=info.free_foot_gap,
-    )
-
-
-def _solve_spd(H: Float[Array, "n n"], rhs: Float[Array, " n"]) -> Float[Array, " n"]:
-    """Solve H x = rhs for the small SPD Hessian (`_linalg.spd_solve`, no LAPACK), with a relative
-    ridge of 1e-10 against a singular pivot.
-
-    The inverse is formed from H alone and applied to `rhs` by a product. In the implicit JVP
-    rules H holds primal values and `rhs` is a tangent: the result is then visibly linear in
-    the tangent, which reverse mode must transpose. Eliminating on `[H | rhs]` put both in one
-    loop carry, and `jax.grad` through a solve failed to transpose it.
-    """
-    eye = jnp.eye(H.shape[0], dtype=H.dtype)
-    ridge = 1e-10 * (jnp.max(jnp.abs(jnp.diagonal(H))) + 1e-30)
-    return matmul(spd_solve(H + ridge * eye, eye), rhs[:, None])[:, 0]
 
 
 #: At most this many BFGS runs per solve (each from the previous answer, with a fresh
@@ -193,7 +80,7 @@ class _CappedNewton(optx.AbstractDescent):
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(1, 2, 3))
 def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
-    """`(y*, steps, converged, pose)`: BFGS on eq. 5; derivatives by the implicit function theorem.
+    """`(y*, steps, converged, max steps reached, pose)`: BFGS on eq. 5; derivatives by the implicit function theorem.
 
     At the optimum grad_y f(y*, p) = 0, so dy* = -H^-1 (d/dp grad_y f) dp with H the 6x6
     Hessian. One linearisation of grad_y f at (y*, p) gives both the Hessian (applied to the
@@ -209,59 +96,65 @@ def _optimum(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
     dtype = problem.shape.dtype
 
     def run(carry):
-        y, steps, _, _, _, runs = carry
+        y, steps, _, _, _, _, runs = carry
         sol = optx.minimise(
             _loop_objective, solver, y, args=problem, max_steps=max_steps, has_aux=True, throw=False
         )
         ok = sol.result == optx.RESULTS.successful
+        maxed = (sol.result == optx.RESULTS.nonlinear_max_steps_reached) | (
+            sol.result == optx.RESULTS.max_steps_reached
+        )
         f_info = sol.state.f_info
         stuck = jnp.linalg.norm(f_info.grad) > _RESTART_GRAD * jnp.maximum(1.0, jnp.abs(f_info.f))
-        return sol.value, steps + sol.stats["num_steps"], ok, sol.state.aux, stuck, runs + 1
+        return sol.value, steps + sol.stats["num_steps"], ok, maxed, sol.state.aux, stuck, runs + 1
 
     # BFGS's Cauchy test stops when steps get short, which a stale inverse-Hessian estimate can
     # cause away from a stationary point (measured on a reach problem of the stance benchmark:
     # stopped with |grad| = 0.83 at objective 156.8914, where the direction-set reference finds
     # 156.8896). Where the gradient is not small BFGS runs once more from its answer with a
     # fresh estimate (156.8898 there); one copy of the solver in the compiled program.
-    r, (root, local, info) = _build_output_like(dtype)
-    start = (jnp.zeros(NUM_AMPLITUDES, dtype), jnp.zeros((), jnp.int32), jnp.array(False),
+    r, (root, local, info) = build_output_like(dtype)
+    start = (jnp.zeros(NUM_AMPLITUDES, dtype), jnp.zeros((), jnp.int32), jnp.array(False), jnp.array(False),
              BalancedBuild(jnp.zeros(2, dtype), root, local, info), jnp.array(True),
              jnp.zeros((), jnp.int32))
-    y, steps, ok, built, _, _ = jax.lax.while_loop(
-        lambda c: c[4] & (c[5] < _RUNS), run, start
+    y, steps, ok, maxed, built, _, _ = jax.lax.while_loop(
+        lambda c: c[5] & (c[6] < _RUNS), run, start
     )
-    return y, steps, ok, built
-
-
-def _implicit_terms(y, problem: StanceProblem, dp):
-    """`(H, mixed)` at an optimum y of eq. 5: the (symmetrised) 6x6 Hessian in y and
-    `(d grad_y f / dp) dp`, both from one linearisation of grad_y f."""
-    _, lin = jax.linearize(jax.grad(objective), y, problem)
-    zero_p = _zero_tangent(problem)
-    H = jax.vmap(lambda e: lin(e, zero_p))(jnp.eye(y.shape[0], dtype=y.dtype))
-    return 0.5 * (H + H.T), lin(jnp.zeros_like(y), dp)
+    return y, steps, ok, maxed, built
 
 
 @_optimum.defjvp
 def _optimum_jvp(rtol, atol, max_steps, primals, tangents):
     (problem,), (dp,) = primals, tangents
-    y, steps, ok, built = _optimum(problem, rtol, atol, max_steps)
-    H, mixed = _implicit_terms(y, problem, dp)
-    dy = -_solve_spd(H, mixed)
+    y, steps, ok, maxed, built = _optimum(problem, rtol, atol, max_steps)
+    H, mixed = implicit_terms(y, problem, dp)
+    dy = -solve_spd(H, mixed)
     _, d_built = jax.jvp(
         lambda p, yy: balanced_rotations(p, amplitudes_from_unknowns(p, yy)), (problem, y), (dp, dy)
     )
     zero = np.zeros((), jax.dtypes.float0)
-    return (y, steps, ok, built), (dy, zero, zero, d_built)
+    return (y, steps, ok, maxed, built), (dy, zero, zero, zero, d_built)
 
 
-def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int):
-    return _finish(problem, *_optimum(problem, rtol, atol, max_steps))
+def _solve_one(problem: StanceProblem, rtol: float, atol: float, max_steps: int, throw: bool = False):
+    # A problem refused here is solved in its place (neutral shape) and flagged: see
+    # `substitute_invalid`. Concrete problems were refused already by `make_problem`.
+    problem, invalid = substitute_invalid(problem)
+    y, steps, ok, maxed, built = _optimum(problem, rtol, atol, max_steps)
+    sol = finish(problem, y, steps, ok, maxed, invalid, built)
+    if throw:
+        token = sol.result.error_if(sol.objective, sol.result != StanceResult.successful)
+        sol = eqx.tree_at(lambda s: s.objective, sol, token)
+    return sol
 
 
 @filter_jit
 def solve_stance(
-    problem: StanceProblem, rtol: float = 1e-6, atol: float = 1e-6, max_steps: int = 200
+    problem: StanceProblem,
+    rtol: float = 1e-6,
+    atol: float = 1e-6,
+    max_steps: int = 200,
+    throw: bool = False,
 ) -> StanceSolution:
     """Solve one stance: torso amplitudes minimising eq. 5 with balance and analytic IK inside.
 
@@ -273,11 +166,19 @@ def solve_stance(
         problem: a `StanceProblem` (`make_problem` or a shape set's `problem`).
         rtol, atol: BFGS tolerances on the step and gradient.
         max_steps: iteration limit (`converged` is False if hit).
+        throw: raise (`eqx.error_if`, an `EqxRuntimeError` naming the `StanceResult`) unless the
+            solve succeeded. Default False, unlike optimistix, as before `result` existed: a
+            solve that did not converge still returns, with `converged=False` and its `result`
+            (max_steps_reached, not_converged). A problem with invalid values that were traced
+            when it was built (e.g. a shape set's intensity under `jax.jit` or `jax.grad` asking
+            for a knee bend past `BEND_MAX_RAD`) returns `result=invalid_input`,
+            `converged=False`, the neutral pose and zero (never NaN) derivatives; built from
+            concrete values, `make_problem` refuses it with a `UserError` before any solve.
 
     Returns:
         A `StanceSolution`.
     """
-    return _solve_one(problem, rtol, atol, max_steps)
+    return _solve_one(problem, rtol, atol, max_steps, throw)
 
 
 @filter_jit
@@ -287,6 +188,7 @@ def solve_stances(
     atol: float = 1e-6,
     max_steps: int = 200,
     batch_size: int | str | None = "auto",
+    throw: bool = False,
 ) -> StanceSolution:
     """Solve a batch of stances (problems stacked along a leading axis) in one call.
 
@@ -300,13 +202,21 @@ def solve_stances(
     solves/s one by one, 81-90 in chunks of 2 or 4, 25 vmapped at once (same objectives to
     float32 round-off).
 
+    Arguments:
+        problems: `StanceProblem`s stacked along a leading axis (`stack_problems`, or a
+            shape set's `problem` under `jax.vmap`).
+        rtol, atol, max_steps: as for `solve_stance`, shared by every problem.
+        batch_size: "auto", None or a positive int (above).
+        throw: as for `solve_stance`; the default False means a batch never fails for one
+            problem: read each problem's `result`.
+
     Returns:
         A `StanceSolution` whose leaves have a leading batch axis.
     """
     arrays, static = eqx.partition(problems, eqx.is_array)
 
     def one(a):
-        return _solve_one(eqx.combine(a, static), rtol, atol, max_steps)
+        return _solve_one(eqx.combine(a, static), rtol, atol, max_steps, throw)
 
     if batch_size == "auto":
         batch_size = 1 if jax.default_backend() == "cpu" else None
@@ -321,6 +231,12 @@ def solve_stances(
 
 def stack_problems(problems: list[StanceProblem]) -> StanceProblem:
     """Stack same-structure problems along a new leading axis (for `solve_stances`).
+
+    Arguments:
+        problems: one or more `StanceProblem`s with the same static settings.
+
+    Returns:
+        One `StanceProblem` whose leaves have a leading axis of `len(problems)`.
 
     Raises:
         UserError: no problems, something that is not a `StanceProblem`, or problems whose
