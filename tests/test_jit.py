@@ -99,13 +99,6 @@ def test_entry_points_run_third_party_products_at_full_precision(monkeypatch):
         assert any("HIGHEST" not in d for d in dots())
 
 
-# Modules whose owners are converting them to `filter_jit` on their own branches (issue 19);
-# their parameters are expected to fail until those branches land.
-_CONVERSION_PENDING = {
-    "fourierjax.stance.fit",
-    "fourierjax.stance.reference",
-    "fourierjax.stance.skeleton48",
-}
 
 
 def _package_modules() -> list[str]:
@@ -138,12 +131,7 @@ def _jitted_outside_the_wrapper(module) -> list[str]:
 
 @pytest.mark.parametrize(
     "module_name",
-    [
-        pytest.param(m, marks=pytest.mark.xfail(reason="filter_jit conversion pending", strict=False))
-        if m in _CONVERSION_PENDING
-        else m
-        for m in _package_modules()
-    ],
+    _package_modules(),
 )
 def test_every_jitted_function_comes_from_the_one_wrapper(module_name):
     import importlib
