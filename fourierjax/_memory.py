@@ -14,11 +14,11 @@ DEFAULT_FRACTION = 0.25
 #: Used when the machine's memory cannot be read (no `os.sysconf`): 16 GiB.
 _FALLBACK_TOTAL = 16 * 2**30
 
-#: XLA temporaries of `fit_batch` per clip, in units of one clip's features (`T * C` values).
-#: Measured with `Compiled.memory_analysis()` (jax 0.10.2, CPU): 19.1-19.2 for T = 240..480,
-#: C = 60..120, N = 1..12, linear in the batch; rounded up, plus the clip's input and its copy
-#: in a chunk.
-FIT_VALUES_PER_FEATURE = 22
+#: Peak values of `fit_batch` per clip, in units of one clip's features (`T * C` values): XLA's
+#: temporaries, measured with `Compiled.memory_analysis()` (jax 0.10.2, CPU), are 19.2 (T = 240)
+#: to 22.6 (T = 200) per feature for C = 5..120 and N = 1..12, linear in the batch and nearly
+#: independent of N and `grid_points`; plus the input, its copy in a chunk, and leeway.
+FIT_VALUES_PER_FEATURE = 26
 
 
 def machine_memory() -> int:
@@ -86,7 +86,7 @@ def resolve_limit(name: str, max_memory) -> int:
     return int(min(value, 2**62))
 
 
-def check_bytes(name: str, nbytes, limit=None) -> int:
+def check_bytes(name: str, nbytes, limit=None, *, hint: str = "ask for less") -> int:
     """Refuse a request that would need more than `limit` bytes, before anything is allocated.
 
     Arguments:
@@ -95,6 +95,7 @@ def check_bytes(name: str, nbytes, limit=None) -> int:
         nbytes: the bytes the request implies (any non-negative number; Python ints do not
             overflow, so compute it from the counts with Python integers).
         limit: the budget in bytes; None: `default_limit()`.
+        hint: what the message suggests.
 
     Returns:
         `nbytes` as an int, when it fits.
@@ -107,7 +108,7 @@ def check_bytes(name: str, nbytes, limit=None) -> int:
     if not (nbytes <= limit):  # NaN and inf are refused too
         raise UserError(
             f"{name} would need {format_bytes(nbytes)} of memory, more than the limit of "
-            f"{format_bytes(limit)}; ask for less"
+            f"{format_bytes(limit)}; {hint}"
         )
     return int(nbytes)
 
@@ -134,7 +135,7 @@ def chunk_sizes(total: int, per_item: int, limit: int, *, name: str = "batch") -
         total: items in the batch (>= 1).
         per_item: bytes one item needs.
         limit: the budget in bytes.
-        name: what an error names when a single item does not fit.
+        name: what an error names when a single item does not fit (it names one item).
 
     Returns:
         `(num_chunks, chunk)`: `num_chunks * chunk >= total`, with fewer than `num_chunks` items of
@@ -143,7 +144,7 @@ def chunk_sizes(total: int, per_item: int, limit: int, *, name: str = "batch") -
     Raises:
         UserError: when even one item needs more than `limit`.
     """
-    check_bytes(f"{name} (one item)", per_item, limit)
+    check_bytes(name, per_item, limit, hint="raise max_memory or make the items smaller")
     fits = max(1, int(limit // max(per_item, 1)))
     num_chunks = -(-int(total) // fits)
     return num_chunks, -(-int(total) // num_chunks)

@@ -150,8 +150,8 @@ def fit_batch(
     given, and the static options): batch sizes that differ compile separately, so pad batches
     to a few fixed sizes when fitting many differently sized sets.
 
-    Memory: a clip costs about ``22 * T * C`` values at the peak of the fit
-    (`fourierjax._memory.fit_bytes_per_clip`: 1.3 MB for 240 frames x 60 channels in float32).
+    Memory: a clip costs about ``26 * T * C`` values at the peak of the fit
+    (`fourierjax._memory.fit_bytes_per_clip`: 1.5 MB for 240 frames x 60 channels in float32).
     A batch whose cost exceeds ``max_memory`` bytes (default: a quarter of the machine's memory)
     is fitted in equal chunks that fit it, the last padded with copies of the last clip, so that
     every chunk runs one compiled program; the results are those of one unchunked call. Under a

@@ -433,16 +433,19 @@ def _parse_decimals(data: bytes, a, start_pos, end_pos):
 
 _DECIMAL_BYTES = b"0123456789.+-\t\n\x0b\x0c\r "  # whitespace: what bytes.split() splits on
 
-#: Bytes of motion text converted at a time (whole lines). The vectorised parser needs ~30
-#: bytes of temporaries per byte of text; in pieces, only one piece's are alive at once.
+#: Most bytes of motion text converted at a time (whole lines). The vectorised parser needs
+#: ~15 bytes of temporaries per byte of text; in pieces, only one piece's are alive at once.
+#: A piece is a 32nd of the block (temporaries under half the file's size), at least
+#: `_MIN_CHUNK_BYTES` (fewer, larger NumPy calls) and at most `_CHUNK_BYTES`.
 _CHUNK_BYTES = 1 << 21
+_MIN_CHUNK_BYTES = 1 << 18
 
 
 def _pieces(text: str, pos: int, first_line: int):
-    """Yields (line number of its first line, piece) of `text[pos:]`: whole lines, about
-    `_CHUNK_BYTES` characters each (read at each call, so that a test can make it small)."""
-    size = max(1, _CHUNK_BYTES)
+    """Yields (line number of its first line, piece) of `text[pos:]`: whole lines, pieces sized
+    as `_CHUNK_BYTES` says (read at each call, so that a test can make them small)."""
     n = len(text)
+    size = max(1, min(_CHUNK_BYTES, max(_MIN_CHUNK_BYTES, (n - pos) // 32)))
     line = first_line
     while pos < n:
         end = pos + size
@@ -495,13 +498,14 @@ def _parse_motion_block(text: str, pos: int, first_line, num_channels, num_frame
     """[F, C] float64 from `text[pos:]` (the text after 'Frame Time:'); BVHError naming the
     first bad line.
 
-    The text is read in pieces of whole lines (`_CHUNK_BYTES`), twice: the first pass checks
-    the row structure (values per line, the frame count) with vectorised byte tests, the second
-    converts the values in bulk (`_parse_decimals`, or one `np.array(tokens, float)` call per
-    piece) into the one output array. Working memory is the output plus one piece's
-    temporaries, whatever the file's size. The errors, and which one is reported first, are
-    those of a single pass over the whole block: the first line with a wrong number of values,
-    then a wrong frame count, then the first token that is not a number, then the first
+    The text is read in pieces of whole lines (at most `_CHUNK_BYTES`, 2 MB), twice: the
+    first pass checks the row structure (values per line, the frame count) with vectorised
+    byte tests, the second converts the values in bulk (`_parse_decimals`, or one
+    `np.array(tokens, float)` call per piece) into the one output array. Working memory is the
+    output plus one piece's temporaries: with the text, under 4x the file's size (plus ~4 MB
+    for files under 8 MB). The errors, and which one is reported first, are those of a single
+    pass over the whole block: the first line with a wrong number of values, then a wrong
+    frame count, then the first token that is not a number, then the first
     non-finite value, then the first value beyond +-`MAX_ABS_VALUE`.
     """
     frames = 0
