@@ -21,13 +21,17 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     from tests.fuzz import cases
 
-    reports = [cases.run_bvh(args.bvh, args.seed), cases.run_models(args.models, args.seed),
-               cases.run_cli(args.cli, args.seed, case_seconds=args.case_seconds),
-               cases.run_gradients()]
-    for rep in reports:
+    runs = (lambda: cases.run_bvh(args.bvh, args.seed),
+            lambda: cases.run_models(args.models, args.seed),
+            lambda: cases.run_cli(args.cli, args.seed, case_seconds=args.case_seconds),
+            cases.run_gradients)
+    reports = []
+    for run in runs:
+        rep = run()
+        reports.append(rep)
         print(rep.line(), flush=True)
         for case, what in rep.examples:
-            print(f"  untyped: {case}: {what}")
+            print(f"  untyped: {case}: {what}", flush=True)
     total = sum(r.cases for r in reports)
     bad = sum(r.untyped for r in reports)
     print(f"fuzz: {total} cases, {bad} untyped exceptions/tracebacks")
