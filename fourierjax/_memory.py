@@ -148,3 +148,52 @@ def chunk_sizes(total: int, per_item: int, limit: int, *, name: str = "batch") -
     fits = max(1, int(limit // max(per_item, 1)))
     num_chunks = -(-int(total) // fits)
     return num_chunks, -(-int(total) // num_chunks)
+
+
+def synthesis_bytes(num_frames: int, num_channels: int, num_harmonics: int,
+                    itemsize: int = 4) -> int:
+    """Peak bytes of synthesizing and writing `num_frames` frames of a model: the sine and
+    cosine basis `[T, N]`, the channels `[T, C]` with their float64 copy, and the BVH text
+    (~12 bytes a value).
+
+    Arguments:
+        num_frames: T; num_channels: C; num_harmonics: N (after noise harmonics);
+        itemsize: bytes per value of the synthesis (4 or 8).
+
+    Returns:
+        Bytes (a Python int, exact for any count).
+    """
+    T, C, N = int(num_frames), int(num_channels), int(num_harmonics)
+    return itemsize * (4 * T * N + 3 * T * C) + 8 * T * C + 12 * T * C
+
+
+def check_synthesis(name: str, num_frames: int, num_channels: int, num_harmonics: int,
+                    limit=None, itemsize: int = 4) -> int:
+    """`check_bytes` of `synthesis_bytes`: for commands that synthesize a user-set length.
+
+    Arguments:
+        name: what the error names, e.g. ``"--seconds 1e5 at 120 fps"``.
+        num_frames, num_channels, num_harmonics, itemsize: as `synthesis_bytes`.
+        limit: bytes; None: `default_limit()`.
+
+    Returns:
+        The bytes, when they fit.
+    """
+    return check_bytes(name, synthesis_bytes(num_frames, num_channels, num_harmonics, itemsize),
+                       limit, hint="ask for fewer frames or harmonics")
+
+
+def crowd_bytes(num_characters: int, num_joints: int, num_frames: int = 1,
+                itemsize: int = 4) -> int:
+    """Bytes of a crowd's positions over `num_frames` frames, with the per-frame world
+    rotations and translations (12 values a joint) of the pose being computed.
+
+    Arguments:
+        num_characters: B; num_joints: J; num_frames: frames evaluated at once;
+        itemsize: bytes per value.
+
+    Returns:
+        Bytes (a Python int).
+    """
+    B, J, T = int(num_characters), int(num_joints), int(num_frames)
+    return itemsize * B * J * (3 * T + 12)
