@@ -227,7 +227,7 @@ def test_pieces_give_the_values_and_errors_of_one_pass(monkeypatch):
 def test_synthesis_and_crowd_estimates_scale_with_their_counts():
     base = _memory.synthesis_bytes(240, 96, 3)
     assert _memory.synthesis_bytes(480, 96, 3) == 2 * base
-    assert _memory.synthesis_bytes(10**6, 96, 10**9) > 10**18  # Python ints: no overflow
+    assert _memory.synthesis_bytes(10**6, 96, 10**12) > 2**63  # Python ints: no overflow
     assert _memory.check_synthesis("--seconds 2", 240, 96, 3, limit=10**9) == base
     with pytest.raises(UserError, match=r"--seconds 1e4 at 120 fps would need .* GB .* fewer frames"):
         _memory.check_synthesis("--seconds 1e4 at 120 fps", 1_200_000, 96, 10**5, limit=10**9)
