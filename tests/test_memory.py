@@ -229,7 +229,8 @@ def test_synthesis_and_crowd_estimates_scale_with_their_counts():
     assert _memory.synthesis_bytes(480, 96, 3) == 2 * base
     assert _memory.synthesis_bytes(10**6, 96, 10**12) > 2**63  # Python ints: no overflow
     assert _memory.check_synthesis("--seconds 2", 240, 96, 3, limit=10**9) == base
-    with pytest.raises(UserError, match=r"--seconds 1e4 at 120 fps would need .* GB .* fewer frames"):
+    with pytest.raises(UserError, match=r"--seconds 1e4 at 120 fps would need 1.9 TB .* limit of "
+                                        "1.0 GB; ask for fewer frames"):
         _memory.check_synthesis("--seconds 1e4 at 120 fps", 1_200_000, 96, 10**5, limit=10**9)
     assert _memory.crowd_bytes(10_000, 31, 1) == 4 * 10_000 * 31 * 15
     assert _memory.crowd_bytes(20_000, 31, 1) == 2 * _memory.crowd_bytes(10_000, 31, 1)
