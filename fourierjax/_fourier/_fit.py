@@ -154,8 +154,11 @@ def fit_batch(
     (`fourierjax._memory.fit_bytes_per_clip`: 1.5 MB for 240 frames x 60 channels in float32).
     A batch whose cost exceeds ``max_memory`` bytes (default: a quarter of the machine's memory)
     is fitted in equal chunks that fit it, the last padded with copies of the last clip, so that
-    every chunk runs one compiled program; the results are those of one unchunked call. Under a
-    caller's jit the chunks are a ``jax.lax.map``. A budget smaller than one clip is a UserError.
+    every chunk runs one compiled program. Chunking changes no result beyond float32 rounding:
+    XLA compiles one program per batch size, and programs of two sizes may sum in another
+    order (chunks of 14 against one batch of 70: bit-identical; 500 against 64: offsets and
+    amplitudes within ~1e-6 relative, ω of 3 clips in 64 a few ulps apart). Under a caller's
+    jit the chunks are a ``jax.lax.map``. A budget smaller than one clip is a UserError.
 
     With ``throw=False`` a clip that cannot be fitted (too few used frames, NaN in used
     frames, constant features, too few cycles: `FitStatus`) gets its code in ``result`` and
