@@ -234,3 +234,9 @@ def test_synthesis_and_crowd_estimates_scale_with_their_counts():
         _memory.check_synthesis("--seconds 1e4 at 120 fps", 1_200_000, 96, 10**5, limit=10**9)
     assert _memory.crowd_bytes(10_000, 31, 1) == 4 * 10_000 * 31 * 15
     assert _memory.crowd_bytes(20_000, 31, 1) == 2 * _memory.crowd_bytes(10_000, 31, 1)
+
+
+def test_the_memory_benchmark_uses_fit_batch_s_estimate():
+    from experiments.benchmarks import memory as bench
+
+    assert bench.PER_CLIP_BYTES == _memory.fit_bytes_per_clip(bench.T, bench.C, bench.N, 4)

@@ -28,6 +28,9 @@ BUDGET = 2 * 10**9
 #: Clips the unchunked reference fit covers: the first and the last (the padded chunk).
 SUBSET = 64
 TARGET_GB = 4.0
+#: fit_batch's own estimate of one clip (its docstring: ~26 values per feature at the peak),
+#: from which the chunks it uses follow; the public API does not return them.
+PER_CLIP_BYTES = 4 * (26 * T * C + 2 * T * (2 * N + 1) + 4 * C * (2 * N + 1) + 64)
 
 
 def _features(num_clips: int) -> np.ndarray:
@@ -53,9 +56,7 @@ def child(num_clips: int, budget: int) -> dict:
 
     x = _features(num_clips)
     dt = np.full(num_clips, DT, np.float32)
-    # fit_batch's own estimate (its docstring: ~26 values per feature at the peak) gives the
-    # chunks it will use; the public API does not return them.
-    per_clip = 4 * (26 * T * C + 2 * T * (2 * N + 1) + 4 * C * (2 * N + 1) + 64)
+    per_clip = PER_CLIP_BYTES
     num_chunks = -(-num_clips // max(1, budget // per_clip))
     chunk = -(-num_clips // num_chunks)
     rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
