@@ -8,7 +8,7 @@ export PYTHONUNBUFFERED := 1
 # module-scoped fits are computed once.
 PYTEST_ARGS ?= -n 2 --dist loadfile
 
-.PHONY: all venv test lint demo bench experiments clean
+.PHONY: all venv test lint demo bench experiments fuzz clean
 
 all: test
 
@@ -31,6 +31,11 @@ demo: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) -m experiments.benchmarks --out out/bench
+
+# The large fuzz and fault run (tests/fuzz): >= 10,000 mutated BVH files, 1,000 mutated model
+# files and 500 CLI argument sets; prints the counts and fails on any untyped exception.
+fuzz: $(STAMP)
+	$(PY) -m tests.fuzz --bvh 10000 --models 1000 --cli 500
 
 experiments: $(STAMP)
 	$(PY) -m experiments --out out/experiments

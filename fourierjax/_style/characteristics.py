@@ -12,6 +12,7 @@ from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
 from fourierjax._jit import filter_jit
 from fourierjax._math import wrap_angle
+from fourierjax._memory import check_bytes, resolve_limit
 from fourierjax._style._common import (
     METHODS,
     Method,
@@ -298,11 +299,28 @@ def _add_noise(model, key, amplitude, harmonics: tuple[int, ...]):
     return replace(model, amplitude=amplitude_new, phase=phase_new)
 
 
+#: Arrays of `[C, max harmonic]` values alive at once in `_add_noise` (amplitude and phase,
+#: their padded copies, the canonical form's temporaries), plus 3 of `[C, K]` (amplitudes,
+#: phases, indices): counted before anything is built.
+_NOISE_ARRAYS_PER_HARMONIC = 8
+
+
+def _check_noise_bytes(model, max_harmonic: int, count: int, name: str, limit: int) -> None:
+    c = int(model.offset.shape[-1])
+    itemsize = jnp.dtype(dtype_of(model)).itemsize
+    # Python ints: 10**18 harmonics do not overflow the estimate.
+    nbytes = c * itemsize * (_NOISE_ARRAYS_PER_HARMONIC * int(max_harmonic) + 3 * int(count))
+    # The tuple of harmonic numbers itself (a static argument): ~36 bytes per Python int.
+    check_bytes(name, nbytes + 36 * int(count), limit)
+
+
 def add_noise(
     model: FourierModel,
     key: PRNGKeyArray,
     amplitude: ArrayLike,
     harmonics: int | Sequence[int] = 3,
+    *,
+    max_memory: int | None = None,
 ) -> FourierModel:
     """Randomised higher harmonics, e.g. a shivering walk (Unuma 1995, §3.3).
 
@@ -317,11 +335,17 @@ def add_noise(
             channels to keep still, e.g. root translation) or `[C, K]` per added harmonic.
         harmonics: an int `K` (the harmonics `N+1 … N+K`, default 3) or explicit harmonic
             numbers, each `> N` (Python ints).
+        max_memory: bytes the new model may need (default: a quarter of the machine's memory).
 
     Returns:
         A FourierModel with `max(harmonics)` harmonics (unused ones at zero).
+
+    Raises:
+        UserError: a bad argument, or harmonics whose model would need more than `max_memory`
+            (checked before anything is allocated: 10**9 harmonics are refused at once).
     """
     n = _count(model)
+    limit = resolve_limit("add_noise: max_memory", max_memory)
     bad = UserError(
         f"add_noise: `harmonics`={harmonics!r}; expected an int K or a sequence of int harmonic "
         "numbers (a float such as 2.0 is not a count)"
@@ -335,6 +359,7 @@ def add_noise(
     if count is not None:
         if count < 1:
             raise UserError(f"add_noise: `harmonics`={count}; add at least one harmonic")
+        _check_noise_bytes(model, n + count, count, f"add_noise: `harmonics`={count}", limit)
         harmonics = tuple(range(n + 1, n + 1 + count))
     else:
         try:
@@ -349,6 +374,8 @@ def add_noise(
             )
         if len(set(harmonics)) != len(harmonics):
             raise UserError(f"add_noise: `harmonics`={harmonics}: repeated harmonic")
+        _check_noise_bytes(model, max(harmonics), len(harmonics),
+                           f"add_noise: `harmonics` up to {max(harmonics)}", limit)
     amplitude = jnp.asarray(amplitude, dtype=dtype_of(model))
     c = model.offset.shape[-1]
     if amplitude.shape not in ((), (c,), (c, len(harmonics))):

@@ -16,6 +16,7 @@ from fourierjax.io._bvh_motion import (
     MIN_FRAME_TIME_S,
     BVHError,
     Motion,
+    _owned_arrays,
     _show,
 )
 from fourierjax.skeleton import CHANNEL_NAMES, Topology
@@ -70,7 +71,8 @@ def read_bvh(path: str | os.PathLike) -> Motion:
     except MemoryError:
         raise BVHError(name, None, "not enough memory to read the file") from None
     try:
-        text = raw.decode("utf-8")
+        # "utf-8-sig" drops a BOM here: `text[1:]` in `parse_bvh` would copy the whole file.
+        text = raw.decode("utf-8-sig")
     except MemoryError:
         raise BVHError(name, None, "not enough memory to decode the file") from None
     except UnicodeDecodeError as err:
@@ -78,6 +80,7 @@ def read_bvh(path: str | os.PathLike) -> Motion:
         raise BVHError(
             name, line, f"not UTF-8 text (byte 0x{raw[err.start]:02x} cannot be decoded)"
         ) from None
+    del raw  # the bytes and the text are not both kept while the frames are parsed
     return parse_bvh(text, source=name)
 
 
@@ -365,17 +368,18 @@ def parse_bvh(text: str, source: str = "<string>") -> Motion:
 
     try:
         values = _parse_motion_block(
-            text[data_pos:], data_line, num_channels, num_frames, frames_line, error,
+            text, data_pos, data_line, num_channels, num_frames, frames_line, error,
             topology.flat_channel_names,
         )
-        return Motion(
-            topology=topology,
-            offsets=np.array([j.offset for j in joints], dtype=np.float64).reshape(-1, 3),
-            end_site_offsets=np.array(end_offsets, dtype=np.float64).reshape(-1, 3),
-            channels=values,
-            frame_time_s=frame_time,
-            source=None if source == "<string>" else src,
-        )
+        with _owned_arrays():  # `values` is ours: the Motion keeps it instead of a copy
+            return Motion(
+                topology=topology,
+                offsets=np.array([j.offset for j in joints], dtype=np.float64).reshape(-1, 3),
+                end_site_offsets=np.array(end_offsets, dtype=np.float64).reshape(-1, 3),
+                channels=values,
+                frame_time_s=frame_time,
+                source=None if source == "<string>" else src,
+            )
     except MemoryError:
         raise error(frames_line, f"not enough memory to read {num_frames} frames of "
                                  f"{num_channels} channels") from None
@@ -429,86 +433,142 @@ def _parse_decimals(data: bytes, a, start_pos, end_pos):
 
 _DECIMAL_BYTES = b"0123456789.+-\t\n\x0b\x0c\r "  # whitespace: what bytes.split() splits on
 
+#: Most bytes of motion text converted at a time (whole lines). The vectorised parser needs
+#: ~15 bytes of temporaries per byte of text; in pieces, only one piece's are alive at once.
+#: A piece is a 32nd of the block (temporaries under half the file's size), at least
+#: `_MIN_CHUNK_BYTES` (fewer, larger NumPy calls) and at most `_CHUNK_BYTES`.
+_CHUNK_BYTES = 1 << 21
+_MIN_CHUNK_BYTES = 1 << 18
 
-def _parse_motion_block(block: str, first_line, num_channels, num_frames, frames_line, error,
-                        channel_names=()):
-    """[F, C] float64 from the text after 'Frame Time:'; BVHError naming the first bad line.
 
-    The row structure (values per line) comes from vectorised byte tests; the values are
-    converted in bulk by NumPy (`_parse_decimals`, or one `np.array(tokens, float)` call).
-    Only when that fails are the rows scanned one by one, to name the first bad line.
+def _pieces(text: str, pos: int, first_line: int):
+    """Yields (line number of its first line, piece) of `text[pos:]`: whole lines, pieces sized
+    as `_CHUNK_BYTES` says (read at each call, so that a test can make them small)."""
+    n = len(text)
+    size = max(1, min(_CHUNK_BYTES, max(_MIN_CHUNK_BYTES, (n - pos) // 32)))
+    line = first_line
+    while pos < n:
+        end = pos + size
+        if end >= n:
+            end = n
+        else:
+            nl = text.find("\n", end - 1)
+            end = n if nl < 0 else nl + 1
+        piece = text[pos:end]
+        yield line, piece
+        line += piece.count("\n")
+        pos = end
+
+
+class _Tokens:
+    """The token layout of one piece of motion text (ASCII bytes, no control characters)."""
+
+    __slots__ = ("data", "a", "others", "start_pos", "end_pos", "counts", "rows")
+
+    def __init__(self, piece: str, first_line: int, error):
+        if not piece.isascii():
+            for lineno, _, line in _lines(piece, 0, first_line):
+                if not line.isascii():
+                    bad = next(ch for ch in line if ord(ch) > 127)
+                    raise error(lineno, f"unexpected character {bad!r} in the motion data")
+        data = self.data = piece.encode("ascii")
+        a = self.a = np.frombuffer(data, dtype=np.uint8)
+        others = self.others = data.translate(None, _DECIMAL_BYTES)  # usually empty
+        if min(others, default=32) < 32:  # control bytes other than whitespace
+            pos = int(np.argmax((a < 32) & ((a < 9) | (a > 13))))
+            raise error(
+                first_line + data.count(b"\n", 0, pos),
+                f"unexpected control character {chr(a[pos])!r} in the motion data",
+            )
+        # Tokens are the runs of non-blank bytes; their starts and ends alternate in `edges`.
+        blank = np.empty(a.size + 2, dtype=bool)
+        blank[0] = blank[-1] = True
+        np.less_equal(a, 32, out=blank[1:-1])
+        edges = np.flatnonzero(blank[1:] != blank[:-1])
+        del blank
+        self.start_pos, self.end_pos = edges[0::2], edges[1::2]
+        newline_pos = np.flatnonzero(a == 10)
+        row_of_token = np.searchsorted(newline_pos, self.start_pos)  # 0-based line in the piece
+        self.counts = np.bincount(row_of_token, minlength=newline_pos.size + 1)
+        self.rows = np.flatnonzero(self.counts)  # lines that hold data; blank lines are skipped
+
+
+def _parse_motion_block(text: str, pos: int, first_line, num_channels, num_frames, frames_line,
+                        error, channel_names=()):
+    """[F, C] float64 from `text[pos:]` (the text after 'Frame Time:'); BVHError naming the
+    first bad line.
+
+    The text is read in pieces of whole lines (at most `_CHUNK_BYTES`, 2 MB), twice: the
+    first pass checks the row structure (values per line, the frame count) with vectorised
+    byte tests, the second converts the values in bulk (`_parse_decimals`, or one
+    `np.array(tokens, float)` call per piece) into the one output array. Working memory is the
+    output plus one piece's temporaries: with the text, under 4x the file's size (plus ~4 MB
+    for files under 8 MB). The errors, and which one is reported first, are those of a single
+    pass over the whole block: the first line with a wrong number of values, then a wrong
+    frame count, then the first token that is not a number, then the first
+    non-finite value, then the first value beyond +-`MAX_ABS_VALUE`.
     """
-    if not block.isascii():
-        for lineno, _, line in _lines(block, 0, first_line):
-            if not line.isascii():
-                bad = next(ch for ch in line if ord(ch) > 127)
-                raise error(lineno, f"unexpected character {bad!r} in the motion data")
-    data = block.encode("ascii")
-    a = np.frombuffer(data, dtype=np.uint8)
-    others = data.translate(None, _DECIMAL_BYTES)  # usually empty
-    if min(others, default=32) < 32:  # control bytes other than whitespace
-        pos = int(np.argmax((a < 32) & ((a < 9) | (a > 13))))
-        raise error(
-            first_line + data.count(b"\n", 0, pos),
-            f"unexpected control character {chr(a[pos])!r} in the motion data",
-        )
-    # Tokens are the runs of non-blank bytes; their starts and ends alternate in `edges`.
-    blank = np.concatenate(([True], a <= 32, [True]))
-    edges = np.flatnonzero(blank[1:] != blank[:-1])
-    start_pos, end_pos = edges[0::2], edges[1::2]
-    newline_pos = np.flatnonzero(a == 10)
-    row_of_token = np.searchsorted(newline_pos, start_pos)  # 0-based line within the block
-    counts = np.bincount(row_of_token, minlength=newline_pos.size + 1)
-    rows = np.flatnonzero(counts)  # lines that hold data; blank lines are skipped
-    bad = np.flatnonzero(counts[rows] != num_channels)
-    if bad.size:
-        r = int(rows[bad[0]])
-        raise error(
-            first_line + r,
-            f"frame {int(bad[0])} has {int(counts[r])} values, expected {num_channels} "
-            "(one per channel)",
-        )
-    if rows.size != num_frames:
-        raise error(
-            frames_line,
-            f"'Frames: {num_frames}' but the file has {rows.size} rows of frame data",
-        )
-    values = None if others else _parse_decimals(data, a, start_pos, end_pos)
-    if values is None:
-        try:
-            if b"_" in others:  # NumPy, like float(), reads "1_0" as 10: not a BVH number
-                raise ValueError
-            values = np.array(data.split(), dtype=np.float64)
-        except ValueError:
-            lines = data.split(b"\n")
-            for r in rows:
-                for tok in lines[r].split():
-                    if not _is_float(tok):
-                        raise error(
-                            first_line + int(r), f"{_show(tok.decode('ascii'))} is not a number"
-                        ) from None
-            raise error(None, "could not parse the motion data") from None  # pragma: no cover
-    finite = np.isfinite(values)
-    if not finite.all():
-        i = int(np.argmin(finite))
-        r = int(rows[i // num_channels])
-        raise error(
-            first_line + r,
-            f"non-finite value {values[i]} in frame {i // num_channels} "
-            f"(channel {i % num_channels})",
-        )
-    big = np.abs(values) > MAX_ABS_VALUE
-    if big.any():
-        i = int(np.argmax(big))
-        c = i % num_channels
-        name = f" {channel_names[c]}" if c < len(channel_names) else ""
-        raise error(
-            first_line + int(rows[i // num_channels]),
-            f"value {values[i]:g} in frame {i // num_channels} (channel {c}{name}) is beyond "
-            f"+-{MAX_ABS_VALUE:g}: float32 forward kinematics would overflow; the file is "
-            "probably corrupt",
-        )
-    return values.reshape(num_frames, num_channels)
+    frames = 0
+    for line0, piece in _pieces(text, pos, first_line):
+        tok = _Tokens(piece, line0, error)
+        bad = np.flatnonzero(tok.counts[tok.rows] != num_channels)
+        if bad.size:
+            r = int(tok.rows[bad[0]])
+            raise error(
+                line0 + r,
+                f"frame {frames + int(bad[0])} has {int(tok.counts[r])} values, expected "
+                f"{num_channels} (one per channel)",
+            )
+        frames += tok.rows.size
+    if frames != num_frames:
+        raise error(frames_line, f"'Frames: {num_frames}' but the file has {frames} rows of frame data")
+    out = np.empty(num_frames * num_channels, dtype=np.float64)
+    done = 0
+    non_finite = big = None  # (line, message) of the first such value, raised after the pass
+    for line0, piece in _pieces(text, pos, first_line):
+        tok = _Tokens(piece, line0, error)
+        values = _piece_values(tok, line0, error)
+        if non_finite is None:
+            finite = np.isfinite(values)
+            if not finite.all():
+                i = int(np.argmin(finite))
+                f, c = divmod(done + i, num_channels)
+                non_finite = (line0 + int(tok.rows[i // num_channels]),
+                              f"non-finite value {values[i]} in frame {f} (channel {c})")
+            elif big is None:
+                over = np.abs(values) > MAX_ABS_VALUE
+                if over.any():
+                    i = int(np.argmax(over))
+                    f, c = divmod(done + i, num_channels)
+                    name = f" {channel_names[c]}" if c < len(channel_names) else ""
+                    big = (line0 + int(tok.rows[i // num_channels]),
+                           f"value {values[i]:g} in frame {f} (channel {c}{name}) is beyond "
+                           f"+-{MAX_ABS_VALUE:g}: float32 forward kinematics would overflow; the "
+                           "file is probably corrupt")
+        out[done : done + values.size] = values
+        done += values.size
+    if non_finite is not None or big is not None:
+        raise error(*(non_finite or big))
+    return out.reshape(num_frames, num_channels)
+
+
+def _piece_values(tok: _Tokens, first_line: int, error) -> np.ndarray:
+    """The values of one piece's tokens, in order; BVHError naming the first non-number."""
+    values = None if tok.others else _parse_decimals(tok.data, tok.a, tok.start_pos, tok.end_pos)
+    if values is not None:
+        return values
+    data = tok.data
+    try:
+        if b"_" in tok.others:  # NumPy, like float(), reads "1_0" as 10: not a BVH number
+            raise ValueError
+        return np.array(data.split(), dtype=np.float64)
+    except ValueError:
+        lines = data.split(b"\n")
+        for r in tok.rows:
+            for t in lines[r].split():
+                if not _is_float(t):
+                    raise error(first_line + int(r), f"{_show(t.decode('ascii'))} is not a number") from None
+        raise error(None, "could not parse the motion data") from None  # pragma: no cover
 
 
 def _is_float(tok: bytes) -> bool:

@@ -1,0 +1,1 @@
+"""Fuzz and fault suite: mutated BVH and model files, CLI arguments, gradients at singular points."""
