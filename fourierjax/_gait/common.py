@@ -143,8 +143,10 @@ def feet_of(body_map: BodyMap) -> FootPoints:
                       (tuple(body_map.left.foot_point_names), tuple(body_map.right.foot_point_names)))
 
 
-def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 64) -> BodyMap:
+def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 64, *, overrides=None) -> BodyMap:
     """The body map of a model's own cycle (`num_samples` poses, root at the origin).
+
+    `overrides` (a dict, TOML text or path; `body.infer_body_map`) set fields by joint name.
 
     A model file's template is the rest pose, which on rigs with joint orients (Bandai: bones
     along local X) lies along another axis than the body stands: the model's poses show how it
@@ -158,13 +160,14 @@ def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 6
     if isinstance(model.offset, jax.core.Tracer):
         raise UserError("the body map is inferred from a concrete model: under jit, vmap or grad pass "
                         "`body_map=` (or `feet=` and `groins=`)")
-    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False)
+    model = jax.tree_util.tree_map(jnp.asarray, model)  # NumPy float64 leaves as JAX holds them
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False, dtype=model.offset.dtype)
     feats = synthesize_phase(model, grid)
     fk = jax.vmap(lambda f: forward_kinematics(skeleton, *local_pose_from_features(skeleton, f,
                                                                                    model.representation)))(feats)
     return infer_body_map_from_positions(skeleton.topology, np.asarray(fk.positions, np.float64),
                                          np.asarray(fk.end_site_positions, np.float64),
-                                         np.asarray(fk.rotations, np.float64))
+                                         np.asarray(fk.rotations, np.float64), overrides=overrides)
 
 
 def resolve_body(

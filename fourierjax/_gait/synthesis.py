@@ -299,3 +299,62 @@ def model_hip_curves(
     return out
 
 
+@filter_jit
+def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis):
+    idx = jnp.asarray([feet.left, feet.right])
+    foot_local, joints = jax.vmap(lambda f: pose_points(skeleton, representation, idx, (*groins, pelvis), f))(features)
+    if clearance is None:
+        clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
+    height = contact_height(foot_local, clearance, up_axis=up_axis)
+    horiz = [k for k in range(3) if k != up_axis]
+    flight_step = 0.5 * (features[1:, :2] + features[:-1, :2]) * frame_time_s
+    phase = jnp.zeros(features.shape[:1], features.dtype)  # unused with a flight step
+    root = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis, flight_step=flight_step,
+                           pelvis_height=height + joints[:, 2, up_axis])
+    vel = jnp.gradient(root, axis=0) / frame_time_s
+    out = features.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]]).at[:, 2].set(height)
+    return out, root, foot_local + root[:, None, None, :], clearance
+
+
+def ground_features(
+    features: Float[ArrayLike, "T C"],
+    skeleton: Skeleton,
+    representation: str,
+    frame_time_s: float,
+    *,
+    feet: FootPoints | None = None,
+    groins: tuple[int, int] | None = None,
+    body_map: BodyMap | None = None,
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    up_axis: int | None = None,
+) -> tuple[Float[Array, "T C"], Float[Array, "T 3"], Float[Array, "T 2 P 3"], Float[Array, "2 P"]]:
+    """Root motion from the stance feet for any gait features (a style interpolation, a transition).
+
+    The walk rule of `synthesize_gait` (gait = 1, jump = 0) on given frames: the root height
+    puts the lowest foot point on the ground and its path follows the foot carrying the body
+    (`root_trajectory`; in flight, the features' own root velocity). For models whose root
+    channels carry no travel (a rig whose trajectory joint is not joint 0).
+
+    Arguments:
+        features: `[T, C]` feature frames (`T ≥ 2`; `fourier` layout) on `skeleton`.
+        skeleton: the `Skeleton`; representation: the features' ("euler" or "expmap").
+        frame_time_s: seconds per frame.
+        feet, groins, body_map, clearance, up_axis: as `synthesize_gait`; without `feet` or
+            `groins` a `body_map` is required (the map of a model's cycle: `model_body_map`).
+
+    Returns:
+        `(features [T, C]` with `root.vx, root.vz, root.y` replaced, `root_position [T, 3]`,
+        `foot_positions [T, 2, P, 3]` world, `clearance [2, P])`.
+    """
+    where = "ground_features"
+    features = jnp.asarray(features)
+    if features.ndim != 2 or features.shape[0] < 2:
+        raise UserError(f"{where}: `features` must be [T >= 2, C], got shape {features.shape}")
+    if body_map is None and (feet is None or groins is None):
+        raise UserError(f"{where}: pass `body_map=` (or both `feet=` and `groins=`)")
+    feet, groins, pelvis, up_axis = resolve_body(where, None, skeleton, feet, groins, body_map, up_axis)
+    check_positive(where, "frame_time_s", frame_time_s, "seconds per frame")
+    if clearance is not None:
+        clearance = jnp.asarray(clearance, features.dtype)
+    return _ground(features, skeleton, clearance, jnp.asarray(frame_time_s, features.dtype),
+                   representation=representation, feet=feet, groins=groins, pelvis=pelvis, up_axis=up_axis)
