@@ -5,6 +5,7 @@ import functools
 import glob
 import pathlib
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -229,3 +230,53 @@ def test_bandai_new_user_commands(bandai_models, tmp_path):
         assert cos >= 0.95, (name, cos)
         assert abs(low) <= 1.0, (name, low)  # cm
     assert glob.glob(f"{w}/sn.bvh")
+
+
+def _cycle_positions(model, skeleton, num=48):
+    from fourierjax import fourier
+    from fourierjax.features import root_relative_positions
+
+    t = jnp.linspace(0.0, 2 * jnp.pi / model.omega, num, endpoint=False)
+    return np.asarray(root_relative_positions(skeleton, fourier.synthesize(model, t), model.representation))
+
+
+def _cycle_distance(p, q):
+    """Mean joint distance of two cycles `[K, J, 3]` at the best cyclic shift."""
+    return min(float(np.linalg.norm(p - np.roll(q, k, axis=0), axis=-1).mean()) for k in range(len(q)))
+
+
+def _halfway_between(mf_a, mf_b):
+    from fourierjax import style
+
+    sk = mf_a.template_motion().skeleton()
+    a, b = (jax.tree_util.tree_map(jnp.asarray, m.model) for m in (mf_a, mf_b))  # float64 leaves as JAX holds them
+    mid = style.interpolate(a, b, 0.5)
+    pa, pb, pm = (_cycle_positions(m, sk) for m in (a, b, mid))
+    return _cycle_distance(pm, pa), _cycle_distance(pm, pb), _cycle_distance(pa, pb)
+
+
+def test_cmu_halfway_is_between(tmp_path):
+    from fourierjax.cli import main
+
+    assert main(["fit", "07_01", "07_12", "--harmonics", "3", "--out", str(tmp_path) + "/"]) == 0
+    a, b = (model_io.load_model(tmp_path / f"{c}.npz") for c in ("07_01", "07_12"))
+    d_a, d_b, d_ab = _halfway_between(a, b)
+    assert d_a < d_ab and d_b < d_ab, (d_a, d_b, d_ab)
+
+
+def test_bandai_halfway_is_between(bandai_models):
+    out, _ = bandai_models
+    a, b = (model_io.load_model(out / f"dataset-1_{c}_001.npz") for c in ("walk_normal", "walk_old"))
+    d_a, d_b, d_ab = _halfway_between(a, b)
+    # Holds without phase alignment too (the models are still "none"-aligned on Bandai): the
+    # best cyclic shift of the comparison absorbs the phase offset of the halfway motion.
+    assert d_a < d_ab and d_b < d_ab, (d_a, d_b, d_ab)
+
+
+def test_plot_decomposition_default_joint_is_the_left_knee(cmu, bandai_models):
+    from fourierjax.cli.plot import _left_knee
+
+    assert _left_knee("model", cmu) == "LeftLeg"
+    out, files = bandai_models
+    assert _left_knee("model", model_io.load_model(out / "dataset-1_walk_normal_001.npz")) == "LowerLeg_L"
+    assert _left_knee("bvh", read_bvh(files[0])) == "LowerLeg_L"
