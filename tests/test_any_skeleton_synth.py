@@ -280,3 +280,21 @@ def test_plot_decomposition_default_joint_is_the_left_knee(cmu, bandai_models):
     out, files = bandai_models
     assert _left_knee("model", model_io.load_model(out / "dataset-1_walk_normal_001.npz")) == "LowerLeg_L"
     assert _left_knee("bvh", read_bvh(files[0])) == "LowerLeg_L"
+
+
+def test_segment_model_from_the_body_map():
+    from fourierjax import anthropometry, body, data
+    from fourierjax.kinematics import fk_frames
+
+    motion = data.load(CLIP)
+    ref = anthropometry.segment_model(motion.topology)
+    assert anthropometry.segment_model(motion.topology, body_map=body.infer_body_map(motion)) == ref
+    renamed = convert(motion, "mixamo")
+    with pytest.raises(ValueError, match="not in the skeleton"):
+        anthropometry.segment_model(renamed.topology)
+    got = anthropometry.segment_model(renamed.topology, body_map=body.infer_body_map(renamed))
+    assert (got.proximal, got.distal, got.mass_fraction) == (ref.proximal, ref.distal, ref.mass_fraction)
+    fk = fk_frames(motion.skeleton(), motion.channels[:3])
+    com = anthropometry.center_of_mass(got, fk.positions[0], fk.end_site_positions[0])
+    np.testing.assert_array_equal(np.asarray(com), np.asarray(
+        anthropometry.center_of_mass(ref, fk.positions[0], fk.end_site_positions[0])))
