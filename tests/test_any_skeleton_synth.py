@@ -298,3 +298,22 @@ def test_segment_model_from_the_body_map():
     com = anthropometry.center_of_mass(got, fk.positions[0], fk.end_site_positions[0])
     np.testing.assert_array_equal(np.asarray(com), np.asarray(
         anthropometry.center_of_mass(ref, fk.positions[0], fk.end_site_positions[0])))
+
+
+def test_synth_body_map_file(cmu, tmp_path, capsys):
+    from fourierjax.cli import main
+
+    model_path = str(tmp_path / "m.npz")
+    model_io.save_model(model_path, cmu.model, motion=cmu.template_motion())
+    bmap = gait.model_body_map(cmu.model, cmu.template_motion().skeleton())
+    (tmp_path / "map.toml").write_text(bmap.to_toml())
+    assert main(["synth", model_path, "--seconds", "1", "--out", str(tmp_path / "a.bvh")]) == 0
+    assert main(["synth", model_path, "--seconds", "1", "--body-map", str(tmp_path / "map.toml"),
+                 "--out", str(tmp_path / "b.bvh")]) == 0
+    assert (tmp_path / "a.bvh").read_text() == (tmp_path / "b.bvh").read_text()
+    (tmp_path / "bad.toml").write_text('[legs.left]\nhip = "Tail"\nknee = "LeftLeg"\nankle = "LeftFoot"\n')
+    capsys.readouterr()
+    assert main(["synth", model_path, "--seconds", "1", "--body-map", str(tmp_path / "bad.toml"),
+                 "--out", str(tmp_path / "c.bvh")]) == 2
+    err = capsys.readouterr().err
+    assert "Tail" in err and "Traceback" not in err

@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -143,6 +144,19 @@ def feet_of(body_map: BodyMap) -> FootPoints:
                       (tuple(body_map.left.foot_point_names), tuple(body_map.right.foot_point_names)))
 
 
+@filter_jit
+def _cycle_fk(model, skeleton, num_samples):
+    from fourierjax.fourier import synthesize_phase
+    from fourierjax.kinematics import forward_kinematics
+    from fourierjax.motion import local_pose_from_features
+
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False, dtype=model.offset.dtype)
+    def pose(f):
+        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f, model.representation))
+
+    return jax.vmap(pose)(synthesize_phase(model, grid))
+
+
 def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 64, *, overrides=None) -> BodyMap:
     """The body map of a model's own cycle (`num_samples` poses, root at the origin).
 
@@ -153,18 +167,12 @@ def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 6
     stands. Needs a concrete model (NumPy inference); under a transformation pass `body_map=`.
     """
     from fourierjax.body import infer_body_map_from_positions
-    from fourierjax.fourier import synthesize_phase
-    from fourierjax.kinematics import forward_kinematics
-    from fourierjax.motion import local_pose_from_features
 
     if isinstance(model.offset, jax.core.Tracer):
         raise UserError("the body map is inferred from a concrete model: under jit, vmap or grad pass "
                         "`body_map=` (or `feet=` and `groins=`)")
     model = jax.tree_util.tree_map(jnp.asarray, model)  # NumPy float64 leaves as JAX holds them
-    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False, dtype=model.offset.dtype)
-    feats = synthesize_phase(model, grid)
-    fk = jax.vmap(lambda f: forward_kinematics(skeleton, *local_pose_from_features(skeleton, f,
-                                                                                   model.representation)))(feats)
+    fk = _cycle_fk(model, skeleton, num_samples)
     return infer_body_map_from_positions(skeleton.topology, np.asarray(fk.positions, np.float64),
                                          np.asarray(fk.end_site_positions, np.float64),
                                          np.asarray(fk.rotations, np.float64), overrides=overrides)
