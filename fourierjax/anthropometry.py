@@ -10,12 +10,16 @@ from __future__ import annotations
 
 import dataclasses
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax.skeleton import Topology
+
+if TYPE_CHECKING:
+    from fourierjax.body import BodyMap
 
 
 @dataclasses.dataclass(frozen=True)
@@ -84,10 +88,58 @@ _CMU_SEGMENTS = {
 }
 
 
+def segments_from_body_map(body_map: BodyMap, topology: Topology) -> dict[str, tuple[str, str]]:
+    """The `segment_model` end points of a skeleton from its body map (any naming).
+
+    Head: neck to the head's End Site (the vertex); trunk: neck to pelvis; arms: shoulder,
+    elbow, wrist and the wrist's first child (the finger base) or its End Site; legs: hip, knee,
+    ankle, toe (or the ankle's End Site). A part the map does not have is left out (the centre
+    of mass normalises by the masses present). On CMU rigs this is `_CMU_SEGMENTS`.
+
+    Arguments:
+        body_map: a `body.BodyMap` of `topology`.
+        topology: the skeleton topology.
+
+    Returns:
+        segment name -> (proximal joint, distal joint or `"<joint>/end"`), by joint name.
+    """
+    name = body_map.name
+
+    def tip(j: int) -> str | None:
+        kids = topology.children(j)
+        if kids:
+            return name(kids[0])
+        return f"{name(j)}/end" if j in topology.end_site_parents else None
+
+    out: dict[str, tuple[str, str]] = {}
+    top = body_map.neck if body_map.neck >= 0 else body_map.head
+    if body_map.head >= 0 and body_map.head in topology.end_site_parents and top >= 0:
+        out["head"] = (name(top), f"{name(body_map.head)}/end")
+    if top >= 0:
+        out["trunk"] = (name(top), name(body_map.pelvis))
+    for side, arm in (("left", body_map.left_arm), ("right", body_map.right_arm)):
+        if arm is None:
+            continue
+        out[f"{side}_upper_arm"] = (name(arm.shoulder), name(arm.elbow))
+        out[f"{side}_forearm"] = (name(arm.elbow), name(arm.wrist))
+        hand = tip(arm.wrist)
+        if hand is not None:
+            out[f"{side}_hand"] = (name(arm.wrist), hand)
+    for side, leg in (("left", body_map.left), ("right", body_map.right)):
+        out[f"{side}_thigh"] = (name(leg.hip), name(leg.knee))
+        out[f"{side}_shank"] = (name(leg.knee), name(leg.ankle))
+        foot = name(leg.toe) if leg.toe >= 0 else tip(leg.ankle)
+        if foot is not None:
+            out[f"{side}_foot"] = (name(leg.ankle), foot)
+    return out
+
+
 def segment_model(
     topology: Topology,
     segments: dict[str, tuple[str, str]] | None = None,
     sex: str = "male",
+    *,
+    body_map: BodyMap | None = None,
 ) -> SegmentModel:
     """Build a `SegmentModel` for a topology from named segment end points.
 
@@ -96,8 +148,10 @@ def segment_model(
         segments: segment name -> (proximal joint, distal joint), where the distal point may be
             `"<joint>/end"` for that joint's End Site. Segment names end in one of the de Leva
             segments (`head`, `trunk`, `upper_arm`, `forearm`, `hand`, `thigh`, `shank`, `foot`).
-            Defaults to the CMU skeleton's naming.
+            Defaults to the body map's segments (`segments_from_body_map`) when `body_map` is
+            given, else the CMU skeleton's naming.
         sex: which de Leva table (only `"male"` is transcribed).
+        body_map: a `body.BodyMap` of `topology` (`body.infer_body_map`), for any naming.
 
     Returns:
         a `SegmentModel`; raises `ValueError` naming a missing joint.
@@ -105,7 +159,8 @@ def segment_model(
     if sex not in DE_LEVA_1996:
         raise ValueError(f"segment_model: `sex` must be one of {list(DE_LEVA_1996)}, got {sex!r}")
     table = DE_LEVA_1996[sex]
-    segments = _CMU_SEGMENTS if segments is None else segments
+    if segments is None:
+        segments = _CMU_SEGMENTS if body_map is None else segments_from_body_map(body_map, topology)
     j = topology.num_joints
 
     def point(name: str) -> int:

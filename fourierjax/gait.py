@@ -10,7 +10,7 @@ import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from fourierjax._gait.common import CMU_GROINS, RULES, groin_joints
+from fourierjax._gait.common import CMU_GROINS, RULES, feet_of, groin_joints, model_body_map
 from fourierjax._gait.fit import HipFit, fit_hip_rule
 from fourierjax._gait.hip import (
     HipRule,
@@ -29,7 +29,7 @@ from fourierjax._gait.metrics import (
     ground_penetration,
 )
 from fourierjax._gait.root import apply_step, integrate_phase, root_trajectory
-from fourierjax._gait.synthesis import GaitResult, model_hip_curves, synthesize_gait
+from fourierjax._gait.synthesis import GaitResult, ground_features, model_hip_curves, synthesize_gait
 
 if TYPE_CHECKING:
     from fourierjax.io.bvh import Motion
@@ -44,10 +44,12 @@ __all__ = [
     "apply_step",
     "contact_height",
     "estimate_sole_clearance",
+    "feet_of",
     "fit_hip_rule",
     "flight_fraction",
     "foot_skating",
     "gait_motion",
+    "ground_features",
     "groin_joints",
     "ground_penetration",
     "hip_rule",
@@ -55,6 +57,7 @@ __all__ = [
     "integrate_phase",
     "leg_heights",
     "lowest_points",
+    "model_body_map",
     "model_hip_curves",
     "root_height",
     "root_trajectory",

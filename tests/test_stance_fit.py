@@ -46,3 +46,31 @@ def test_fit_a_cmu_frame():
     # The fit explains the frame better than the neutral pose does.
     neutral = np.asarray(torso_directions(BODY, jnp.zeros(6), jnp.zeros(4), jnp.zeros(4), jnp.ones(2)))
     assert d["rms_direction_error"] <= np.sqrt(np.mean((neutral - dirs) ** 2)) + 1e-6
+
+
+def test_torso_points_from_the_body_map():
+    """The map's joints are the CMU joints this fit read by name before (CMU results unchanged)."""
+    from fourierjax.body import infer_body_map
+    from fourierjax.data import load
+    from fourierjax.stance.fit import torso_points
+
+    motion = load("07_01")
+    names = motion.topology.names
+    pts = torso_points(infer_body_map(motion), motion.topology)
+    got = {k: tuple(names[j] for j in v) for k, v in pts.items()}
+    assert got == {
+        "r_hip": ("RightUpLeg",), "l_hip": ("LeftUpLeg",), "abdomen": ("LowerBack",), "chest": ("Spine",),
+        "neck": ("Neck",), "head": ("Neck1",), "head_top": ("Head",), "r_collar": ("RightShoulder",),
+        "r_shoulder": ("RightArm",), "l_collar": ("LeftShoulder",), "l_shoulder": ("LeftArm",),
+    }  # fmt: skip
+
+
+def test_torso_directions_of_a_renamed_rig_equal_cmu():
+    from fourierjax.data import load
+    from tests.conventions import convert
+
+    motion = load("07_01")
+    ref = cmu_torso_directions(BODY, motion, frame=150)
+    for convention in ("mixamo", "daz"):
+        got = cmu_torso_directions(BODY, convert(motion, convention), frame=150)
+        np.testing.assert_allclose(got, ref, atol=1e-6)

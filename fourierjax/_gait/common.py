@@ -11,11 +11,14 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
+    from fourierjax.body import BodyMap
     from fourierjax.contacts import FootPoints
-    from fourierjax.skeleton import Skeleton, Topology
+    from fourierjax.fourier import FourierModel
+    from fourierjax.skeleton import Skeleton
 
 RULES = ("unuma1995", "continuous", "smooth")
 CMU_GROINS = ("LeftUpLeg", "RightUpLeg")
@@ -85,25 +88,123 @@ def traced_jump_checks(where: str, x: Array, gait: ArrayLike, jump: ArrayLike) -
     return eqx.error_if(x, bad, f"{where}: `gait` must be finite and `jump` finite and >= 0")
 
 
-def groin_joints(topology: Topology, names: tuple[str, str] = CMU_GROINS) -> tuple[int, int]:
-    """Indices of the left and right groin (hip) joints; CMU names by default.
+def groin_joints(
+    topology, names: tuple[str, str] | None = None, *, body_map: BodyMap | None = None
+) -> tuple[int, int]:
+    """Indices of the left and right groin (hip) joints, from the body map.
 
     Arguments:
-        topology: a `Topology` (anything with `names`).
-        names: `(left, right)` joint names.
+        topology: a `Topology` (anything with `names`), or a `Motion` (then its body map is
+            inferred, `body.infer_body_map`).
+        names: `(left, right)` joint names; given, they win.
+        body_map: a `body.BodyMap`; its `groins` win over the defaults.
 
     Returns:
-        `(left, right)` joint indices. Raises `UserError` naming the skeleton's joints when a
-        name is missing.
+        `(left, right)` joint indices. With neither `names` nor `body_map`: the map of a
+        `Motion`, or the CMU names (`CMU_GROINS`) of a bare topology. Raises `UserError` naming
+        the skeleton's joints when a name is missing.
     """
+    if names is None and body_map is not None:
+        return tuple(int(g) for g in body_map.groins)
+    if names is None and hasattr(topology, "channels") and hasattr(topology, "topology"):
+        from fourierjax.body import infer_body_map
+
+        return tuple(int(g) for g in infer_body_map(topology).groins)
+    topology = getattr(topology, "topology", topology)
+    given = names is not None
+    names = CMU_GROINS if names is None else names
     joints = tuple(topology.names)
     missing = [n for n in names if n not in joints]
     if missing:
+        hint = ("" if given else " (the CMU names are the default of a bare topology: pass the "
+                "clip itself, or body_map=fourierjax.body.infer_body_map(motion))")
         raise UserError(
             f"groin_joints: the skeleton has no joint(s) {missing}; its joints are {list(joints)}."
-            " Pass names=(left, right) for a skeleton that does not use the CMU names"
+            f" Pass names=(left, right) or body_map= for a skeleton that does not use the CMU names{hint}"
         )
     return joints.index(names[0]), joints.index(names[1])
+
+
+def common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
+    """The nearest joint above both `a` and `b` (the pelvis of two groins); -1 when none."""
+    up = set()
+    while a >= 0:
+        up.add(a)
+        a = parents[a]
+    while b >= 0 and b not in up:
+        b = parents[b]
+    return b
+
+
+def feet_of(body_map: BodyMap) -> FootPoints:
+    """The `contacts.FootPoints` of a body map (ankle first, toe tip last)."""
+    from fourierjax.contacts import FootPoints
+
+    return FootPoints(tuple(body_map.left.foot_points), tuple(body_map.right.foot_points),
+                      (tuple(body_map.left.foot_point_names), tuple(body_map.right.foot_point_names)))
+
+
+@filter_jit
+def _cycle_fk(model, skeleton, num_samples):
+    from fourierjax.fourier import synthesize_phase
+    from fourierjax.kinematics import forward_kinematics
+    from fourierjax.motion import local_pose_from_features
+
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False, dtype=model.offset.dtype)
+    def pose(f):
+        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f, model.representation))
+
+    return jax.vmap(pose)(synthesize_phase(model, grid))
+
+
+def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 64, *, overrides=None) -> BodyMap:
+    """The body map of a model's own cycle (`num_samples` poses, root at the origin).
+
+    `overrides` (a dict, TOML text or path; `body.infer_body_map`) set fields by joint name.
+
+    A model file's template is the rest pose, which on rigs with joint orients (Bandai: bones
+    along local X) lies along another axis than the body stands: the model's poses show how it
+    stands. Needs a concrete model (NumPy inference); under a transformation pass `body_map=`.
+    """
+    from fourierjax.body import infer_body_map_from_positions
+
+    if isinstance(model.offset, jax.core.Tracer):
+        raise UserError("the body map is inferred from a concrete model: under jit, vmap or grad pass "
+                        "`body_map=` (or `feet=` and `groins=`)")
+    model = jax.tree_util.tree_map(jnp.asarray, model)  # NumPy float64 leaves as JAX holds them
+    fk = _cycle_fk(model, skeleton, num_samples)
+    return infer_body_map_from_positions(skeleton.topology, np.asarray(fk.positions, np.float64),
+                                         np.asarray(fk.end_site_positions, np.float64),
+                                         np.asarray(fk.rotations, np.float64), overrides=overrides)
+
+
+def resolve_body(
+    where: str, model: FourierModel, skeleton: Skeleton, feet: FootPoints | None,
+    groins: tuple[int, int] | None, body_map: BodyMap | None, up_axis: int | None,
+) -> tuple[FootPoints, tuple[int, int], int, int]:
+    """`(feet, groins, pelvis, up_axis)` of a synthesis: given arguments win, then `body_map`,
+    then the map of the model's own cycle (`model_body_map`); up is Y (1) without a map."""
+    if body_map is None and (feet is None or groins is None):
+        body_map = model_body_map(model, skeleton)
+    if body_map is not None and tuple(body_map.joint_names) != tuple(skeleton.topology.names):
+        raise UserError(f"{where}: `body_map` was made for another skeleton (joints "
+                        f"{list(body_map.joint_names)[:4]}..., the model's are {list(skeleton.topology.names)[:4]}...)")
+    if feet is None:
+        feet = feet_of(body_map)
+    if groins is None:
+        groins = body_map.groins
+    if up_axis is None:
+        up_axis = 1 if body_map is None else int(body_map.up_axis)
+    if up_axis not in (0, 1, 2):
+        raise UserError(f"{where}: `up_axis` must be 0, 1 or 2, got {up_axis!r}")
+    groins = check_indices(where, skeleton, feet, groins)
+    if body_map is not None and tuple(sorted(groins)) == tuple(sorted(body_map.groins)):
+        pelvis = int(body_map.pelvis)
+    else:
+        pelvis = common_ancestor(tuple(skeleton.topology.parents), *groins)
+    if pelvis < 0:
+        raise UserError(f"{where}: the groins {groins} have no common ancestor (pelvis) in the skeleton")
+    return feet, groins, pelvis, up_axis
 
 
 def _is_index(i, n: int) -> bool:
@@ -132,12 +233,13 @@ def check_indices(where: str, skeleton: Skeleton, feet: FootPoints, groins: tupl
 
 
 def pose_points(
-    skeleton: Skeleton, representation: str, idx: Array, groins: tuple[int, int], feat: Float[Array, " C"]
-) -> tuple[Float[Array, "2 P 3"], Float[Array, "2 3"]]:
-    """Foot points `[2, P, 3]` and groins `[2, 3]` of one feature frame, pelvis at the origin."""
+    skeleton: Skeleton, representation: str, idx: Array, joints: tuple[int, ...], feat: Float[Array, " C"]
+) -> tuple[Float[Array, "2 P 3"], Float[Array, "K 3"]]:
+    """Foot points `[2, P, 3]` and `joints` `[K, 3]` (the groins, then e.g. the pelvis) of one
+    feature frame, root at the origin."""
     from fourierjax.kinematics import forward_kinematics
     from fourierjax.motion import local_pose_from_features
 
     fk = forward_kinematics(skeleton, *local_pose_from_features(skeleton, feat, representation))
     allp = jnp.concatenate([fk.positions, fk.end_site_positions], axis=0)
-    return allp[idx], fk.positions[jnp.asarray(groins)]
+    return allp[idx], fk.positions[jnp.asarray(joints)]

@@ -70,6 +70,7 @@ def root_trajectory(
     contact_threshold: Float[ArrayLike, ""] | None = None,
     temperature: Float[ArrayLike, ""] | None = None,
     flight_step: Float[Array, "T-1 2"] | None = None,
+    pelvis_height: Float[Array, " T"] | None = None,
 ) -> Float[Array, "T 3"]:
     """Root positions over time from the feet on the ground (the carrying foot point stays put).
 
@@ -94,8 +95,9 @@ def root_trajectory(
         clearance: `[2, P]` sole clearances.
         up_axis: index of the up axis.
         contact_threshold: height (file units) below which the lowest point is on the
-            ground; default `0.03 · mean(height)` (CMU: ~0.5 units ≈ 3 cm).
-        temperature: τ in file units; default `0.003 · mean(height)` (CMU: ~0.05 units).
+            ground; default `0.03 · s`, `s` the mean pelvis height above the ground (CMU:
+            ~0.5 units ≈ 3 cm).
+        temperature: τ in file units; default `0.003 · s` (CMU: ~0.05 units).
         flight_step: optional `[T - 1, 2]` horizontal root moves to use in flight instead of
             the carried velocity (`synthesize_gait` passes the model's own root velocity).
             With it, every stance move keeps at least 10% of `flight_step` along its
@@ -105,6 +107,11 @@ def root_trajectory(
             min +6, mean 47 units/s against 43 before and 63.5 captured), at the price of
             that foot sliding by the deficit for a few frames (skating metric 6.6 -> 10.5
             units/s on that run; walks unchanged: 07_01 7.7).
+        pelvis_height: `[T]` the pelvis's height above the ground, the length scale `s` of
+            the defaults; default `height` (the root is the pelvis, as on CMU rigs). The root
+            is not always the pelvis: Bandai's `joint_Root` sits below the feet of a model, and
+            a negative scale made τ < 0, so the soft argmin picked the highest point, the
+            swing foot, which carried the body backwards at twice its speed (a moonwalk).
 
     Returns:
         `[T, 3]` root positions; horizontal components start at 0, the up component is
@@ -117,7 +124,7 @@ def root_trajectory(
     """
     T = foot_local.shape[0]
     # Scale-relative defaults; differentiated like everything else (true derivatives).
-    scale = jnp.mean(height)
+    scale = jnp.mean(height if pelvis_height is None else pelvis_height)
     th = 0.03 * scale if contact_threshold is None else contact_threshold
     tau = 0.003 * scale if temperature is None else temperature
     y = foot_local[..., up_axis]

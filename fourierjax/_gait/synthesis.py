@@ -13,11 +13,11 @@ from jaxtyping import Array, ArrayLike, Float
 from fourierjax._checks import integer
 from fourierjax._gait.common import (
     check_finite,
-    check_indices,
     check_jump,
     check_positive,
     check_rule,
     pose_points,
+    resolve_body,
 )
 from fourierjax._gait.hip import HipRule, contact_height, hip_rule, hip_rule_curves, leg_heights, lowest_points
 from fourierjax._gait.metrics import estimate_sole_clearance
@@ -26,6 +26,7 @@ from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
+    from fourierjax.body import BodyMap
     from fourierjax.contacts import FootPoints
     from fourierjax.fourier import FourierModel
     from fourierjax.skeleton import Skeleton
@@ -62,7 +63,7 @@ def _integrate_trapezoid(v, dt):
 @filter_jit
 def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
                      root_motion, frame_time_s, width, temperature, *,
-                     num_frames, feet, groins, rule, num_cycle_samples, up_axis):
+                     num_frames, feet, groins, pelvis, rule, num_cycle_samples, up_axis):
     # Every number a caller may vary is an array (traced): filter_jit holds Python numbers
     # static, and each new frame time, width or temperature would compile again.
     from fourierjax.fourier import synthesize_phase
@@ -76,7 +77,7 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     rep = model.representation
 
     def points(f):
-        return pose_points(skeleton, rep, idx, groins, f)
+        return pose_points(skeleton, rep, idx, (*groins, pelvis), f)
 
     # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule; the sole
     # clearances (if not given) from a cycle of the unstepped model (the foot's geometry must
@@ -86,7 +87,8 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     poses = [feats, synthesize_phase(stepped, grid)]
     if clearance is None:
         poses.append(synthesize_phase(model, grid))
-    all_feet, all_groins = jax.vmap(points)(jnp.concatenate(poses, axis=0))
+    all_feet, all_joints = jax.vmap(points)(jnp.concatenate(poses, axis=0))
+    all_groins, pelvis_local = all_joints[:, :2], all_joints[:num_frames, 2]
     foot_local, groin_local = all_feet[:num_frames], all_groins[:num_frames]
     cyc_feet = all_feet[num_frames : num_frames + K]
     cyc_groins = all_groins[num_frames : num_frames + K]
@@ -109,7 +111,7 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     v_model = feats[:, :2] * speed_t[:, None]
     flight_step = 0.5 * (v_model[1:] + v_model[:-1]) * frame_time_s
     root_on = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis,
-                              flight_step=flight_step)
+                              flight_step=flight_step, pelvis_height=height + pelvis_local[:, up_axis])
     vel = jnp.gradient(root_on, axis=0) / frame_time_s
     feats_on = feats.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]])
     feats_on = feats_on.at[:, 2].set(height)
@@ -132,8 +134,9 @@ def synthesize_gait(
     num_frames: int,
     frame_time_s: float,
     *,
-    feet: FootPoints,
-    groins: tuple[int, int],
+    feet: FootPoints | None = None,
+    groins: tuple[int, int] | None = None,
+    body_map: BodyMap | None = None,
     clearance: Float[ArrayLike, "2 P"] | None = None,
     step: Float[ArrayLike, ""] = 1.0,
     speed: Float[ArrayLike, "*T"] = 1.0,
@@ -145,7 +148,7 @@ def synthesize_gait(
     width: Float[ArrayLike, ""] = 0.01,
     temperature: Float[ArrayLike, ""] | None = None,
     num_cycle_samples: int = 64,
-    up_axis: int = 1,
+    up_axis: int | None = None,
 ) -> GaitResult:
     """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
 
@@ -166,8 +169,11 @@ def synthesize_gait(
         skeleton: the `Skeleton` it animates.
         num_frames: number of output frames (≥ 2).
         frame_time_s: output frame spacing in seconds (a concrete number).
-        feet: `contacts.FootPoints`.
-        groins: `(left, right)` joint indices (`groin_joints`).
+        feet: `contacts.FootPoints`; default the body map's feet.
+        groins: `(left, right)` joint indices (`groin_joints`); default the body map's.
+        body_map: a `body.BodyMap` of the skeleton (feet, groins, pelvis, up axis); default
+            the map of the model's own cycle (`body.infer_body_map_from_positions`; a concrete
+            model). `feet`, `groins` and `up_axis`, when given, win over it.
         clearance: `[2, P]` sole clearances (`contacts.sole_clearance` of the source clip);
             default `None` estimates them from one cycle of the model
             (`estimate_sole_clearance`).
@@ -177,7 +183,8 @@ def synthesize_gait(
         root_motion: root from the hip rule and the stance feet (True) or the model's own.
         phase0: phase of the first frame (radians).
         num_cycle_samples: phases of the cycle over which `Lmax` is taken.
-        up_axis: index of the up axis.
+        up_axis: index of the up axis; default the body map's (Y, 1, when `feet` and
+            `groins` are given without a map).
 
     Returns:
         A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
@@ -203,9 +210,7 @@ def synthesize_gait(
         raise UserError(f"{where}: `frame_time_s` must be a number (seconds), got {frame_time_s!r}") from None
     if not (math.isfinite(dt) and dt > 0):
         raise UserError(f"{where}: `frame_time_s` must be finite and > 0 (seconds), got {frame_time_s}")
-    if up_axis not in (0, 1, 2):
-        raise UserError(f"{where}: `up_axis` must be 0, 1 or 2, got {up_axis!r}")
-    groins = check_indices(where, skeleton, feet, groins)
+    feet, groins, pelvis, up_axis = resolve_body(where, model, skeleton, feet, groins, body_map, up_axis)
     if len(feet.left) != len(feet.right):
         raise UserError("synthesize_gait: both feet must have the same number of points")
     for name, value in (("step", step), ("speed", speed), ("gait", gait), ("phase0", phase0)):
@@ -239,7 +244,7 @@ def synthesize_gait(
         jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
         jnp.asarray(dt, dtype), jnp.asarray(width, dtype),
         None if temperature is None else jnp.asarray(temperature, dtype),
-        num_frames=num_frames, feet=feet, groins=groins, rule=rule,
+        num_frames=num_frames, feet=feet, groins=groins, pelvis=pelvis, rule=rule,
         num_cycle_samples=num_cycle_samples, up_axis=int(up_axis),
     )
 
@@ -261,29 +266,29 @@ def model_hip_curves(
     model: FourierModel,
     skeleton: Skeleton,
     *,
-    feet: FootPoints,
-    groins: tuple[int, int],
-    gait: Float[ArrayLike, ""],
-    jump: Float[ArrayLike, ""],
+    feet: FootPoints | None = None,
+    groins: tuple[int, int] | None = None,
+    body_map: BodyMap | None = None,
+    gait: Float[ArrayLike, ""] = 1.0,
+    jump: Float[ArrayLike, ""] = 0.0,
     clearance: Float[ArrayLike, "2 P"] | None = None,
     num_samples: int = 128,
     width: Float[ArrayLike, ""] = 0.01,
     temperature: Float[ArrayLike, ""] | None = None,
-    up_axis: int = 1,
+    up_axis: int | None = None,
 ) -> dict[str, Float[Array, " K"]]:
     """The three hip rules over one cycle of a model: the data of a side-by-side plot.
 
     Arguments:
-        model, skeleton, feet, groins, clearance: as `synthesize_gait`.
-        gait, jump, width, temperature: as `hip_rule`.
+        model, skeleton, feet, groins, body_map, clearance, up_axis: as `synthesize_gait`.
+        gait, jump, width, temperature: as `hip_rule` (default a walk: 1, 0).
         num_samples: K, phases per cycle.
-        up_axis: index of the up axis.
 
     Returns:
         `dict`: `"phase"` `[K]` (radians), `"L_L"`, `"L_R"`, and the `hip_rule_curves`
         entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
     """
-    groins = check_indices("model_hip_curves", skeleton, feet, groins)
+    feet, groins, _, up_axis = resolve_body("model_hip_curves", model, skeleton, feet, groins, body_map, up_axis)
     num_samples = integer(num_samples, "model_hip_curves: `num_samples`", 1)
     grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples)
     if clearance is None:
@@ -294,3 +299,62 @@ def model_hip_curves(
     return out
 
 
+@filter_jit
+def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis):
+    idx = jnp.asarray([feet.left, feet.right])
+    foot_local, joints = jax.vmap(lambda f: pose_points(skeleton, representation, idx, (*groins, pelvis), f))(features)
+    if clearance is None:
+        clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
+    height = contact_height(foot_local, clearance, up_axis=up_axis)
+    horiz = [k for k in range(3) if k != up_axis]
+    flight_step = 0.5 * (features[1:, :2] + features[:-1, :2]) * frame_time_s
+    phase = jnp.zeros(features.shape[:1], features.dtype)  # unused with a flight step
+    root = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis, flight_step=flight_step,
+                           pelvis_height=height + joints[:, 2, up_axis])
+    vel = jnp.gradient(root, axis=0) / frame_time_s
+    out = features.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]]).at[:, 2].set(height)
+    return out, root, foot_local + root[:, None, None, :], clearance
+
+
+def ground_features(
+    features: Float[ArrayLike, "T C"],
+    skeleton: Skeleton,
+    representation: str,
+    frame_time_s: float,
+    *,
+    feet: FootPoints | None = None,
+    groins: tuple[int, int] | None = None,
+    body_map: BodyMap | None = None,
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    up_axis: int | None = None,
+) -> tuple[Float[Array, "T C"], Float[Array, "T 3"], Float[Array, "T 2 P 3"], Float[Array, "2 P"]]:
+    """Root motion from the stance feet for any gait features (a style interpolation, a transition).
+
+    The walk rule of `synthesize_gait` (gait = 1, jump = 0) on given frames: the root height
+    puts the lowest foot point on the ground and its path follows the foot carrying the body
+    (`root_trajectory`; in flight, the features' own root velocity). For models whose root
+    channels carry no travel (a rig whose trajectory joint is not joint 0).
+
+    Arguments:
+        features: `[T, C]` feature frames (`T ≥ 2`; `fourier` layout) on `skeleton`.
+        skeleton: the `Skeleton`; representation: the features' ("euler" or "expmap").
+        frame_time_s: seconds per frame.
+        feet, groins, body_map, clearance, up_axis: as `synthesize_gait`; without `feet` or
+            `groins` a `body_map` is required (the map of a model's cycle: `model_body_map`).
+
+    Returns:
+        `(features [T, C]` with `root.vx, root.vz, root.y` replaced, `root_position [T, 3]`,
+        `foot_positions [T, 2, P, 3]` world, `clearance [2, P])`.
+    """
+    where = "ground_features"
+    features = jnp.asarray(features)
+    if features.ndim != 2 or features.shape[0] < 2:
+        raise UserError(f"{where}: `features` must be [T >= 2, C], got shape {features.shape}")
+    if body_map is None and (feet is None or groins is None):
+        raise UserError(f"{where}: pass `body_map=` (or both `feet=` and `groins=`)")
+    feet, groins, pelvis, up_axis = resolve_body(where, None, skeleton, feet, groins, body_map, up_axis)
+    check_positive(where, "frame_time_s", frame_time_s, "seconds per frame")
+    if clearance is not None:
+        clearance = jnp.asarray(clearance, features.dtype)
+    return _ground(features, skeleton, clearance, jnp.asarray(frame_time_s, features.dtype),
+                   representation=representation, feet=feet, groins=groins, pelvis=pelvis, up_axis=up_axis)

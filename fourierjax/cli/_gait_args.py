@@ -38,6 +38,9 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
                    "(no jump) or smooth (differentiable, for fitting gait and jump: its sigmoid "
                    "also lifts frames just below the threshold, so stance feet float); default "
                    "unuma1995")
+    g.add_argument("--body-map", default=None, metavar="FILE",
+                   help="TOML body map (legs, feet, up; `fourierjax info` prints the inferred one) "
+                   "overriding the map inferred from the model's poses")
     g.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
                    help="root height from the hip rule and root path from the stance feet "
                    "(default on); --no-root-motion keeps the model's own root channels")
@@ -60,8 +63,18 @@ def _check(args) -> None:
         raise UserError(f"--jump: must be >= 0, got {args.jump}")
 
 
-def apply_gait(args, model, template, num_frames: int, frame_time_s: float):
-    """Synthesize `num_frames` under the step constraints.
+def body_map_for(model, template, body_map=None, path=None):
+    """The body map of a synthesis: `body_map` (e.g. stored with the model) when given, else the
+    map of the model's own cycle, with the TOML file `path` (`--body-map`) overriding fields."""
+    from fourierjax import gait
+
+    if body_map is not None and path is None:
+        return body_map
+    return gait.model_body_map(model, template.skeleton(), overrides=path)
+
+
+def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body_map=None):
+    """Synthesize `num_frames` under the step constraints, on any rig the body map understands.
 
     Arguments:
         args: the parsed flags of `add_gait_arguments`.
@@ -69,32 +82,29 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float):
         template: a `Motion` supplying the skeleton.
         num_frames: frames to synthesize.
         frame_time_s: seconds per frame.
+        body_map: a `body.BodyMap` of the skeleton (e.g. stored in the model file); default the
+            map of the model's own poses (`--body-map FILE` overrides its fields).
 
     Returns:
         `(motion, summary line)`.
     """
     import numpy as np
 
-    from fourierjax import contacts, gait
-    from fourierjax.errors import UserError
+    from fourierjax import gait
     from fourierjax.io.gait_bvh import gait_motion
 
     _check(args)
-    topo = template.topology
-    try:
-        feet = contacts.foot_points(topo)
-        groins = gait.groin_joints(topo)
-    except UserError as err:
-        raise UserError(f"step constraints need a CMU-named skeleton: {err}") from None
+    bmap = body_map_for(model, template, body_map, getattr(args, "body_map", None))
     result = gait.synthesize_gait(
-        model, template.skeleton(), num_frames, frame_time_s, feet=feet, groins=groins,
+        model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
         root_motion=args.root_motion,
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model).
     motion = gait_motion(template, result, model.channel_names, frame_time_s)
     skate = gait.foot_skating(result.foot_positions, frame_time_s, result.clearance[None])
-    advance = np.asarray(result.root_position[-1] - result.root_position[0])
+    advance = np.array(result.root_position[-1] - result.root_position[0])
+    advance[bmap.up_axis] = 0.0
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))
         # Both feet off the ground (the hip rule puts the ground at height 0).
@@ -107,6 +117,6 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float):
         f"step constraints: hip rule {args.hip_rule}, root motion "
         f"{'on' if args.root_motion else 'off'}; {flight_text}, foot skating "
         f"{float(skate.mean_speed):.2f} units/s, root advance "
-        f"{float(np.hypot(advance[0], advance[2])):.1f} units"
+        f"{float(np.linalg.norm(advance)):.1f} units"
     )
     return motion, summary

@@ -140,14 +140,35 @@ def load_gait_pair(args: argparse.Namespace):
     return a, b
 
 
-def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template) -> None:
-    """Write synthesized features as a BVH on `template`'s skeleton."""
+def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None) -> None:
+    """Write synthesized features as a BVH on `template`'s skeleton.
+
+    Features whose root channels do not move (a rig whose trajectory is not on joint 0, e.g.
+    Bandai's `Hips` under a still `joint_Root`) would walk in place with the feet off the floor:
+    their root path then comes from the stance feet (`gait.ground_features`, on the body map of
+    `model`'s poses), with a notice.
+    """
+    import sys
+
     import numpy as np
 
     from fourierjax import motion as fmotion
     from fourierjax.io.bvh import write_bvh
 
-    motion = fmotion.motion_from_features(template, np.asarray(features, np.float64), channel_names, frame_time_s)
+    x = np.asarray(features, np.float64)
+    if model is not None and len(x) >= 2 and not np.ptp(x[:, :3], axis=0).any():
+        from fourierjax import gait
+        from fourierjax.io.gait_bvh import grounded_motion
+
+        bmap = gait.model_body_map(model, template.skeleton())
+        feats, root, _, _ = gait.ground_features(x, template.skeleton(), model.representation, frame_time_s,
+                                                 body_map=bmap)
+        print("fourierjax: notice: the model's root channels carry no travel (the rig's trajectory "
+              f"joint, {bmap.name(bmap.pelvis)}, is not its root): root path from the stance feet",
+              file=sys.stderr)
+        motion = grounded_motion(template, feats, root, channel_names, frame_time_s)
+    else:
+        motion = fmotion.motion_from_features(template, x, channel_names, frame_time_s)
     write_bvh(motion, out)
 
 
@@ -230,6 +251,6 @@ def run(args: argparse.Namespace) -> int:
         template, frame_time_s = template_of(a, b, "interpolate")
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
         t = jnp.arange(frame_count(seconds, dt)) * dt
-        write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template)
+        write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model)
     print(f"wrote {out}")
     return 0

@@ -23,9 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "frame after any leading rest/T-pose frames)")
     parser.add_argument("--phase", default="0", metavar="RAD",
                         help="stick: cycle phase of a model, radians (default 0)")
-    parser.add_argument("--joint", default="LeftLeg", metavar="NAME",
+    parser.add_argument("--joint", default=None, metavar="NAME",
                         help="decomposition: joint whose rotation channels are shown "
-                        "(default LeftLeg, the left knee)")
+                        "(default the left knee of the body map, e.g. LeftLeg on CMU rigs)")
     parser.add_argument("--harmonics", default="2", metavar="N",
                         help="decomposition of a BVH clip: harmonics to fit (default 2, Tilmanne)")
     parser.add_argument("--seconds", default="2", metavar="S",
@@ -199,11 +199,32 @@ def _spectrum(what, obj, args, out) -> None:
     viz.save_figure(fig, out)
 
 
+def _left_knee(what, obj) -> str:
+    """The left knee's name from the body map (of the clip, or of a model's own poses)."""
+    from fourierjax.errors import UserError
+
+    if what == "bvh":
+        from fourierjax.body import infer_body_map
+
+        bmap = infer_body_map(obj)
+    else:
+        template = obj.template_motion()
+        if template is None:
+            raise UserError("--joint: the model file carries no skeleton to find the knee on; name a joint")
+        from fourierjax.gait import model_body_map
+
+        bmap = model_body_map(obj.model, template.skeleton())
+    return bmap.name(bmap.left.knee)
+
+
 def _decomposition(what, obj, args, out) -> None:
     import numpy as np
 
     from fourierjax import viz
     from fourierjax.errors import UserError
+
+    if args.joint is None:
+        args.joint = _left_knee(what, obj)
 
     if what == "bvh":
         from fourierjax.motion import features_from_motion, fit_motions

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     num = frame_count(args.seconds, dt)
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
-    motion, gait_summary = apply_gait(args, model, template, num, dt)
+    motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None))
     write_bvh(motion, out)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")

@@ -66,6 +66,6 @@ def run(args: argparse.Namespace) -> int:
     dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
     t = jnp.arange(frame_count(seconds, dt)) * dt
     values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
-    write_motion(out, values, a.model.channel_names, dt, template)
+    write_motion(out, values, a.model.channel_names, dt, template, a.model)
     print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
     return 0

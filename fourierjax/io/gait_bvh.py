@@ -31,12 +31,19 @@ def gait_motion(
     Returns:
         A `Motion` with `T` frames.
     """
+    return grounded_motion(template, result.features, result.root_position, channel_names, frame_time_s)
+
+
+def grounded_motion(
+    template: Motion, features, root_position, channel_names: Sequence[str], frame_time_s: float
+) -> Motion:
+    """A writeable `Motion` of features `[T, C]` whose root path `[T, 3]` is given exactly
+    (`gait.ground_features`, `synthesize_gait`): written to the root's position channels."""
     from fourierjax.motion import motion_from_features
 
-    mot = motion_from_features(template, np.asarray(result.features), channel_names,
-                               frame_time_s)
+    mot = motion_from_features(template, np.asarray(features), channel_names, frame_time_s)
     ch = np.array(mot.channels)
-    root = np.asarray(result.root_position, dtype=np.float64)
+    root = np.asarray(root_position, dtype=np.float64)
     base = mot.topology.channel_offsets[0]
     for k, name in enumerate(mot.topology.channels[0]):
         if name.endswith("position"):

@@ -154,32 +154,74 @@ def target_directions_from_positions(positions: dict[str, np.ndarray]) -> np.nda
     return np.stack(out)
 
 
-def cmu_torso_directions(body: Body, motion, frame: int, rest_frame: int = 0) -> np.ndarray:
-    """Target directions for `fit_torso` from a CMU clip frame (joint-direction mapping).
+def torso_points(body_map, topology) -> dict[str, tuple[int, ...]]:
+    """The joints of a real skeleton that stand for `target_directions_from_positions`' points.
 
-    Each CMU segment's rotation away from the clip's rest frame (the smallest rotation taking
+    From the body map: hips, the first two spine joints (abdomen, chest; one joint serves both
+    when the spine has one), the neck, the joint between neck and head (or their midpoint),
+    the head, and each arm's collar (or the shoulder's parent) and shoulder. A point given as
+    several joints is their mean. On CMU rigs: LeftUpLeg, LowerBack, Spine, Neck, Neck1, Head,
+    Left/RightShoulder, Left/RightArm.
+
+    Raises:
+        UserError: the map has no spine, neck or head, or no arms.
+    """
+    if not body_map.spine or body_map.neck < 0 or body_map.head < 0:
+        raise UserError("stance fit: the body map has no spine, neck or head; give them in a body map file")
+    if body_map.left_arm is None or body_map.right_arm is None:
+        raise UserError("stance fit: the body map has no arms; give them in a body map file")
+    parents = topology.parents
+    spine = body_map.spine
+    between, j = [], parents[body_map.head]
+    while j >= 0 and j != body_map.neck:
+        between.append(j)
+        j = parents[j]
+    head = (between[-1],) if between and j == body_map.neck else (body_map.neck, body_map.head)
+
+    def collar(arm):
+        return arm.collar if arm.collar >= 0 else parents[arm.shoulder]
+
+    return {
+        "r_hip": (body_map.right.hip,), "l_hip": (body_map.left.hip,), "abdomen": (spine[0],),
+        "chest": (spine[1] if len(spine) > 1 else spine[0],), "neck": (body_map.neck,), "head": head,
+        "head_top": (body_map.head,), "r_collar": (collar(body_map.right_arm),),
+        "r_shoulder": (body_map.right_arm.shoulder,), "l_collar": (collar(body_map.left_arm),),
+        "l_shoulder": (body_map.left_arm.shoulder,),
+    }  # fmt: skip
+
+
+def cmu_torso_directions(body: Body, motion, frame: int, rest_frame: int = 0, *, body_map=None) -> np.ndarray:
+    """Target directions for `fit_torso` from a clip frame of any rig (joint-direction mapping).
+
+    Each segment's rotation away from the clip's rest frame (the smallest rotation taking
     its rest direction to its direction at `frame`, in the pelvis frame) is applied to our
-    skeleton's rest direction of the same segment: abdomen = LowerBack->Spine,
-    chest = Spine1->Neck, neck = Neck->Neck1, head = Neck1->Head, collars =
-    Left/RightShoulder->Left/RightArm. So differences of skeleton proportions and rest
-    curvature do not bias the fit.
+    skeleton's rest direction of the same segment: abdomen = first -> second spine joint,
+    chest = second spine joint -> neck, neck = neck -> the joint below the head, head = that
+    joint -> head, collars -> shoulders (`torso_points`; on CMU: LowerBack->Spine,
+    Spine->Neck, Neck->Neck1, Neck1->Head, Left/RightShoulder->Left/RightArm). So differences
+    of skeleton proportions and rest curvature do not bias the fit.
+
+    Arguments:
+        body: our `Body`; motion: a `Motion`; frame, rest_frame: frame indices.
+        body_map: the clip's `body.BodyMap`; default `body.infer_body_map(motion)`.
+
+    Returns:
+        `[6, 3]` target directions.
     """
     import jax.numpy as jnp
 
     from fourierjax.kinematics import fk_from_channels
 
     sk = motion.skeleton()
-    names = motion.topology.names
+    if body_map is None:
+        from fourierjax.body import infer_body_map
+
+        body_map = infer_body_map(motion)
+    points = torso_points(body_map, motion.topology)
 
     def frame_dirs(f):
         pos = np.asarray(fk_from_channels(sk, jnp.asarray(motion.channels[f])).positions)
-        q = {n: pos[names.index(n)] for n in names}
-        return target_directions_from_positions({
-            "r_hip": q["RightUpLeg"], "l_hip": q["LeftUpLeg"], "abdomen": q["LowerBack"],
-            "chest": q["Spine"], "neck": q["Neck"], "head": q["Neck1"], "head_top": q["Head"],
-            "r_collar": q["RightShoulder"], "r_shoulder": q["RightArm"],
-            "l_collar": q["LeftShoulder"], "l_shoulder": q["LeftArm"],
-        })  # fmt: skip
+        return target_directions_from_positions({k: pos[list(js)].mean(0) for k, js in points.items()})
 
     d0, d1 = frame_dirs(rest_frame), frame_dirs(frame)
     # Our rest directions: the spine straight up, the collars along their bones.
