@@ -9,12 +9,19 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 # Re-exported: `fourierjax.cli.synth` and older callers import them from here.
-from fourierjax.io.model_io import load_characteristic, save_characteristic
 
-__all__ = ["HELP", "add_arguments", "run", "load_characteristic", "save_characteristic"]
+__all__ = ["HELP", "add_arguments", "run", "load_characteristic", "save_characteristic"]  # noqa: F822 (module __getattr__)
+
+
+def __getattr__(name: str):
+    # The model-file functions load on first use: building the parser (`fourierjax --help`)
+    # must not import JAX.
+    if name in ("load_characteristic", "save_characteristic"):
+        from fourierjax.io import model_io
+
+        return getattr(model_io, name)
+    raise AttributeError(name)
 
 HELP = "Fourier characteristics A - B of two gaits (Unuma eq. 7), e.g. briskness = brisk - walk."
 
@@ -29,8 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from fourierjax import style
     from fourierjax.cli.interpolate import check_out, load_gait_pair
+    from fourierjax.io.model_io import save_characteristic
 
     out = check_out(args.out, (".npz",))
     a, b = load_gait_pair(args)
