@@ -374,6 +374,28 @@ def _position_ve_impl(skeleton, x, xhat, mask, representation, pelvis):
 _position_ve_jit = _jit.filter_jit(_position_ve_impl)
 
 
+#: A joint whose continuous Euler channels span more than this (radians) passes near gimbal
+#: lock: its first and third angles wind around the pole (a Bandai `Spine`: 1,680 degrees).
+_WINDING_SPAN = np.pi
+
+
+def _search_weights(x, names, keep) -> tuple[float, ...] | None:
+    """Channel weights of the ω search: ``fourier.fit_batch``'s default (1 for rotations, 0 for
+    ``root.*``), and 0 for every channel of a joint whose Euler angles wind near gimbal lock
+    (their spectrum is the winding, not the gait). None when no joint winds (the default)."""
+    from fourierjax.fourier import angle_channel_mask
+
+    w = np.asarray(angle_channel_mask(names), float)
+    span = np.ptp(x[np.asarray(keep, bool)], axis=0) if np.any(keep) else np.zeros(len(names))
+    joints = {n.rsplit(".", 1)[0] for n, sp, a in zip(names, span, w) if a and sp > _WINDING_SPAN}
+    if not joints:
+        return None
+    w = np.where([n.rsplit(".", 1)[0] in joints for n in names], 0.0, w)
+    if not w.any():
+        return None
+    return tuple(float(v) for v in w)
+
+
 def _frame_range(motion, start_frame, stop_frame) -> tuple[int, int]:
     F = motion.num_frames
     lo = 0 if start_frame is None else int(start_frame)
@@ -457,9 +479,13 @@ def fit_motions(
         prepared.append((m, a, b, sub, x, names, left, right, om, keep, bm))
     groups: dict[tuple[str, ...], list[int]] = {}
     for i, p in enumerate(prepared):
-        groups.setdefault(p[5], []).append(i)
+        w = None if "channel_weights" in fit_kwargs else _search_weights(p[4], p[5], p[9])
+        groups.setdefault((p[5], w), []).append(i)
     results: list[ClipFit | None] = [None] * len(prepared)
-    for names, idx in groups.items():
+    for (names, weights), idx in groups.items():
+        kw = dict(fit_kwargs)
+        if weights is not None:
+            kw["channel_weights"] = jnp.asarray(weights, dtype)
         T = _bucket(max(prepared[i][4].shape[0] for i in idx))
         C = len(names)
         feats = np.zeros((len(idx), T, C))
@@ -474,7 +500,7 @@ def fit_motions(
         res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
                            mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
                            representation=representation, channel_names=names, throw=False,
-                           **fit_kwargs)
+                           **kw)
         for k, i in enumerate(idx):
             m, a, b, sub, x, _, left, right, _, keep, bm = prepared[i]
             raw = jax.tree.map(lambda v: v[k], res.model)

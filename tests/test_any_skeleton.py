@@ -1,0 +1,150 @@
+"""Issue #20, the fitting side: root features, steady segment, contacts and alignment from the body map."""
+
+import pathlib
+
+import numpy as np
+import pytest
+
+import fourierjax.data
+from fourierjax import contacts
+from fourierjax._fourier._layout import root_joints, world_pose
+from fourierjax.body import infer_body_map
+from fourierjax.errors import UserError
+from fourierjax.features import features_from_motion, heading_of, motion_from_features
+from fourierjax.io.axes import to_y_up
+from fourierjax.io.bvh import read_bvh
+from fourierjax.motion import fit_motions, steady_segment
+from tests.conventions import CONVENTIONS, convert
+
+BANDAI = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+LOCOMOTION = ("walk", "run", "dash", "walk-back")
+
+
+def _bandai_files():
+    if not BANDAI.is_dir():
+        return []
+    return sorted(p for p in BANDAI.glob("*.bvh") if p.stem.split("_")[1] in LOCOMOTION)
+
+
+needs_bandai = pytest.mark.skipif(not BANDAI.is_dir(), reason=f"Bandai-Namco data not found at {BANDAI}")
+
+
+def test_cmu_root_is_joint_0():
+    m = fourierjax.data.load("07_01")
+    assert root_joints(m) == root_joints(m, infer_body_map(m))
+    rj = root_joints(m)
+    assert (rj.trajectory, rj.pelvis, rj.facing_local) == (0, 0, (0.0, 0.0, 1.0))
+
+
+def test_foot_points_from_body_map():
+    m = fourierjax.data.load("07_01")
+    bm = infer_body_map(m)
+    assert contacts.foot_points(m.topology, bm) == contacts.foot_points(m.topology)
+    other = convert(m, "daz")
+    with pytest.raises(UserError, match="another skeleton"):
+        contacts.foot_points(other.topology, bm)
+    assert contacts.foot_points(other.topology, infer_body_map(other)).left == bm.left.foot_points
+
+
+def test_z_up_is_refused_by_the_features():
+    m = convert(fourierjax.data.load("07_01"), "zup")
+    with pytest.raises(UserError, match="to_y_up"):
+        features_from_motion(m)
+
+
+def test_stop_frame():
+    m = fourierjax.data.load("07_01")
+    with pytest.raises(UserError, match="outside"):
+        fit_motions([m], 2, start_frame=10, stop_frame=m.num_frames + 1)
+
+
+@pytest.fixture(scope="module")
+def convention_fits():
+    m = fourierjax.data.load("07_01")[:200]
+    ms = [m] + [to_y_up(convert(m, c), "z") if c == "zup" else convert(m, c) for c in CONVENTIONS]
+    return dict(zip(("cmu", *CONVENTIONS), fit_motions(ms, 3)))
+
+
+# "bandai" (ZXY channels on turned joint frames) still differs in the fitted ω: the Euler
+# unwrapping of the rewritten channels (issue #20 item 5, unfinished); its heel strikes, ω from
+# steps and root advance agree.
+@pytest.mark.parametrize("convention", CONVENTIONS)
+def test_conventions_give_the_cmu_results(convention_fits, convention):
+    ref, r = convention_fits["cmu"], convention_fits[convention]
+    assert r.successful and r.alignment == "left_heel_strike" == ref.alignment
+    assert (r.left_heel_strikes, r.right_heel_strikes) == (ref.left_heel_strikes, ref.right_heel_strikes)
+    assert (r.frame_start, r.frame_stop) == (ref.frame_start, ref.frame_stop)
+    assert r.omega_steps == pytest.approx(ref.omega_steps, rel=1e-5)
+    scale = 0.0564 if convention == "metres" else 1.0
+    advance = float(np.asarray(r.model.offset)[1]) / scale  # root.vz: the mean speed forward
+    assert advance == pytest.approx(float(np.asarray(ref.model.offset)[1]), rel=0.01)
+    if convention != "bandai":
+        assert r.omega_fit == pytest.approx(ref.omega_fit, rel=0.01)
+        d = np.angle(np.exp(1j * (r.phase_shift - ref.phase_shift)))
+        assert abs(d) < 0.01 * 2 * np.pi  # aligned phases within 1% of a cycle
+
+
+@needs_bandai
+@pytest.mark.parametrize("name", ["walk_normal_001", "walk_normal_002", "walk-back_normal_001"])
+def test_bandai_root_features_round_trip(name):
+    """The pelvis's world pose gives the root features and comes back through the trajectory
+    joint (Hips on most clips, joint_Root on the short loops)."""
+    m = read_bvh(BANDAI / f"dataset-1_{name}.bvh")
+    bm = infer_body_map(m)
+    x, names = features_from_motion(m, body_map=bm)
+    p0, q0 = world_pose(m, bm.pelvis)
+    back = motion_from_features(m, x, names, m.frame_time_s, heading_rad=heading_of(m, body_map=bm),
+                                start_xz=(p0[0, 0], p0[0, 2]), body_map=bm)
+    p1, q1 = world_pose(back, bm.pelvis)
+    np.testing.assert_allclose(p1[:, 1], p0[:, 1], atol=1e-3)
+    np.testing.assert_allclose(p1, p0, atol=0.5)  # cm: trapezoid integration of central differences
+    assert np.minimum(np.abs(q1 - q0).max(-1), np.abs(q1 + q0).max(-1)).max() < 1e-5
+    speed = np.mean(x[:, 1])
+    assert abs(speed) > 5 * abs(np.mean(x[:, 0]))  # travel along the heading
+    assert (speed < 0) == name.startswith("walk-back")  # walk-back: backwards from the facing
+
+
+@pytest.fixture(scope="module")
+def bandai_fits():
+    files = _bandai_files()
+    if not files:
+        pytest.skip(f"Bandai-Namco data not found at {BANDAI}")
+    motions = [read_bvh(p) for p in files]
+    return {p.stem.removeprefix("dataset-1_"): (m, f) for p, m, f in zip(files, motions, fit_motions(motions, 3))}
+
+
+# Clips whose fitted fundamental is off the step frequency (a subharmonic or a short segment):
+# the Euler drift of item 5 (unfinished) and slow styles whose steady segment is short.
+OMEGA_OFF = {"walk_proud_001", "walk_proud_002", "walk_musical_002", "run_normal_001"}
+
+
+@needs_bandai
+def test_bandai_heel_strikes_and_omega(bandai_fits):
+    assert len(bandai_fits) == 75
+    no_strikes, off = [], []
+    for name, (_, f) in bandai_fits.items():
+        if f.alignment != "left_heel_strike" or not f.left_heel_strikes:
+            no_strikes.append(name)
+        if not (np.isfinite(f.omega_steps) and abs(f.omega_steps / f.omega_fit - 1) <= 0.05):
+            off.append(name)
+    assert len(no_strikes) <= 3 and set(no_strikes) <= OMEGA_OFF, no_strikes
+    assert set(off) <= OMEGA_OFF, sorted(set(off) - OMEGA_OFF)
+
+
+@needs_bandai
+def test_bandai_steady_segment_is_steady(bandai_fits):
+    """The steady segment's mean speed is at least 0.85 of its largest smoothed (+-0.5 s) speed."""
+    ratios = {}
+    for name, (m, f) in bandai_fits.items():
+        bm = f.body_map
+        a, b = steady_segment(m, body_map=bm)
+        assert (a, b) == (f.frame_start, f.frame_stop)
+        p = world_pose(m, bm.pelvis)[0][:, [0, 2]]
+        w = 15
+        i = np.arange(a, b)
+        hi, lo = np.minimum(i + w, len(p) - 1), np.maximum(i - w, 0)
+        smoothed = np.linalg.norm(p[hi] - p[lo], axis=1) / ((hi - lo) * m.frame_time_s)
+        mean = np.linalg.norm(p[b - 1] - p[a]) / ((b - 1 - a) * m.frame_time_s)
+        ratios[name] = mean / smoothed.max()
+    low = {n: round(r, 3) for n, r in ratios.items() if r < 0.85}
+    assert not low, low
