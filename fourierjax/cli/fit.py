@@ -164,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
                 out.mkdir(parents=True, exist_ok=True)
             prov = dict(row, fourierjax_version=__version__, command="fit")
             model_io.save_model(target, fit.model, motion=motion, provenance=prov,
-                                alignment=fit.alignment)
+                                alignment=fit.alignment, body_map=fit.body_map)
             row["model"] = str(target)
     if args.json:
         print(json.dumps(rows))
