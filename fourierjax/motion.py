@@ -158,6 +158,7 @@ def steady_segment(
     max_turn_deg_s: float = 30.0,
     min_duration_s: float = 0.5,
     turn_window_s: float = 1.0,
+    trim_fraction: float = 0.9,
 ) -> tuple[int, int]:
     """The longest steady, straight stretch of a clip: frames ``[start, stop)``.
 
@@ -166,8 +167,11 @@ def steady_segment(
     in-step sway); a frame is steady when its smoothed speed is at least
     ``min_speed_fraction`` of the clip's 90th-percentile speed and its heading, of the velocity
     smoothed over ``+-turn_window_s`` (a slow walk sways by 20 degrees each step), turns slower
-    than ``max_turn_deg_s``. Clips that start from standing, stop, or walk back and forth (CMU
-    142_02, 142_08) keep their longest steady run; if no run lasts ``min_duration_s`` the whole
+    than ``max_turn_deg_s``. The run's ends are then trimmed while their smoothed speed is
+    under ``trim_fraction`` of the run's median (the acceleration from a standing start and the
+    deceleration to a stop: Bandai clips start at 0.6-0.9 of their speed). Clips that start
+    from standing, stop, or walk back and forth (CMU 142_02, 142_08) keep their longest steady
+    run; if no run lasts ``min_duration_s`` the whole
     clip is returned. (Capture glitches inside it are masked by ``fit_motions``, see
     :func:`glitch_frames`.)
 
@@ -204,7 +208,15 @@ def steady_segment(
             start = None
     if (best[1] - best[0]) * motion.frame_time_s < min_duration_s:
         return 0, F
-    return best
+    a, b = best
+    med = np.median(speed[a:b])
+    while a < b - 1 and speed[a] < trim_fraction * med:
+        a += 1
+    while b - 1 > a and speed[b - 1] < trim_fraction * med:
+        b -= 1
+    if (b - a) * motion.frame_time_s < min_duration_s:
+        return best
+    return a, b
 
 
 # ----------------------------------------------------------------------------- clip fitting
