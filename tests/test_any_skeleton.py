@@ -192,3 +192,17 @@ def test_winding_joints_leave_the_omega_search():
         x, n = features_from_motion(m[a:b])
         if name != "142_02":
             assert _search_weights(x, n, np.ones(len(x), bool)) is None, name
+
+
+@needs_bandai
+def test_bandai_hip_flexion_fallback():
+    """Without contacts the map's left hip aligns the phase: peak flexion (the knee ahead along the
+    facing) comes just before the heel strike on walks (0.01-0.08 cycle), earlier on runs (0.15).
+    (On walk-back it is 0.41 cycle away: walking backwards the foot lands at full extension.)"""
+    names = ["walk_normal_001", "walk_old_002", "run_old_001"]
+    ms = [read_bvh(BANDAI / f"dataset-1_{n}.bvh") for n in names]
+    strikes, fallback = fit_motions(ms, 3), fit_motions(ms, 3, use_contacts=False)
+    for n, m, s, f in zip(names, ms, strikes, fallback):
+        assert s.alignment == "left_heel_strike" and f.alignment == "left_hip_flexion", n
+        d = (f.phase_shift - s.phase_shift) / (2 * np.pi)
+        assert abs((d + 0.5) % 1.0 - 0.5) < (0.2 if n.startswith("run") else 0.1), (n, d)
