@@ -65,9 +65,9 @@ def convention_fits():
     return dict(zip(("cmu", *CONVENTIONS), fit_motions(ms, 3)))
 
 
-# "bandai" (ZXY channels on turned joint frames) still differs in the fitted ω: the Euler
-# unwrapping of the rewritten channels (issue #20 item 5, unfinished); its heel strikes, ω from
-# steps and root advance agree.
+# (The "bandai" rewrite's fitted ω was 0.75 Hz against 0.92 before joints whose Euler angles wind
+# near gimbal lock left the ω search; its position VE stays lower, 0.73 against 0.99 on 07_01,
+# because those channels wind.)
 @pytest.mark.parametrize("convention", CONVENTIONS)
 def test_conventions_give_the_cmu_results(convention_fits, convention):
     ref, r = convention_fits["cmu"], convention_fits[convention]
@@ -78,10 +78,9 @@ def test_conventions_give_the_cmu_results(convention_fits, convention):
     scale = 0.0564 if convention == "metres" else 1.0
     advance = float(np.asarray(r.model.offset)[1]) / scale  # root.vz: the mean speed forward
     assert advance == pytest.approx(float(np.asarray(ref.model.offset)[1]), rel=0.01)
-    if convention != "bandai":
-        assert r.omega_fit == pytest.approx(ref.omega_fit, rel=0.01)
-        d = np.angle(np.exp(1j * (r.phase_shift - ref.phase_shift)))
-        assert abs(d) < 0.01 * 2 * np.pi  # aligned phases within 1% of a cycle
+    assert r.omega_fit == pytest.approx(ref.omega_fit, rel=0.01)
+    d = np.angle(np.exp(1j * (r.phase_shift - ref.phase_shift)))
+    assert abs(d) < 0.01 * 2 * np.pi  # aligned phases within 1% of a cycle
 
 
 @needs_bandai
