@@ -205,3 +205,17 @@ def test_bandai_hip_flexion_fallback():
         assert s.alignment == "left_heel_strike" and f.alignment == "left_hip_flexion", n
         d = (f.phase_shift - s.phase_shift) / (2 * np.pi)
         assert abs((d + 0.5) % 1.0 - 0.5) < (0.2 if n.startswith("run") else 0.1), (n, d)
+
+
+@needs_bandai
+def test_moving_joint_above_the_trajectory_is_refused():
+    import dataclasses
+
+    m = read_bvh(BANDAI / "dataset-1_walk_normal_001.bvh")
+    bm = infer_body_map(m)
+    assert bm.name(bm.trajectory) == "Hips" and bm.name(m.topology.parents[bm.trajectory]) == "joint_Root"
+    channels = m.channels.copy()
+    channels[:, 2] += np.linspace(0.0, 50.0, len(channels))  # joint_Root.Zposition drifts
+    moved = dataclasses.replace(m, channels=channels)
+    with pytest.raises(UserError, match="'joint_Root', above the trajectory joint 'Hips', moves"):
+        features_from_motion(moved, body_map=bm)
