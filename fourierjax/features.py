@@ -467,7 +467,7 @@ def channel_model(
     if root_xz.ndim == 0 or root_xz.shape[-1] != 2:
         raise UserError(f"channel_model: `root_xz` must be [..., 2] (X, Z), got shape {root_xz.shape}")
     feature = {n: i for i, n in enumerate(model.channel_names)}
-    root = topo.names[0]
+    root = topo.names[_channel_model_root(template)]
     position = {f"{root}.Xposition": "root.vx", f"{root}.Yposition": "root.y",
                 f"{root}.Zposition": "root.vz"}  # fmt: skip
     names = topo.flat_channel_names
@@ -502,6 +502,27 @@ def channel_model(
     phase = jnp.where(full(constant[:, None], per_term), 0.0, phase)
     omega = jnp.broadcast_to(omega, lead)
     return FourierModel(offset, amp, phase, omega, "euler", names)
+
+
+def _channel_model_root(template) -> int:
+    """The joint whose position channels take the travel in `channel_model`: the body map's
+    pelvis, which must carry it (the trajectory joint) below joints at rest (Bandai: `Hips` under a
+    `joint_Root` at the origin; CMU: joint 0)."""
+    rj = root_joints(template)
+    topo = template.topology
+    if rj.pelvis != rj.trajectory:
+        raise UserError(
+            f"channel_model: the travel is on {topo.names[rj.trajectory]!r}, above the pelvis "
+            f"{topo.names[rj.pelvis]!r}: a linear model of the BVH channels needs it on the pelvis")
+    frame = np.array([0]) if template.num_frames else None
+    for j in _ancestors(topo, rj.pelvis):
+        with jax.ensure_compile_time_eval():  # the template is concrete, also under a trace
+            t, q = ((np.asarray(template.offsets[j], np.float64)[None], np.array([[1.0, 0, 0, 0]]))
+                    if frame is None else _local_transform(template, j, frame))
+        if np.abs(t).max() > 1e-9 or np.abs(np.abs(q[0, 0]) - 1.0) > 1e-9:
+            raise UserError(f"channel_model: joint {topo.names[j]!r} above the pelvis is not at the "
+                            "origin with no rotation in the template")
+    return rj.pelvis
 
 
 def _layout_tables(topology, representation):

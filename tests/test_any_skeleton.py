@@ -219,3 +219,28 @@ def test_moving_joint_above_the_trajectory_is_refused():
     moved = dataclasses.replace(m, channels=channels)
     with pytest.raises(UserError, match="'joint_Root', above the trajectory joint 'Hips', moves"):
         features_from_motion(moved, body_map=bm)
+
+
+@needs_bandai
+def test_bandai_channel_model_animates_the_pelvis():
+    """`channel_model` writes the travel into the pelvis's position channels (Hips, under a
+    `joint_Root` at rest), and equals `motion_from_features` on every other channel."""
+    import jax.numpy as jnp
+
+    from fourierjax import fourier
+    from fourierjax.features import channel_model
+
+    m = read_bvh(BANDAI / "dataset-1_walk_normal_001.bvh")
+    f = fit_motions([m], 3)[0]
+    t = jnp.arange(60) * m.frame_time_s
+    ch = np.asarray(fourier.synthesize(channel_model(m, f.model), t))
+    x = np.asarray(fourier.synthesize(f.model, t), np.float64)
+    ref = motion_from_features(m, x, f.model.channel_names, m.frame_time_s, body_map=f.body_map).channels
+    names = m.topology.flat_channel_names
+    treadmill = [names.index("Hips.Xposition"), names.index("Hips.Zposition")]
+    others = np.setdiff1d(np.arange(len(names)), treadmill)
+    np.testing.assert_allclose(ch[:, others], ref[:, others], atol=2e-3)
+    assert np.ptp(ch[:, names.index("Hips.Zposition")]) < 20  # a treadmill: sways, does not travel
+    loop = read_bvh(BANDAI / "dataset-1_walk_normal_002.bvh")  # the travel on joint_Root
+    with pytest.raises(UserError, match="above the pelvis"):
+        channel_model(loop, fit_motions([loop], 2)[0].model)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 
+import jax
 import numpy as np
 
 from fourierjax import _jit, rotations
@@ -162,8 +163,9 @@ def root_joints(motion, body_map=None) -> RootJoints:
     from fourierjax.body import BodyMapError, infer_body_map
 
     if body_map is None:
-        try:
-            body_map = infer_body_map(motion)
+        try:  # the motion is concrete: infer eagerly even when called under a trace
+            with jax.ensure_compile_time_eval():
+                body_map = infer_body_map(motion)
         except BodyMapError:
             return RootJoints(0, 0)
     bm = body_map
@@ -177,7 +179,8 @@ def root_joints(motion, body_map=None) -> RootJoints:
     if traj != pelvis and traj not in ancestors(topo, pelvis):
         raise UserError(f"body map: the trajectory joint {topo.names[traj]!r} is neither the pelvis "
                         f"{topo.names[pelvis]!r} nor one of its ancestors")
-    return RootJoints(traj, pelvis, _facing_local(motion, bm))
+    with jax.ensure_compile_time_eval():
+        return RootJoints(traj, pelvis, _facing_local(motion, bm))
 
 
 def _relative_position(motion, base: int, joint: int) -> np.ndarray:
