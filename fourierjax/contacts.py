@@ -40,16 +40,18 @@ class FootPoints(NamedTuple):
 
 def foot_points(
     topology: Topology,
-    feet: tuple[tuple[str, ...], tuple[str, ...]] = CMU_FEET,
+    feet=CMU_FEET,
     *,
     end_sites: bool = True,
 ) -> FootPoints:
-    """Find the foot points of a skeleton by joint name.
+    """The foot points of a skeleton: from its body map, or by joint name.
 
     Arguments:
         topology: a `fourierjax.skeleton.Topology` (uses `names` and `end_site_parents`).
-        feet: `(left_names, right_names)`, the joints of each foot, ankle first. Defaults to
-            the CMU naming (`LeftFoot, LeftToeBase` / `RightFoot, RightToeBase`).
+        feet: a `fourierjax.body.BodyMap` of the skeleton (its `feet`: any rig; the points
+            already hold the toe tip, so `end_sites` is not used), or `(left_names,
+            right_names)`, the joints of each foot, ankle first. Defaults to the CMU naming
+            (`LeftFoot, LeftToeBase` / `RightFoot, RightToeBase`).
         end_sites: also take the End Site(s) hanging from the last joint of each foot (the
             toe tip, the lowest point of a flat foot).
 
@@ -59,6 +61,16 @@ def foot_points(
     Raises `UserError` naming the missing joints and the skeleton's joints when the skeleton
     does not use the names asked for (pass `feet=` for other skeletons).
     """
+    if hasattr(feet, "left") and hasattr(feet, "feet"):  # a BodyMap
+        bm = feet
+        if tuple(bm.joint_names) != tuple(topology.names):
+            raise UserError("foot_points: the body map was made for another skeleton (its joint names differ)")
+        left, right = bm.feet
+        if len(left) != len(right):
+            raise UserError(f"foot_points: the body map's feet have different point counts: "
+                            f"{bm.left.foot_point_names} vs {bm.right.foot_point_names}")
+        return FootPoints(tuple(left), tuple(right), (tuple(bm.left.foot_point_names),
+                                                      tuple(bm.right.foot_point_names)))
     names = tuple(topology.names)
     num_joints = len(names)
     es_parents = tuple(getattr(topology, "end_site_parents", ()))

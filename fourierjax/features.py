@@ -19,16 +19,25 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 from fourierjax import rotations
 from fourierjax._checks import number
 from fourierjax._fourier._layout import (
+    ancestors as _ancestors,
+)
+from fourierjax._fourier._layout import (
     as_f64 as _np,
 )
 from fourierjax._fourier._layout import (
-    root_pose as _root_pose,
+    local_transform as _local_transform,
+)
+from fourierjax._fourier._layout import (
+    root_joints,
 )
 from fourierjax._fourier._layout import (
     rot as _rot,
 )
 from fourierjax._fourier._layout import (
     rotation_joints as _rotation_joints,
+)
+from fourierjax._fourier._layout import (
+    world_pose as _world_pose,
 )
 from fourierjax._fourier._layout import (
     yaw_quat as _yaw_quat,
@@ -87,17 +96,43 @@ def channel_names_for(topology: Topology, representation: str) -> tuple[str, ...
     return tuple(names)
 
 
-def heading_of(motion) -> float:
-    """Circular mean (radians) of the root's facing yaw: its local +Z projected on the floor.
+def heading_of(motion, *, body_map=None) -> float:
+    """Circular mean (radians) of the body's facing yaw, from the pelvis's world orientation.
 
-    ``psi = atan2(f_x, f_z)``; a rotation by ``psi`` about +Y takes +Z to the facing direction.
+    The facing is the pelvis-frame direction ``(left hip - right hip) x up`` of the body map
+    (CMU: the pelvis's local +Z), turned to world axes each frame and projected on the floor;
+    ``psi = atan2(f_x, f_z)``, so a rotation by ``psi`` about +Y takes +Z to the facing.
+
+    Arguments:
+        motion: a Motion (Y up).
+        body_map: the clip's `fourierjax.body.BodyMap`; None infers it.
+
+    Returns:
+        The heading in radians.
     """
-    _, q = _root_pose(motion)
-    f = _rot("quat_apply", q, np.tile([0.0, 0.0, 1.0], (len(q), 1)))
+    rj = root_joints(motion, body_map)
+    _, q = _world_pose(motion, rj.pelvis)
+    f = _rot("quat_apply", q, np.tile(np.array(rj.facing_local), (len(q), 1)))
     s, c = f[:, 0].sum(), f[:, 2].sum()
     if np.hypot(s, c) < 1e-9 * len(f):
         return 0.0
     return float(np.arctan2(s, c))
+
+
+def _check_static_above(motion, rj) -> None:
+    """Joints above the trajectory joint are written back at the template's values: refuse a
+    clip where they move."""
+    topo = motion.topology
+    for j in _ancestors(topo, rj.trajectory):
+        base = topo.channel_offsets[j]
+        n = len(topo.channels[j])
+        if n and motion.num_frames > 1:
+            span = float(np.ptp(motion.channels[:, base:base + n], axis=0).max())
+            if span > 1e-6 * (1.0 + float(np.abs(motion.channels[:, base:base + n]).max())):
+                raise UserError(
+                    f"{motion.source or 'motion'}: joint {topo.names[j]!r}, above the trajectory joint "
+                    f"{topo.names[rj.trajectory]!r}, moves (its channels span {span:.4g}); the root "
+                    "features cannot be written back. Name the moving joint as `trajectory` in a body map")
 
 
 def make_euler_continuous(
@@ -159,9 +194,13 @@ def make_euler_continuous(
 
 def features_from_motion(
     motion, representation: str = "euler", heading_rad: float | None = None,
-    valid: Bool[ArrayLike, " F"] | None = None,
+    valid: Bool[ArrayLike, " F"] | None = None, *, body_map=None,
 ) -> tuple[Float[np.ndarray, "F C"], tuple[str, ...]]:
     """Fitting features of a clip: heading-frame root velocity and height, joint rotations.
+
+    The root features come from the world pose of the body map's pelvis (through FK of its
+    ancestors): its ground-plane velocity and height, and its orientation relative to the
+    heading, which replaces the pelvis's own rotation channels. On CMU the pelvis is joint 0.
 
     Arguments:
         motion: a ``fourierjax.io.bvh.Motion`` (at least 2 frames).
@@ -170,6 +209,7 @@ def features_from_motion(
             Tilmanne & Dutoit §2.1).
         heading_rad: yaw of the heading frame; default :func:`heading_of` the clip.
         valid: optional ``bool [F]``, False at capture glitches (Euler continuity skips them).
+        body_map: the clip's `fourierjax.body.BodyMap`; None infers it.
     Returns:
         ``(features [F, C] float64, channel_names)``: ``root.vx, root.vz`` (file units/s, by
         central differences), ``root.y`` (file units), then rotations in radians.
@@ -177,9 +217,11 @@ def features_from_motion(
     names = channel_names_for(motion.topology, representation)
     if motion.num_frames < 2:
         raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
-    psi = (heading_of(motion) if heading_rad is None
+    rj = root_joints(motion, body_map)
+    _check_static_above(motion, rj)
+    psi = (heading_of(motion, body_map=body_map) if heading_rad is None
            else number(heading_rad, "features_from_motion: `heading_rad`"))
-    pos, q_root = _root_pose(motion)
+    pos, q_root = _world_pose(motion, rj.pelvis)
     c, s = np.cos(psi), np.sin(psi)
     # World -> heading frame: rotate by -psi about +Y.
     x_h = c * pos[:, 0] - s * pos[:, 2]
@@ -189,31 +231,34 @@ def features_from_motion(
     q_rel = _rot("quat_multiply", np.tile(_yaw_quat(-psi), (len(q_root), 1)), q_root)
     cols = [vx, vz, pos[:, 1]]
     joints = _rotation_joints(motion.topology)
-    blocks = _joint_rotations(motion, joints, representation, root_quat=q_rel, valid=valid)
+    blocks = _joint_rotations(motion, joints, representation, root_quat=q_rel, root_joint=rj.pelvis,
+                              valid=valid)
     for j, _, _ in joints:
         cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
     return np.stack(cols, axis=1), names
 
 
-def _joint_rotations(motion, joints, representation: str, *, root_quat=None,
+def _joint_rotations(motion, joints, representation: str, *, root_quat=None, root_joint: int = 0,
                      valid=None) -> dict[int, np.ndarray]:
     """Rotation of each of ``joints`` (from :func:`_rotation_joints`) over the clip, ``{joint:
     [F, 3]}`` radians: continuous Euler angles in the file's order, or continuous exponential
-    maps. ``root_quat [F, 4]`` replaces the root's (joint 0) rotation when given."""
+    maps. ``root_quat [F, 4]`` replaces the rotation of ``root_joint`` (the pelvis) when given."""
     blocks: dict[int, np.ndarray] = {}
     # Joints sharing a rotation order are converted together: [F, J_g, 3].
     for order in dict.fromkeys(o for _, o, _ in joints):
         group = [(j, idx) for j, o, idx in joints if o == order]
         e = np.radians(motion.channels[:, np.array([idx for _, idx in group])])
-        root = group[0][0] == 0 and root_quat is not None
-        if root:  # the root: e.g. its orientation relative to the heading frame
-            e[:, 0] = _rot("euler_from_quat", root_quat, order=order)
+        members = [j for j, _ in group]
+        root = root_quat is not None and root_joint in members
+        r = members.index(root_joint) if root else 0
+        if root:  # the pelvis: e.g. its orientation relative to the heading frame
+            e[:, r] = _rot("euler_from_quat", root_quat, order=order)
         if representation == "euler":
             ang = make_euler_continuous(e, order, valid)
         else:
             q = _rot("quat_from_euler", e, order=order)
             if root:
-                q[:, 0] = root_quat
+                q[:, r] = root_quat
             ang = _rot("make_expmap_continuous", _rot("expmap_from_quat", q))
         for k, (j, _) in enumerate(group):
             blocks[j] = ang[:, k]
@@ -261,18 +306,23 @@ def motion_from_features(
     *,
     heading_rad: float = 0.0,
     start_xz: tuple[float, float] = (0.0, 0.0),
+    body_map=None,
 ):
     """A writeable Motion from features (e.g. ``synthesize`` output) on a template's skeleton.
 
     The root position is integrated from ``root.vx, root.vz`` (trapezoid rule, starting at
     ``start_xz``) in the heading frame rotated by ``heading_rad`` about +Y (0: walking along +Z);
-    its height is ``root.y``. Rotations are converted back to the file's Euler orders in degrees.
-    Position channels of non-root joints keep the template's first-frame values.
+    its height is ``root.y``. This is the world pose of the body map's pelvis: the travel goes
+    into the trajectory joint's position channels (in its parent's frame) and the orientation
+    into the pelvis's rotation channels, with the joints above the pelvis at the template's
+    first-frame values (CMU: both are joint 0). Rotations are converted back to the file's
+    Euler orders in degrees. Other position channels keep the template's first-frame values.
 
     Arguments:
         template: Motion supplying topology, offsets and channel layout.
         features: ``[F, C]``; channel_names: their names (the layout of :func:`channel_names_for`).
         frame_time_s: seconds per frame of the new motion.
+        body_map: the template's `fourierjax.body.BodyMap`; None infers it.
     Returns:
         Motion with ``F`` frames.
     Raises:
@@ -308,19 +358,55 @@ def motion_from_features(
     pz = np.concatenate([[0.0], np.cumsum(0.5 * (vz[1:] + vz[:-1]) * frame_time_s)])
     c, s = np.cos(heading_rad), np.sin(heading_rad)
     world = {"X": start_xz[0] + c * px + s * pz, "Y": y, "Z": start_xz[1] - s * px + c * pz}
+    rj = root_joints(template, body_map)
+    pelvis, traj = rj.pelvis, rj.trajectory
+    # The pelvis's world pose is written back through the trajectory joint's position channels
+    # and the pelvis's rotation channels; the joints above the pelvis keep the template's values.
+    general = not (pelvis == traj == 0)
+    above = set(_ancestors(topo, pelvis))
+    if general:
+        first = template if template.num_frames else None
+        tq = {j: _local_transform(first, j, np.array([0])) if first is not None else
+              (np.asarray(template.offsets[j], np.float64)[None], np.array([[1.0, 0, 0, 0]]))
+              for j in [*_ancestors(topo, pelvis), pelvis]}
+        pre_t, pre_q = np.zeros((1, 3)), np.array([[1.0, 0.0, 0.0, 0.0]])  # world of traj's parent
+        for j in _ancestors(topo, traj):
+            pre_t = pre_t + _rot("quat_apply", pre_q, tq[j][0])
+            pre_q = _rot("quat_multiply", pre_q, tq[j][1])
+        chain = [*[j for j in _ancestors(topo, pelvis) if j not in _ancestors(topo, traj)], pelvis]
+        # Pelvis in the trajectory joint's parent frame: t_0 + q_0 (t_1 + q_1 (... + t_pelvis)),
+        # chain = (trajectory, ..., pelvis); all but t_0 at the template's values.
+        tail = np.zeros((1, 3))
+        if len(chain) > 1:
+            tail = tq[pelvis][0]
+            for j in chain[-2:0:-1]:
+                tail = tq[j][0] + _rot("quat_apply", tq[j][1], tail)
+            tail = _rot("quat_apply", tq[traj][1], tail)
+        rot_above = pre_q
+        for j in chain[:-1]:
+            rot_above = _rot("quat_multiply", rot_above, tq[j][1])
+        conj = pre_q * np.array([1.0, -1.0, -1.0, -1.0])
+        p_world = np.stack([world["X"], world["Y"], world["Z"]], axis=1)
+        t_traj = _rot("quat_apply", np.tile(conj, (F, 1)), p_world - pre_t) - tail
+        world = {"X": t_traj[:, 0], "Y": t_traj[:, 1], "Z": t_traj[:, 2]}
+        rot_above_inv = np.tile(rot_above * np.array([1.0, -1.0, -1.0, -1.0]), (F, 1))
     col = 3
     for j, order, idx in _rotation_joints(topo):
         ang = x[:, col : col + 3]
         col += 3
-        if j == 0 or rep == "expmap":
+        if j in above:
+            continue  # the template's values
+        if j == pelvis or rep == "expmap":
             q = (_rot("quat_from_euler", ang, order=order) if rep == "euler"
                  else _rot("quat_from_expmap", ang))
-            if j == 0:
+            if j == pelvis:
                 q = _rot("quat_multiply", np.tile(_yaw_quat(heading_rad), (F, 1)), q)
+                if general:
+                    q = _rot("quat_multiply", rot_above_inv, q)
             ang = make_euler_continuous(_rot("euler_from_quat", q, order=order), order)
         out[:, idx] = np.degrees(ang)
-    base = topo.channel_offsets[0]
-    for k, ch in enumerate(topo.channels[0]):
+    base = topo.channel_offsets[traj]
+    for k, ch in enumerate(topo.channels[traj]):
         if ch.endswith("position"):
             out[:, base + k] = world[ch[0]]
     return dataclasses.replace(template, channels=out, frame_time_s=float(frame_time_s),
@@ -381,7 +467,7 @@ def channel_model(
     if root_xz.ndim == 0 or root_xz.shape[-1] != 2:
         raise UserError(f"channel_model: `root_xz` must be [..., 2] (X, Z), got shape {root_xz.shape}")
     feature = {n: i for i, n in enumerate(model.channel_names)}
-    root = topo.names[0]
+    root = topo.names[_channel_model_root(template)]
     position = {f"{root}.Xposition": "root.vx", f"{root}.Yposition": "root.y",
                 f"{root}.Zposition": "root.vz"}  # fmt: skip
     names = topo.flat_channel_names
@@ -418,6 +504,27 @@ def channel_model(
     return FourierModel(offset, amp, phase, omega, "euler", names)
 
 
+def _channel_model_root(template) -> int:
+    """The joint whose position channels take the travel in `channel_model`: the body map's
+    pelvis, which must carry it (the trajectory joint) below joints at rest (Bandai: `Hips` under a
+    `joint_Root` at the origin; CMU: joint 0)."""
+    rj = root_joints(template)
+    topo = template.topology
+    if rj.pelvis != rj.trajectory:
+        raise UserError(
+            f"channel_model: the travel is on {topo.names[rj.trajectory]!r}, above the pelvis "
+            f"{topo.names[rj.pelvis]!r}: a linear model of the BVH channels needs it on the pelvis")
+    frame = np.array([0]) if template.num_frames else None
+    for j in _ancestors(topo, rj.pelvis):
+        with jax.ensure_compile_time_eval():  # the template is concrete, also under a trace
+            t, q = ((np.asarray(template.offsets[j], np.float64)[None], np.array([[1.0, 0, 0, 0]]))
+                    if frame is None else _local_transform(template, j, frame))
+        if np.abs(t).max() > 1e-9 or np.abs(np.abs(q[0, 0]) - 1.0) > 1e-9:
+            raise UserError(f"channel_model: joint {topo.names[j]!r} above the pelvis is not at the "
+                            "origin with no rotation in the template")
+    return rj.pelvis
+
+
 def _layout_tables(topology, representation):
     """Static gather tables: per order, (joints, feature column triples)."""
     groups: dict[str, tuple[list[int], list[list[int]]]] = {}
@@ -432,16 +539,18 @@ def _layout_tables(topology, representation):
 
 
 def local_pose_from_features(
-    skeleton: Skeleton, features: Float[ArrayLike, " C"], representation: str
+    skeleton: Skeleton, features: Float[ArrayLike, " C"], representation: str, pelvis: int = 0
 ) -> tuple[Float[Array, "J 3"], Float[Array, "J 4"]]:
     """Local translations [J, 3] and rotations [J, 4] of one feature frame (pure JAX).
 
-    The root sits at the origin (root-relative) with its heading-frame orientation; joints
-    without rotation channels keep the identity.
+    The pelvis sits at the origin (root-relative) with its heading-frame orientation (its
+    features are its world orientation): the joints above it collapse onto the origin with the
+    identity rotation. Joints without rotation channels keep the identity.
 
     Arguments:
         skeleton: ``fourierjax.skeleton.Skeleton``; features: ``[C]`` one frame;
-        representation: the features' representation.
+        representation: the features' representation;
+        pelvis: the body map's pelvis (``BodyMap.pelvis``; CMU: joint 0), a static int.
     Returns:
         ``(translations [J, 3], quats [J, 4])`` for ``kinematics.forward_kinematics``.
     """
@@ -454,24 +563,29 @@ def local_pose_from_features(
         q = rotations.quat_from_expmap(ang) if key == "expmap" else rotations.quat_from_euler(
             ang, key)
         quats = quats.at[js].set(q)
-    translations = jnp.asarray(skeleton.offsets, features.dtype).at[0].set(0.0)
+    translations = jnp.asarray(skeleton.offsets, features.dtype).at[pelvis].set(0.0)
+    above = _ancestors(topo, pelvis)
+    if above:
+        translations = translations.at[jnp.asarray(above)].set(0.0)
+        quats = quats.at[jnp.asarray(above)].set(jnp.asarray([1.0, 0.0, 0.0, 0.0], features.dtype))
     return translations, quats
 
 
 def root_relative_positions(
-    skeleton: Skeleton, features: Float[ArrayLike, "T C"], representation: str
+    skeleton: Skeleton, features: Float[ArrayLike, "T C"], representation: str, pelvis: int = 0
 ) -> Float[Array, "T J 3"]:
-    """Joint positions [T, J, 3] with the root at the origin (heading frame), through FK.
+    """Joint positions [T, J, 3] with the pelvis at the origin (heading frame), through FK.
 
     Arguments:
-        skeleton: the clip's Skeleton; features: ``[T, C]``; representation: of the features.
+        skeleton: the clip's Skeleton; features: ``[T, C]``; representation: of the features;
+        pelvis: the body map's pelvis (static int; CMU: joint 0).
     Returns:
         ``[T, J, 3]`` file units.
     """
     from fourierjax.kinematics import forward_kinematics
 
     def one(f):
-        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f,
-                                                                      representation)).positions
+        return forward_kinematics(skeleton, *local_pose_from_features(skeleton, f, representation,
+                                                                      pelvis)).positions
 
     return jax.vmap(one)(jnp.asarray(features))

@@ -15,9 +15,10 @@ from jaxtyping import ArrayLike, Bool, Float, Int
 
 from fourierjax import _jit
 from fourierjax._fourier._layout import bucket as _bucket
-from fourierjax._fourier._layout import root_pose as _root_pose
+from fourierjax._fourier._layout import root_joints as _root_joints
 from fourierjax._fourier._layout import rot as _rot
 from fourierjax._fourier._layout import rotation_joints as _rotation_joints
+from fourierjax._fourier._layout import world_pose as _world_pose
 from fourierjax._fourier._model import FourierModel
 from fourierjax.errors import UserError
 from fourierjax.features import (  # noqa: F401  (re-exported: their old home)
@@ -72,7 +73,7 @@ _root_relative_positions_jit = _jit.filter_jit(root_relative_positions)
 
 
 def model_joint_positions(
-    model: FourierModel, skeleton: Skeleton, phases: Float[ArrayLike, " K"]
+    model: FourierModel, skeleton: Skeleton, phases: Float[ArrayLike, " K"], pelvis: int = 0
 ) -> Float[np.ndarray, "K J 3"]:
     """Joint positions of a Fourier gait model's pose at cycle phases (Unuma 1995 eq. 1).
 
@@ -82,21 +83,33 @@ def model_joint_positions(
 
     Arguments:
         model: a ``FourierModel`` with the gait channel layout (:func:`channel_names_for`);
-        skeleton: the Skeleton the model was fitted on; phases: ``[K]`` radians of the cycle.
+        skeleton: the Skeleton the model was fitted on; phases: ``[K]`` radians of the cycle;
+        pelvis: the body map's pelvis (``BodyMap.pelvis``; CMU: joint 0).
     Returns:
         ``[K, J, 3]`` file units.
     """
     from fourierjax import fourier
 
     feats = fourier.synthesize_phase(model, jnp.asarray(phases, float))
-    p = np.asarray(_root_relative_positions_jit(skeleton, feats, model.representation))
+    p = np.asarray(_root_relative_positions_jit(skeleton, feats, model.representation, pelvis))
     height = np.asarray(feats[:, ROOT_CHANNELS.index("root.y")])
     return p + height[:, None, None] * np.array([0.0, 1.0, 0.0])
 
 
-def _hip_flexion_phase(model, motion, channel: int):
+def _hip_flexion_channel(model, names, bm) -> int | None:
+    """The left hip's feature channel with the largest fundamental (its flexion), or None."""
+    hip = bm.name(bm.left.hip) + "."
+    cands = [i for i, n in enumerate(names) if n.startswith(hip)]
+    if not cands:
+        return None
+    amp = np.asarray(model.amplitude)[np.array(cands), 0]
+    return cands[int(np.argmax(amp))]
+
+
+def _hip_flexion_phase(model, motion, channel: int, bm):
     """Phase of the left hip's peak flexion: the extreme of the hip channel's fundamental at
-    which the left knee is further forward (+Z in the heading frame) than at the other.
+    which the body map's left knee is further forward (+Z in the heading frame, which is where
+    the body faces) than at the other.
 
     The channel's peak alone (``fourier.channel_event_phase``) is not enough: whether flexion is
     its maximum or its minimum depends on the skeleton's axes (on CMU skeletons flexion is
@@ -105,13 +118,9 @@ def _hip_flexion_phase(model, motion, channel: int):
     from fourierjax import fourier as fr
 
     peak = float(fr.channel_event_phase(model, channel))
-    topo = motion.topology
-    hip = topo.index("LeftUpLeg")
-    knees = topo.children(hip)
-    if not knees:
-        return jnp.asarray(peak)
-    p = model_joint_positions(model, motion.skeleton(), np.array([peak, peak + np.pi]))
-    ahead = p[:, knees[0], 2] - p[:, hip, 2]
+    hip, knee = bm.left.hip, bm.left.knee
+    p = model_joint_positions(model, motion.skeleton(), np.array([peak, peak + np.pi]), bm.pelvis)
+    ahead = p[:, knee, 2] - p[:, hip, 2]
     return jnp.asarray(peak if ahead[0] >= ahead[1] else peak + np.pi)
 
 
@@ -143,26 +152,35 @@ def glitch_frames(
 def steady_segment(
     motion,
     *,
+    body_map=None,
     window_s: float = 0.5,
     min_speed_fraction: float = 0.75,
     max_turn_deg_s: float = 30.0,
     min_duration_s: float = 0.5,
+    turn_window_s: float = 1.0,
+    trim_fraction: float = 0.9,
 ) -> tuple[int, int]:
     """The longest steady, straight stretch of a clip: frames ``[start, stop)``.
 
-    The root's horizontal velocity is smoothed over ``+-window_s`` (which averages out the
+    The horizontal velocity of the body map's pelvis (world, through its ancestors: the
+    trajectory joint's travel; CMU: joint 0) is smoothed over ``+-window_s`` (which averages out the
     in-step sway); a frame is steady when its smoothed speed is at least
-    ``min_speed_fraction`` of the clip's 90th-percentile speed and its heading turns slower than
-    ``max_turn_deg_s``. Clips that start from standing, stop, or walk back and forth (CMU
-    142_02, 142_08) keep their longest steady run; if no run lasts ``min_duration_s`` the whole
+    ``min_speed_fraction`` of the clip's 90th-percentile speed and its heading, of the velocity
+    smoothed over ``+-turn_window_s`` (a slow walk sways by 20 degrees each step), turns slower
+    than ``max_turn_deg_s``. The run's ends are then trimmed while their smoothed speed is
+    under ``trim_fraction`` of the run's median (the acceleration from a standing start and the
+    deceleration to a stop: Bandai clips start at 0.6-0.9 of their speed). Clips that start
+    from standing, stop, or walk back and forth (CMU 142_02, 142_08) keep their longest steady
+    run; if no run lasts ``min_duration_s`` the whole
     clip is returned. (Capture glitches inside it are masked by ``fit_motions``, see
     :func:`glitch_frames`.)
 
     Arguments:
-        motion: a Motion. Returns: ``(start, stop)`` frame indices into ``motion``.
+        motion: a Motion (Y up); body_map: its `fourierjax.body.BodyMap` (None: inferred).
+    Returns: ``(start, stop)`` frame indices into ``motion``.
     """
     F = motion.num_frames
-    pos, _ = _root_pose(motion)
+    pos, _ = _world_pose(motion, _root_joints(motion, body_map).pelvis)
     p = pos[:, [0, 2]]
     w = max(1, int(round(window_s / motion.frame_time_s)))
     idx = np.arange(F)
@@ -170,7 +188,10 @@ def steady_segment(
     span = np.maximum(hi - lo, 1) * motion.frame_time_s
     v = (p[hi] - p[lo]) / span[:, None]
     speed = np.hypot(v[:, 0], v[:, 1])
-    heading = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+    wt = max(w, int(round(turn_window_s / motion.frame_time_s)))
+    thi, tlo = np.minimum(idx + wt, F - 1), np.maximum(idx - wt, 0)
+    vt = p[thi] - p[tlo]
+    heading = np.unwrap(np.arctan2(vt[:, 0], vt[:, 1]))
     turn = np.abs(np.gradient(heading, motion.frame_time_s)) if F > 1 else np.zeros(F)
     ref = np.percentile(speed, 90)
     if ref <= 0:
@@ -187,7 +208,15 @@ def steady_segment(
             start = None
     if (best[1] - best[0]) * motion.frame_time_s < min_duration_s:
         return 0, F
-    return best
+    a, b = best
+    med = np.median(speed[a:b])
+    while a < b - 1 and speed[a] < trim_fraction * med:
+        a += 1
+    while b - 1 > a and speed[b - 1] < trim_fraction * med:
+        b -= 1
+    if (b - a) * motion.frame_time_s < min_duration_s:
+        return best
+    return a, b
 
 
 # ----------------------------------------------------------------------------- clip fitting
@@ -207,7 +236,8 @@ class ClipFit:
     ``masked_frames`` counts capture-glitch frames left out of the fit (:func:`glitch_frames`).
     ``result`` is the clip's `fourier.FitStatus` name in lower case (``"successful"``, else e.g.
     ``"too_few_cycles"``; the model and metrics are then meaningless) and ``message`` says what
-    is wrong, naming the clip's file.
+    is wrong, naming the clip's file. ``body_map`` is the clip's `fourierjax.body.BodyMap` (None
+    for a skeleton without recognisable legs).
     """
 
     source: str | None
@@ -230,6 +260,7 @@ class ClipFit:
     masked_frames: int = 0
     result: str = "successful"
     message: str = ""
+    body_map: object = None
 
     @property
     def successful(self) -> bool:
@@ -271,23 +302,26 @@ class ClipFit:
         }
 
 
-def foot_positions_of(motion, points=None) -> Float[np.ndarray, "F P 3"]:
+def foot_positions_of(motion, points=None, *, body_map=None) -> Float[np.ndarray, "F P 3"]:
     """World positions of the foot points of every frame of a clip, through FK.
 
     Frames are padded to a few length buckets, so clips of similar lengths share one compiled
     FK.
 
     Arguments:
-        motion: a Motion; points: ``contacts.FootPoints`` (default:
-        ``contacts.foot_points(motion.topology)``, the CMU feet: ankle, toe, toe tip).
+        motion: a Motion; points: ``contacts.FootPoints`` (default: the body map's feet,
+        ``contacts.foot_points(motion.topology, body_map)``: ankle, toe, toe tip);
+        body_map: the clip's `fourierjax.body.BodyMap` (None: inferred when ``points`` is None).
     Returns:
         ``[F, 2, P, 3]`` (left, right) file units, ready for ``contacts.foot_contacts`` and
         ``contacts.estimate_ground``.
     """
     from fourierjax import contacts
+    from fourierjax.body import infer_body_map
     from fourierjax.kinematics import fk_frames
 
-    points = contacts.foot_points(motion.topology) if points is None else points
+    if points is None:
+        points = contacts.foot_points(motion.topology, body_map or infer_body_map(motion))
     F = motion.num_frames
     ch = np.concatenate([motion.channels, np.repeat(motion.channels[-1:], _bucket(F) - F, 0)])
     fk = fk_frames(motion.skeleton(), jnp.asarray(ch))
@@ -295,16 +329,27 @@ def foot_positions_of(motion, points=None) -> Float[np.ndarray, "F P 3"]:
                                                      points))[:F]
 
 
-def foot_contacts_of(motion) -> Bool[np.ndarray, "F 2"] | None:
-    """Foot contacts ``bool [F, 2]`` (left, right) of a clip: ``fourierjax.contacts`` on FK foot
-    points (ankle, toe, toe tip). None when the skeleton has no CMU-named feet."""
-    from fourierjax import contacts
+def foot_contacts_of(motion, *, body_map=None) -> Bool[np.ndarray, "F 2"] | None:
+    """Foot contacts ``bool [F, 2]`` (left, right) of a clip: ``fourierjax.contacts`` on FK of
+    the body map's foot points (ankle, toe, toe tip), about its up axis. None when the skeleton
+    has no body map (no legs can be found).
 
-    try:
-        points = contacts.foot_points(motion.topology)
-    except UserError:
-        return None
-    return contacts.foot_contacts(foot_positions_of(motion, points), motion.frame_time_s)
+    Arguments:
+        motion: a Motion; body_map: its `fourierjax.body.BodyMap` (None: inferred).
+    Returns:
+        ``bool [F, 2]`` or None.
+    """
+    from fourierjax import contacts
+    from fourierjax.body import BodyMapError, infer_body_map
+
+    if body_map is None:
+        try:
+            body_map = infer_body_map(motion)
+        except BodyMapError:
+            return None
+    points = contacts.foot_points(motion.topology, body_map)
+    return contacts.foot_contacts(foot_positions_of(motion, points), motion.frame_time_s,
+                                  up_axis=body_map.up_axis)
 
 
 def _steps(contacts_lr, frame_time_s):
@@ -326,19 +371,51 @@ def _steps(contacts_lr, frame_time_s):
     return left, right, float(2 * np.pi / (2 * step)) if step > 0 else float("nan")
 
 
-def _position_ve(skeleton, representation, x, xhat, mask):
-    return _position_ve_jit(skeleton, x, xhat, mask, representation)
+def _position_ve(skeleton, representation, x, xhat, mask, pelvis=0):
+    return _position_ve_jit(skeleton, x, xhat, mask, representation, pelvis)
 
 
-def _position_ve_impl(skeleton, x, xhat, mask, representation):
+def _position_ve_impl(skeleton, x, xhat, mask, representation, pelvis):
     from fourierjax.fourier import variance_explained
 
-    p = root_relative_positions(skeleton, x, representation)
-    ph = root_relative_positions(skeleton, xhat, representation)
+    p = root_relative_positions(skeleton, x, representation, pelvis)
+    ph = root_relative_positions(skeleton, xhat, representation, pelvis)
     return variance_explained(p, ph, mask)
 
 
 _position_ve_jit = _jit.filter_jit(_position_ve_impl)
+
+
+#: A joint whose continuous Euler channels span more than this (radians) passes near gimbal
+#: lock: its first and third angles wind around the pole (a Bandai `Spine`: 1,680 degrees).
+_WINDING_SPAN = np.pi
+
+
+def _search_weights(x, names, keep) -> tuple[float, ...] | None:
+    """Channel weights of the ω search: ``fourier.fit_batch``'s default (1 for rotations, 0 for
+    ``root.*``), and 0 for every channel of a joint whose Euler angles wind near gimbal lock
+    (their spectrum is the winding, not the gait). None when no joint winds (the default)."""
+    from fourierjax.fourier import angle_channel_mask
+
+    w = np.asarray(angle_channel_mask(names), float)
+    span = np.ptp(x[np.asarray(keep, bool)], axis=0) if np.any(keep) else np.zeros(len(names))
+    joints = {n.rsplit(".", 1)[0] for n, sp, a in zip(names, span, w) if a and sp > _WINDING_SPAN}
+    if not joints:
+        return None
+    w = np.where([n.rsplit(".", 1)[0] in joints for n in names], 0.0, w)
+    if not w.any():
+        return None
+    return tuple(float(v) for v in w)
+
+
+def _frame_range(motion, start_frame, stop_frame) -> tuple[int, int]:
+    F = motion.num_frames
+    lo = 0 if start_frame is None else int(start_frame)
+    hi = F if stop_frame is None else int(stop_frame)
+    if not 0 <= lo < hi <= F:
+        raise UserError(f"fit_motions: frames [{start_frame}, {stop_frame}) are outside "
+                        f"{motion.source or 'the clip'} (frames 0..{F - 1})")
+    return lo, hi
 
 
 def fit_motions(
@@ -350,6 +427,9 @@ def fit_motions(
     use_contacts: bool = True,
     dtype=None,
     throw: bool = False,
+    body_map=None,
+    start_frame: int | None = None,
+    stop_frame: int | None = None,
     **fit_kwargs,
 ) -> list[ClipFit]:
     """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
@@ -360,13 +440,18 @@ def fit_motions(
     (``fourierjax.contacts``; ω from steps, Tilmanne §2.2), then ONE batched
     :func:`fourierjax.fourier.fit_batch` call for all clips that share a channel layout (padding
     and masks), phase alignment to the left heel strike (fallback: the peak of the left hip
-    flexion fundamental, ``LeftUpLeg.Xrotation`` / ``LeftUpLeg.expmap0``), and the metrics.
+    flexion fundamental: the body map's left hip channel with the largest fundamental), and the
+    metrics. Feet, legs, pelvis and trajectory come from each clip's body map.
 
     Arguments:
         motions: a sequence of Motions (e.g. after dropping a rest frame).
         num_harmonics: N; representation: "euler" | "expmap".
         throw: raise a UserError (the first failed clip's message, naming its file) after the
             fit instead of returning failed clips.
+        body_map: a `fourierjax.body.BodyMap` for every clip, a sequence of one per clip, or
+            None to infer each clip's (``fourierjax.body.infer_body_map``).
+        start_frame, stop_frame: only frames ``[start_frame, stop_frame)`` of each clip are
+            used (the steady segment is looked for inside them); None: the clip's ends.
         fit_kwargs: passed on to ``fit_batch`` (search band, grid...).
 
     Returns:
@@ -378,21 +463,41 @@ def fit_motions(
     motions = list(motions)
     if not motions:
         raise UserError("fit_motions: no motions given")
+    from fourierjax.body import BodyMap, BodyMapError, infer_body_map
+
     dtype = dtype or jnp.zeros(()).dtype
+    if body_map is None or isinstance(body_map, BodyMap):
+        maps = [body_map] * len(motions)
+    else:
+        maps = list(body_map)
+        if len(maps) != len(motions):
+            raise UserError(f"fit_motions: {len(maps)} body maps for {len(motions)} motions")
     prepared = []
-    for m in motions:
-        a, b = steady_segment(m) if segment else (0, m.num_frames)
+    for m, bm in zip(motions, maps):
+        lo, hi = _frame_range(m, start_frame, stop_frame)
+        clip = m[lo:hi]
+        if bm is None:
+            try:
+                bm = infer_body_map(clip)
+            except BodyMapError:
+                bm = None  # no legs: joint 0 carries the root, no contacts, no alignment
+        a, b = steady_segment(clip, body_map=bm) if segment else (0, clip.num_frames)
+        a, b = a + lo, b + lo
         sub = m[a:b]
         keep = ~glitch_frames(sub)
-        x, names = features_from_motion(sub, representation, valid=keep)
-        c = foot_contacts_of(sub) if use_contacts else None
+        x, names = features_from_motion(sub, representation, valid=keep, body_map=bm)
+        c = foot_contacts_of(sub, body_map=bm) if use_contacts and bm is not None else None
         left, right, om = _steps(c, sub.frame_time_s)
-        prepared.append((m, a, b, sub, x, names, left, right, om, keep))
+        prepared.append((m, a, b, sub, x, names, left, right, om, keep, bm))
     groups: dict[tuple[str, ...], list[int]] = {}
     for i, p in enumerate(prepared):
-        groups.setdefault(p[5], []).append(i)
+        w = None if "channel_weights" in fit_kwargs else _search_weights(p[4], p[5], p[9])
+        groups.setdefault((p[5], w), []).append(i)
     results: list[ClipFit | None] = [None] * len(prepared)
-    for names, idx in groups.items():
+    for (names, weights), idx in groups.items():
+        kw = dict(fit_kwargs)
+        if weights is not None:
+            kw["channel_weights"] = jnp.asarray(weights, dtype)
         T = _bucket(max(prepared[i][4].shape[0] for i in idx))
         C = len(names)
         feats = np.zeros((len(idx), T, C))
@@ -407,9 +512,9 @@ def fit_motions(
         res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
                            mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
                            representation=representation, channel_names=names, throw=False,
-                           **fit_kwargs)
+                           **kw)
         for k, i in enumerate(idx):
-            m, a, b, sub, x, _, left, right, _, keep = prepared[i]
+            m, a, b, sub, x, _, left, right, _, keep, bm = prepared[i]
             raw = jax.tree.map(lambda v: v[k], res.model)
             dt = sub.frame_time_s
             if len(left):
@@ -420,9 +525,9 @@ def fit_motions(
                 model = fr.shift_phase(raw, delta)
                 alignment = "left_heel_strike"
             else:
-                hip = [c for c in ("LeftUpLeg.Xrotation", "LeftUpLeg.expmap0") if c in names]
-                if hip:
-                    delta = _hip_flexion_phase(raw, sub, names.index(hip[0]))
+                hip = None if bm is None else _hip_flexion_channel(raw, names, bm)
+                if hip is not None:
+                    delta = _hip_flexion_phase(raw, sub, hip, bm)
                     model = fr.shift_phase(raw, delta)
                     alignment = "left_hip_flexion"
                 else:
@@ -430,7 +535,7 @@ def fit_motions(
             t = jnp.arange(T, dtype=dtype) * dt
             xhat = fr.synthesize(raw, t)
             pve = _position_ve(sub.skeleton(), representation, jnp.asarray(feats[k], dtype),
-                               xhat, jnp.asarray(mask[k]))
+                               xhat, jnp.asarray(mask[k]), 0 if bm is None else bm.pelvis)
             status = fr.FitStatus(int(res.result[k]))
             message = "" if status == fr.FitStatus.SUCCESSFUL else (
                 f"fit_motions: clip {i} ({m.source or 'no file'}): {status.message} (fitted "
@@ -446,6 +551,7 @@ def fit_motions(
                 left_heel_strikes=tuple(int(v) for v in left),
                 right_heel_strikes=tuple(int(v) for v in right),
                 masked_frames=int(np.sum(~keep)), result=status.name.lower(), message=message,
+                body_map=bm,
             )
     failed = [r for r in results if r is not None and not r.successful]
     if throw and failed:

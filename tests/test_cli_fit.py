@@ -108,3 +108,35 @@ def test_fit_folder_with_one_short_clip_fits_the_others(tmp_path):
     assert len(errors) == 1 and "short.bvh" in errors[0], r.stderr
     assert r.stderr.rstrip().splitlines()[-1] == "fourierjax: fitted 2 of 3 clips; 1 failed"
     assert sorted(p.name for p in out.iterdir()) == ["02_01.npz", "07_12.npz"]
+
+
+def test_fit_z_up_blender_export_stop_frame_and_body_map(tmp_path, capsys):
+    """A Blender-style export (Z up, 6 channels on every joint) is turned Y-up on reading, with a
+    notice, and fits like the original; --stop-frame bounds the frames; --body-map overrides."""
+    from fourierjax.cli import main
+    from fourierjax.io import model_io
+    from fourierjax.io.bvh import read_bvh, write_bvh
+    from tests.conventions import convert
+
+    original = read_bvh(data.path("07_01"))
+    zup = tmp_path / "zup.bvh"
+    write_bvh(convert(original, "zup"), zup)
+    override = tmp_path / "map.toml"
+    override.write_text('units = "m"\n')
+    out = tmp_path / "models"
+    assert main(["fit", str(data.path("07_01")), str(zup), "--harmonics", "3", "--json", "--start-frame",
+                 "1", "--stop-frame", "200", "--body-map", str(override), "--out", str(out) + "/"]) == 0
+    captured = capsys.readouterr()
+    assert f"{zup}: z is up; turned Y-up on reading" in captured.err
+    assert str(data.path("07_01")) + ": z is up" not in captured.err
+    a, b = json.loads(captured.out)
+    # (--start-frame 1: `data.detect_rest_frames` finds the T-pose of the original, not of the export.)
+    assert a["frames_used"] == b["frames_used"] and a["frames_used"][1] <= 200
+    assert a["left_heel_strikes"] == b["left_heel_strikes"] and a["alignment"] == "left_heel_strike"
+    assert b["fundamental_hz_steps"] == pytest.approx(a["fundamental_hz_steps"], rel=1e-5)
+    assert b["fundamental_hz"] == pytest.approx(a["fundamental_hz"], rel=0.01)
+    assert b["variance_explained_positions"] == pytest.approx(a["variance_explained_positions"], abs=0.01)
+    mf = model_io.load_model(out / "zup.npz")
+    assert mf.stored_body_map.units == "m" and mf.stored_body_map.up_axis == 1
+    assert main(["fit", str(zup), "--harmonics", "3", "--stop-frame", "99999"]) == 2
+    assert "--stop-frame: 99999 is outside" in capsys.readouterr().err

@@ -107,3 +107,22 @@ def test_in_process_matches_subprocess_keys(capsys):
     assert {"joints", "channels", "frames", "frame_time_s", "duration_s", "rotation_orders",
             "end_sites", "file"} <= set(info)  # fmt: skip
     assert info["frames"] == 1882 and info["leading_rest_frames"] == 0
+
+
+def test_info_prints_the_body_map_and_units(capsys):
+    assert main(["info", "07_01", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["body_map"]["legs"]["left"]["hip"] == "LeftUpLeg"
+    assert info["body_map"]["trajectory"] == "Hips" and info["units"] == "cmu"
+    assert info["metres_per_unit"] == pytest.approx(0.0564)
+    assert main(["info", "07_01"]) == 0
+    out = capsys.readouterr().out
+    assert "units:" in out and "legs (names): left LeftUpLeg > LeftLeg > LeftFoot > LeftToeBase" in out
+
+
+def test_info_says_why_there_is_no_body_map(tmp_path, capsys):
+    path = tmp_path / "six.bvh"
+    path.write_text(SIX_CHANNELS)
+    assert main(["info", str(path), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["body_map"] is None and "legs" in info["body_map_error"]

@@ -534,3 +534,43 @@ def test_a_folder_given_as_a_model_is_the_typed_error(tmp_path):
     (tmp_path / "m.npz").mkdir()
     with pytest.raises(model_io.ModelFileError, match="m.npz: cannot read the file"):
         model_io.load_model(tmp_path / "m.npz")
+
+
+def test_body_map_travels_with_the_model(tmp_path):
+    from fourierjax.body import BodyMapError, infer_body_map
+    from fourierjax.errors import UserError
+    from fourierjax.motion import fit_motions
+
+    def fields(bm):
+        return {k: v for k, v in bm.to_dict().items() if k != "sources"}
+
+    m = data.load("07_01")[1:160]
+    fit = fit_motions([m], 2)[0]
+    assert fit.body_map == infer_body_map(m)
+    path = tmp_path / "m.npz"
+    model_io.save_model(path, fit.model, motion=m, body_map=fit.body_map)
+    with np.load(path) as z:
+        header = json.loads(str(z["header"]))
+    assert header["version"] == model_io.FORMAT_VERSION == 2
+    assert header["body_map"] == fit.body_map.to_dict()
+    mf = model_io.load_model(path)
+    assert mf.stored_body_map is not None and fields(mf.body_map) == fields(fit.body_map)
+    # Version 1 (no map): still loads, the map inferred from the template's skeleton.
+    old = tmp_path / "old.npz"
+    model_io.save_model(old, fit.model, motion=m)
+    with np.load(old) as z:
+        assert json.loads(str(z["header"]))["version"] == 1
+    mf1 = model_io.load_model(old)
+    assert mf1.stored_body_map is None
+    assert mf1.body_map.left.names == fit.body_map.left.names
+    assert model_io.load_model(tmp_path / "m.npz").model.channel_names == fit.model.channel_names
+    # A map of another skeleton, or one without a skeleton, is refused.
+    with pytest.raises(UserError, match="needs `motion`"):
+        model_io.save_model(tmp_path / "x.npz", fit.model, body_map=fit.body_map)
+    arrays = {k: v for k, v in np.load(path).items() if k != "header"}
+    bad = tmp_path / "bad.npz"
+    broken = dict(header, body_map=dict(header["body_map"], pelvis="NoSuchJoint"))
+    _write(bad, broken, **arrays)
+    with pytest.raises(model_io.ModelFileError, match="bad body_map record"):
+        model_io.load_model(bad)
+    assert issubclass(BodyMapError, UserError)

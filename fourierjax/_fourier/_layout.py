@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
+import jax
 import numpy as np
 
 from fourierjax import _jit, rotations
@@ -68,7 +70,7 @@ def yaw_quat(psi: np.ndarray) -> np.ndarray:
 
 
 def root_pose(motion) -> tuple[np.ndarray, np.ndarray]:
-    """Root world position [F, 3] and orientation [F, 4] (wxyz) of every frame."""
+    """Joint 0's world position [F, 3] and orientation [F, 4] (wxyz) of every frame."""
     topo = motion.topology
     chans = topo.channels[0]
     base = topo.channel_offsets[0]
@@ -83,3 +85,137 @@ def root_pose(motion) -> tuple[np.ndarray, np.ndarray]:
         raise UserError(f"root joint {topo.names[0]!r} needs 3 rotation channels, got {chans}")
     q = rot("quat_from_euler", np.radians(motion.channels[:, idx]), order=order)
     return pos, q
+
+
+def local_transform(motion, joint: int, frames=None) -> tuple[np.ndarray, np.ndarray]:
+    """A joint's local translation [F, 3] (OFFSET, position channels replacing what they name)
+    and rotation [F, 4] (wxyz; identity without rotation channels) of every frame, or of
+    ``frames``."""
+    topo = motion.topology
+    ch = motion.channels if frames is None else motion.channels[frames]
+    chans = topo.channels[joint]
+    base = topo.channel_offsets[joint]
+    F = ch.shape[0]
+    pos = np.broadcast_to(np.asarray(motion.offsets[joint], np.float64), (F, 3)).copy()
+    for k, c in enumerate(chans):
+        if c.endswith("position"):
+            pos[:, _AXES.index(c[0])] = ch[:, base + k]
+    idx = [base + k for k, c in enumerate(chans) if c.endswith("rotation")]
+    order = topo.rotation_orders[joint]
+    if not idx:
+        q = np.zeros((F, 4))
+        q[:, 0] = 1.0
+    elif order is None or len(order) != 3:
+        raise UserError(f"joint {topo.names[joint]!r} needs 3 rotation channels or none, got {chans}")
+    else:
+        q = rot("quat_from_euler", np.radians(ch[:, idx]), order=order)
+    return pos, q
+
+
+def ancestors(topology, joint: int) -> list[int]:
+    """The joints above ``joint``, root first (``joint`` excluded)."""
+    out = []
+    j = topology.parents[joint]
+    while j >= 0:
+        out.append(j)
+        j = topology.parents[j]
+    return out[::-1]
+
+
+def world_pose(motion, joint: int, frames=None) -> tuple[np.ndarray, np.ndarray]:
+    """World position [F, 3] and orientation [F, 4] (wxyz) of ``joint`` through FK of its
+    ancestors' channels. Joint 0 (a root) takes :func:`root_pose`'s exact path."""
+    if joint == 0 and frames is None:
+        return root_pose(motion)
+    pos = quat = None
+    for j in [*ancestors(motion.topology, joint), joint]:
+        t, q = local_transform(motion, j, frames)
+        if pos is None:
+            pos, quat = t, q
+        else:
+            pos = pos + rot("quat_apply", quat, t)
+            quat = rot("quat_multiply", quat, q)
+    return pos, quat
+
+
+@dataclasses.dataclass(frozen=True)
+class RootJoints:
+    """The joints that carry the root features: ``pelvis`` (whose world pose gives heading,
+    velocity, height and orientation), ``trajectory`` (an ancestor of, or the pelvis, whose
+    position channels take the travel back) and the pelvis-frame facing (a unit 3-vector)."""
+
+    trajectory: int
+    pelvis: int
+    facing_local: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+#: A pelvis-frame facing within this angle of a local axis is taken as that axis exactly.
+_SNAP_DEG = 15.0
+
+
+def root_joints(motion, body_map=None) -> RootJoints:
+    """The root joints of a clip from its body map (inferred when None).
+
+    A skeleton whose body map cannot be inferred (no legs: test rigs, props) keeps joint 0 and
+    its local +Z, the layout of older releases. The map's up axis must be +Y (convert Z-up
+    clips at the edge with ``fourierjax.io.axes.to_y_up``).
+    """
+    from fourierjax.body import BodyMapError, infer_body_map
+
+    if body_map is None:
+        try:  # the motion is concrete: infer eagerly even when called under a trace
+            with jax.ensure_compile_time_eval():
+                body_map = infer_body_map(motion)
+        except BodyMapError:
+            return RootJoints(0, 0)
+    bm = body_map
+    if (bm.up_axis, bm.up_sign) != (1, 1):
+        raise UserError(
+            f"{motion.source or 'motion'}: its up axis is {'-' if bm.up_sign < 0 else '+'}{'xyz'[bm.up_axis]}; "
+            "the Fourier features are Y-up: convert it first with fourierjax.io.axes.to_y_up(motion, up)"
+        )
+    topo = motion.topology
+    pelvis, traj = bm.pelvis, bm.trajectory
+    if traj != pelvis and traj not in ancestors(topo, pelvis):
+        raise UserError(f"body map: the trajectory joint {topo.names[traj]!r} is neither the pelvis "
+                        f"{topo.names[pelvis]!r} nor one of its ancestors")
+    with jax.ensure_compile_time_eval():
+        return RootJoints(traj, pelvis, _facing_local(motion, bm))
+
+
+def _relative_position(motion, base: int, joint: int) -> np.ndarray:
+    """Position [F, 3] of ``joint`` in the frame of its ancestor ``base``."""
+    chain = []
+    j = joint
+    while j != base:
+        chain.append(j)
+        j = motion.topology.parents[j]
+    pos = quat = None
+    for j in chain[::-1]:
+        t, q = local_transform(motion, j)
+        if pos is None:
+            pos, quat = t, q
+        else:
+            pos = pos + rot("quat_apply", quat, t)
+            quat = rot("quat_multiply", quat, q)
+    return pos
+
+
+def _facing_local(motion, bm) -> tuple[float, float, float]:
+    """Where the body faces in the pelvis's frame: ``(left hip - right hip) x up``, averaged over
+    frames, snapped to a local axis within ``_SNAP_DEG`` (CMU: exactly +Z)."""
+    _, q = world_pose(motion, bm.pelvis)
+    lat = _relative_position(motion, bm.pelvis, bm.left.hip) - _relative_position(motion, bm.pelvis, bm.right.hip)
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    up = rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
+    f = np.cross(lat, up).mean(axis=0)
+    n = np.linalg.norm(f)
+    if not np.isfinite(n) or n < 1e-12:
+        return (0.0, 0.0, 1.0)
+    f = f / n
+    k = int(np.argmax(np.abs(f)))
+    if np.abs(f[k]) >= np.cos(np.radians(_SNAP_DEG)):
+        snapped = np.zeros(3)
+        snapped[k] = np.sign(f[k])
+        f = snapped
+    return tuple(float(v) for v in f)  # type: ignore[return-value]

@@ -23,6 +23,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--start-frame", type=int, default=None, metavar="K",
                         help="first frame of the file to use (default: drop leading rest/T-pose "
                         "frames, with a notice)")
+    parser.add_argument("--stop-frame", type=int, default=None, metavar="K",
+                        help="frame of the file after the last one to use (default: the end)")
+    parser.add_argument("--body-map", default=None, metavar="FILE",
+                        help="TOML body map overriding the inferred one (legs, feet, trajectory, "
+                        "up, units; see `fourierjax info`)")
+    parser.add_argument("--up", default=None, metavar="AXIS",
+                        help="the files' up axis (y, z, -z, ...; default: inferred); other than "
+                        "+y, the clip is turned Y-up on reading, with a notice")
     parser.add_argument("--all-frames", action="store_true",
                         help="fit every frame instead of the longest steady straight stretch")
     parser.add_argument("--out", default=None, metavar="MODEL",
@@ -32,13 +40,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="print one JSON list (one object per clip) instead of a table")
 
 
-def _load(path: pathlib.Path, start_frame: int | None):
-    """The motion to fit and the number of leading file frames dropped."""
+def _load(path: pathlib.Path, start_frame: int | None, stop_frame: int | None = None,
+          up: str | None = None, body_map: str | None = None):
+    """The motion to fit (Y up), the number of leading file frames dropped, and its body map."""
+    from fourierjax.body import infer_body_map
     from fourierjax.data import detect_rest_frames
     from fourierjax.errors import UserError
+    from fourierjax.io.axes import to_y_up
     from fourierjax.io.bvh import read_bvh
 
     motion = read_bvh(path)
+    if stop_frame is not None:
+        if not 1 < stop_frame <= motion.num_frames:
+            raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
+        motion = motion[:stop_frame]
+    bm = infer_body_map(motion, up=up, overrides=body_map)
+    if (bm.up_axis, bm.up_sign) != (1, 1):
+        axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
+        print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
+        motion = to_y_up(motion, axis)
+        bm = infer_body_map(motion, overrides=body_map)
     if start_frame is not None:
         if not 0 <= start_frame < motion.num_frames - 1:
             raise UserError(
@@ -53,7 +74,9 @@ def _load(path: pathlib.Path, start_frame: int | None):
     motion = motion[skip:]
     if motion.num_frames < 16:
         raise UserError(f"{path}: only {motion.num_frames} frames to fit; need at least 16")
-    return motion, skip
+    if start_frame is not None and start_frame >= (stop_frame or motion.num_frames + skip):
+        raise UserError(f"--start-frame {start_frame} is not before --stop-frame {stop_frame}")
+    return motion, skip, bm
 
 
 #: A fit explaining less than this fraction of the angle variance is flagged on stderr (the
@@ -112,15 +135,17 @@ def run(args: argparse.Namespace) -> int:
     loaded = []
     for text, p in zip(files, paths, strict=True):
         try:
-            loaded.append((text, p, *_load(p, args.start_frame)))
+            loaded.append((text, p, *_load(p, args.start_frame, args.stop_frame, args.up,
+                                           args.body_map)))
         except UserError as err:
             if len(files) == 1:
                 raise
             failed.append(f"{text}: {err}")
-    fits = fit_motions([m for _, _, m, _ in loaded], args.harmonics, args.representation,
-                       segment=not args.all_frames) if loaded else []
+    fits = fit_motions([m for _, _, m, _, _ in loaded], args.harmonics, args.representation,
+                       segment=not args.all_frames,
+                       body_map=[bm for *_, bm in loaded]) if loaded else []
     rows = []
-    for (text, path, motion, skip), fit in zip(loaded, fits, strict=True):
+    for (text, path, motion, skip, _), fit in zip(loaded, fits, strict=True):
         if not fit.successful:
             failed.append(f"{text}: {fit.message}")
             continue
@@ -139,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
                 out.mkdir(parents=True, exist_ok=True)
             prov = dict(row, fourierjax_version=__version__, command="fit")
             model_io.save_model(target, fit.model, motion=motion, provenance=prov,
-                                alignment=fit.alignment)
+                                alignment=fit.alignment, body_map=fit.body_map)
             row["model"] = str(target)
     if args.json:
         print(json.dumps(rows))

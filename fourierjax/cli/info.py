@@ -1,4 +1,4 @@
-"""`fourierjax info`: a summary of a BVH file (skeleton, channels, frames, timing)."""
+"""`fourierjax info`: a summary of a BVH file (skeleton, channels, frames, timing, body map and units)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,8 @@ import argparse
 import collections
 import json
 
-HELP = "Summarise a BVH file: joints, channels, frames, frame time, duration, rotation orders."
+HELP = ("Summarise a BVH file: joints, channels, frames, frame time, duration, rotation orders, "
+        "and the inferred body map (legs, feet, trajectory, up axis, units).")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -37,7 +38,20 @@ def summary(motion) -> dict:
         ),
         "root": topo.names[0],
         "leading_rest_frames": detect_rest_frames(motion),
+        **_body_summary(motion),
     }
+
+
+def _body_summary(motion) -> dict:
+    """The inferred body map (`BodyMap.to_dict`, its `describe()` lines) and units, or why not."""
+    from fourierjax.body import BodyMapError, infer_body_map
+
+    try:
+        bm = infer_body_map(motion)
+    except BodyMapError as err:
+        return {"body_map": None, "body_map_error": str(err), "units": None, "metres_per_unit": None}
+    return {"body_map": bm.to_dict(), "body_map_description": bm.describe(), "units": bm.units,
+            "metres_per_unit": bm.metres_per_unit}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,7 +79,16 @@ def run(args: argparse.Namespace) -> int:
     ]
     if rest:
         rows.append(("rest frames", f"{rest} leading synthetic/rest frame(s) (T-pose or zeros)"))
+    if info["body_map"] is not None:
+        rows.append(("units", f"{info['units']} ({info['metres_per_unit']:g} m per unit)"))
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"{key + ':':<{width + 1}} {value}")
+    if info["body_map"] is None:
+        why = info["body_map_error"].split(". Its joints are")[0]  # the reason, one line
+        print(f"body map: none: {why} (see --json for how to write one)")
+    else:
+        print("body map (inferred; override with fit --body-map FILE):")
+        for line in info["body_map_description"].splitlines():
+            print(f"  {line}")
     return 0

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import functools
 import io
 import json
 import math
@@ -20,7 +21,7 @@ from fourierjax.errors import UserError
 from fourierjax.io.atomic import write_bytes_atomic
 
 FORMAT_NAME = "fourierjax.fourier_model"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 CHARACTERISTIC_FORMAT_NAME = "fourierjax.fourier_characteristic"
 CHARACTERISTIC_FORMAT_VERSION = 1
 
@@ -81,6 +82,23 @@ class ModelFile:
     frame_time_s: float | None = None
     provenance: dict = dataclasses.field(default_factory=dict)
     alignment: str = "none"
+    stored_body_map: object | None = None  # fourierjax.body.BodyMap read from the header
+
+    @functools.cached_property
+    def body_map(self):
+        """The skeleton's `fourierjax.body.BodyMap`: the one stored in the file (version 2), else
+        inferred from the template (None without a skeleton or when no legs can be found)."""
+        if self.stored_body_map is not None:
+            return self.stored_body_map
+        template = self.template_motion()
+        if template is None:
+            return None
+        from fourierjax.body import BodyMapError, infer_body_map
+
+        try:
+            return infer_body_map(template)
+        except BodyMapError:
+            return None
 
     def template_motion(self):
         """A one-frame Motion on the stored skeleton (for ``motion_from_features``), or None.
@@ -304,7 +322,7 @@ def _check_arrays(path: str, header: dict, data: dict, trailing: dict) -> tuple[
 
 
 def save_model(path, model, *, motion=None, provenance: dict | None = None,
-               alignment: str = "none") -> None:
+               alignment: str = "none", body_map=None) -> None:
     """Write one FourierModel (no batch axis) to ``path``, written whole or not at all.
 
     Format ``fourierjax.fourier_model``, version 1: an uncompressed ``.npz`` holding ``header``
@@ -315,7 +333,9 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     ``offset [C]``, ``amplitude [C, N]`` (A_n >= 0), ``phase [C, N]`` (radians, Unuma eq. 1
     sine convention), ``omega []`` (rad/s, in [`OMEGA_MIN_RAD_S`, `OMEGA_MAX_RAD_S`]); with a
     skeleton, ``skeleton_offsets [J, 3]`` and ``skeleton_end_site_offsets [E, 3]`` (file units),
-    so that ``fourierjax synth`` can write a BVH without the source clip.
+    so that ``fourierjax synth`` can write a BVH without the source clip. Version 2 adds
+    ``body_map`` to the header (`fourierjax.body.BodyMap.to_dict`, joints by name); a file
+    without a body map is written as version 1, which older readers still read.
 
     Arguments:
         path: output file (written as given; conventionally ``*.npz``).
@@ -323,6 +343,8 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         motion: the source Motion (its skeleton and frame time are stored), or None.
         provenance: JSON-able fit details.
         alignment: the phase-alignment event name.
+        body_map: the skeleton's `fourierjax.body.BodyMap` (e.g. ``ClipFit.body_map``), stored
+            with ``motion``'s skeleton, or None.
 
     Raises:
         UserError, before anything is written, for what `load_model` would refuse.
@@ -333,7 +355,10 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     except (TypeError, ValueError) as err:
         raise UserError(f"save_model: `provenance` must hold only JSON values (dict, list, str, "
                         f"number, bool, None, NumPy arrays): {err}") from None
-    header = _header(FORMAT_NAME, FORMAT_VERSION, model, "model", skeleton=None,
+    if body_map is not None and motion is None:
+        raise UserError("save_model: `body_map` needs `motion` (the skeleton it names)")
+    version = FORMAT_VERSION if body_map is not None else 1
+    header = _header(FORMAT_NAME, version, model, "model", skeleton=None,
                      provenance=provenance, alignment=alignment)
     arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
     _refuse_non_finite("save_model", "model", arrays, path)
@@ -356,6 +381,10 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         arrays["skeleton_offsets"] = motion.offsets
         arrays["skeleton_end_site_offsets"] = np.asarray(motion.end_site_offsets,
                                                          np.float64).reshape(-1, 3)
+        if body_map is not None:
+            if tuple(body_map.joint_names) != tuple(topo.names):
+                raise UserError("save_model: `body_map` was made for another skeleton than `motion`'s")
+            header["body_map"] = body_map.to_dict()
     _write_archive(path, header, arrays)
 
 
@@ -422,7 +451,20 @@ def load_model(path) -> ModelFile:
             raise ModelFileError(path, "bad skeleton record: frame_time_s must be a finite "
                                        f"number > 0, got {frame_time!r}")
         frame_time = float(frame_time)
-    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment)
+    stored = header.get("body_map")
+    body_map = None
+    if stored is not None:
+        if topology is None:
+            raise ModelFileError(path, "a body_map without a skeleton record")
+        from fourierjax.body import BodyMapError, body_map_from_dict
+
+        if not isinstance(stored, dict):
+            raise ModelFileError(path, f"body_map must be a JSON object, got {stored!r:.80}")
+        try:
+            body_map = body_map_from_dict(stored, topology)
+        except (BodyMapError, KeyError, TypeError, ValueError) as err:
+            raise ModelFileError(path, f"bad body_map record: {err}") from None
+    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment, body_map)
 
 
 _EULER_NAME = re.compile(r"\.[XYZ]rotation$")
