@@ -177,8 +177,15 @@ def root_joints(motion, body_map=None) -> RootJoints:
     topo = motion.topology
     pelvis, traj = bm.pelvis, bm.trajectory
     if traj != pelvis and traj not in ancestors(topo, pelvis):
-        raise UserError(f"body map: the trajectory joint {topo.names[traj]!r} is neither the pelvis "
-                        f"{topo.names[pelvis]!r} nor one of its ancestors")
+        # A map inferred from posed positions (a model's cycle, walking in place) cannot tell
+        # which joint's channels carry the travel: the pelvis, or the nearest of its ancestors
+        # with position channels, does.
+        traj = next((j for j in [pelvis, *reversed(ancestors(topo, pelvis))]
+                     if {c[0] for c in topo.channels[j] if c.endswith("position")} == set("XYZ")), None)
+        if traj is None:
+            raise UserError(f"body map: the trajectory joint {topo.names[bm.trajectory]!r} is neither the "
+                            f"pelvis {topo.names[pelvis]!r} nor one of its ancestors, and none of those has "
+                            "X, Y and Z position channels")
     with jax.ensure_compile_time_eval():
         return RootJoints(traj, pelvis, _facing_local(motion, bm))
 

@@ -233,13 +233,14 @@ def check_indices(where: str, skeleton: Skeleton, feet: FootPoints, groins: tupl
 
 
 def pose_points(
-    skeleton: Skeleton, representation: str, idx: Array, joints: tuple[int, ...], feat: Float[Array, " C"]
+    skeleton: Skeleton, representation: str, idx: Array, joints: tuple[int, ...], feat: Float[Array, " C"],
+    pelvis: int = 0,
 ) -> tuple[Float[Array, "2 P 3"], Float[Array, "K 3"]]:
     """Foot points `[2, P, 3]` and `joints` `[K, 3]` (the groins, then e.g. the pelvis) of one
-    feature frame, root at the origin."""
+    feature frame, the pelvis (the joint whose world pose the root features are) at the origin."""
+    from fourierjax.features import local_pose_from_features
     from fourierjax.kinematics import forward_kinematics
-    from fourierjax.motion import local_pose_from_features
 
-    fk = forward_kinematics(skeleton, *local_pose_from_features(skeleton, feat, representation))
+    fk = forward_kinematics(skeleton, *local_pose_from_features(skeleton, feat, representation, pelvis))
     allp = jnp.concatenate([fk.positions, fk.end_site_positions], axis=0)
     return allp[idx], fk.positions[jnp.asarray(joints)]

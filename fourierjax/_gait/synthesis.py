@@ -77,7 +77,7 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     rep = model.representation
 
     def points(f):
-        return pose_points(skeleton, rep, idx, (*groins, pelvis), f)
+        return pose_points(skeleton, rep, idx, (*groins, pelvis), f, pelvis)
 
     # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule; the sole
     # clearances (if not given) from a cycle of the unstepped model (the foot's geometry must
@@ -250,14 +250,14 @@ def synthesize_gait(
 
 
 @filter_jit
-def _cycle_points(model, skeleton, feet, groins, num_samples):
+def _cycle_points(model, skeleton, feet, groins, num_samples, pelvis=0):
     from fourierjax.fourier import synthesize_phase
 
     idx = jnp.asarray([feet.left, feet.right])
     grid = jnp.linspace(0.0, 2 * jnp.pi, num_samples, endpoint=False,
                         dtype=jnp.asarray(model.offset).dtype)
     foot_local, groin_local = jax.vmap(
-        lambda f: pose_points(skeleton, model.representation, idx, groins, f)
+        lambda f: pose_points(skeleton, model.representation, idx, groins, f, pelvis)
     )(synthesize_phase(model, grid))
     return grid, foot_local, groin_local
 
@@ -288,9 +288,10 @@ def model_hip_curves(
         `dict`: `"phase"` `[K]` (radians), `"L_L"`, `"L_R"`, and the `hip_rule_curves`
         entries (`"L"`, `"N"`, `"unuma1995"`, `"continuous"`, `"smooth"`).
     """
-    feet, groins, _, up_axis = resolve_body("model_hip_curves", model, skeleton, feet, groins, body_map, up_axis)
+    feet, groins, pelvis, up_axis = resolve_body("model_hip_curves", model, skeleton, feet, groins, body_map,
+                                                 up_axis)
     num_samples = integer(num_samples, "model_hip_curves: `num_samples`", 1)
-    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples)
+    grid, foot_local, groin_local = _cycle_points(model, skeleton, feet, groins, num_samples, pelvis)
     if clearance is None:
         clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
     leg = leg_heights(groin_local, foot_local, jnp.asarray(clearance), up_axis=up_axis)
@@ -302,7 +303,8 @@ def model_hip_curves(
 @filter_jit
 def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis):
     idx = jnp.asarray([feet.left, feet.right])
-    foot_local, joints = jax.vmap(lambda f: pose_points(skeleton, representation, idx, (*groins, pelvis), f))(features)
+    foot_local, joints = jax.vmap(
+        lambda f: pose_points(skeleton, representation, idx, (*groins, pelvis), f, pelvis))(features)
     if clearance is None:
         clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
     height = contact_height(foot_local, clearance, up_axis=up_axis)

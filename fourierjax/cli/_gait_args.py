@@ -101,7 +101,7 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         root_motion=args.root_motion,
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model).
-    motion = gait_motion(template, result, model.channel_names, frame_time_s)
+    motion = gait_motion(template, result, model.channel_names, frame_time_s, body_map=bmap)
     skate = gait.foot_skating(result.foot_positions, frame_time_s, result.clearance[None])
     advance = np.array(result.root_position[-1] - result.root_position[0])
     advance[bmap.up_axis] = 0.0

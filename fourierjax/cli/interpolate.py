@@ -140,7 +140,7 @@ def load_gait_pair(args: argparse.Namespace):
     return a, b
 
 
-def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None) -> None:
+def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None, body_map=None) -> None:
     """Write synthesized features as a BVH on `template`'s skeleton.
 
     Features whose root channels do not move (a rig whose trajectory is not on joint 0, e.g.
@@ -156,19 +156,25 @@ def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, templ
     from fourierjax.io.bvh import write_bvh
 
     x = np.asarray(features, np.float64)
+    if body_map is None and model is not None:
+        from fourierjax import gait
+
+        # The map of the model's own poses: a rest template that is not a T-pose (Bandai's
+        # bones along local X) does not show which way is up.
+        body_map = gait.model_body_map(model, template.skeleton())
     if model is not None and len(x) >= 2 and not np.ptp(x[:, :3], axis=0).any():
         from fourierjax import gait
         from fourierjax.io.gait_bvh import grounded_motion
 
-        bmap = gait.model_body_map(model, template.skeleton())
+        bmap = body_map
         feats, root, _, _ = gait.ground_features(x, template.skeleton(), model.representation, frame_time_s,
                                                  body_map=bmap)
         print("fourierjax: notice: the model's root channels carry no travel (the rig's trajectory "
               f"joint, {bmap.name(bmap.pelvis)}, is not its root): root path from the stance feet",
               file=sys.stderr)
-        motion = grounded_motion(template, feats, root, channel_names, frame_time_s)
+        motion = grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
     else:
-        motion = fmotion.motion_from_features(template, x, channel_names, frame_time_s)
+        motion = fmotion.motion_from_features(template, x, channel_names, frame_time_s, body_map=body_map)
     write_bvh(motion, out)
 
 

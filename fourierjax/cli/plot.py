@@ -88,7 +88,7 @@ def _model_motion(mf, seconds: float, input_name: str):
     dt = mf.frame_time_s or 1 / 120
     t = jnp.arange(max(2, int(round(seconds / dt)))) * dt
     x = np.asarray(fourier.synthesize(mf.model, t), np.float64)
-    return motion_from_features(template, x, mf.model.channel_names, dt)
+    return motion_from_features(template, x, mf.model.channel_names, dt, body_map=mf.body_map)
 
 
 def _joint_channels(names, joint: str, input_name: str) -> list[int]:
@@ -146,7 +146,9 @@ def run(args: argparse.Namespace) -> int:
             template = obj.template_motion()
             if template is None:
                 raise UserError(f"{args.input}: the model file carries no skeleton to draw")
-            p = model_joint_positions(obj.model, template.skeleton(), np.array([ph]))[0]
+            bmap = obj.body_map
+            p = model_joint_positions(obj.model, template.skeleton(), np.array([ph]),
+                                      0 if bmap is None else bmap.pelvis)[0]
             if not np.isfinite(p).all():
                 raise UserError(f"{args.input}: the pose at phase {ph:g} rad is not finite")
             title = f"{pathlib.Path(args.input).name}, phase {ph:.2f} rad"

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -15,7 +14,7 @@ if TYPE_CHECKING:
 
 
 def gait_motion(
-    template: Motion, result: GaitResult, channel_names: Sequence[str], frame_time_s: float
+    template: Motion, result: GaitResult, channel_names: Sequence[str], frame_time_s: float, *, body_map=None
 ) -> Motion:
     """A writeable `Motion` of a synthesized gait, carrying its root trajectory.
 
@@ -27,25 +26,24 @@ def gait_motion(
         result: a `gait.GaitResult` from `synthesize_gait`.
         channel_names: the model's channel names.
         frame_time_s: seconds per frame.
+        body_map: the skeleton's `fourierjax.body.BodyMap` (the synthesis's); None infers it
+            from `template`, which a rest pose that is not a T-pose (Bandai) does not allow.
 
     Returns:
         A `Motion` with `T` frames.
     """
-    return grounded_motion(template, result.features, result.root_position, channel_names, frame_time_s)
+    return grounded_motion(template, result.features, result.root_position, channel_names, frame_time_s,
+                           body_map=body_map)
 
 
 def grounded_motion(
-    template: Motion, features, root_position, channel_names: Sequence[str], frame_time_s: float
+    template: Motion, features, root_position, channel_names: Sequence[str], frame_time_s: float, *,
+    body_map=None,
 ) -> Motion:
-    """A writeable `Motion` of features `[T, C]` whose root path `[T, 3]` is given exactly
-    (`gait.ground_features`, `synthesize_gait`): written to the root's position channels."""
-    from fourierjax.motion import motion_from_features
+    """A writeable `Motion` of features `[T, C]` whose pelvis path `[T, 3]` is given exactly
+    (`gait.ground_features`, `synthesize_gait`): written through the trajectory joint's position
+    channels (`features.place_root`; CMU: the root's)."""
+    from fourierjax.features import motion_from_features, place_root
 
-    mot = motion_from_features(template, np.asarray(features), channel_names, frame_time_s)
-    ch = np.array(mot.channels)
-    root = np.asarray(root_position, dtype=np.float64)
-    base = mot.topology.channel_offsets[0]
-    for k, name in enumerate(mot.topology.channels[0]):
-        if name.endswith("position"):
-            ch[:, base + k] = root[:, "XYZ".index(name[0])]
-    return dataclasses.replace(mot, channels=ch)
+    mot = motion_from_features(template, np.asarray(features), channel_names, frame_time_s, body_map=body_map)
+    return place_root(mot, np.asarray(root_position, dtype=np.float64), body_map=body_map)

@@ -87,14 +87,22 @@ class ModelFile:
     @functools.cached_property
     def body_map(self):
         """The skeleton's `fourierjax.body.BodyMap`: the one stored in the file (version 2), else
-        inferred from the template (None without a skeleton or when no legs can be found)."""
+        inferred from the model's own poses over a cycle (`gait.model_body_map`: a rest template
+        that is not a T-pose, e.g. Bandai's, does not show which way is up), else from the
+        template; None without a skeleton or when no legs can be found."""
         if self.stored_body_map is not None:
             return self.stored_body_map
         template = self.template_motion()
         if template is None:
             return None
         from fourierjax.body import BodyMapError, infer_body_map
+        from fourierjax.errors import UserError
+        from fourierjax.gait import model_body_map
 
+        try:
+            return model_body_map(self.model, template.skeleton())
+        except UserError:
+            pass
         try:
             return infer_body_map(template)
         except BodyMapError:
