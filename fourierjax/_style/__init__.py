@@ -10,6 +10,7 @@ from fourierjax._style.characteristics import (
     stack,
     superpose,
 )
+from fourierjax._style.distance import cycle_distance, cycle_distance_shift, cycle_distances
 from fourierjax._style.interpolation import blend_time_domain, interpolate, interpolate_omega
 from fourierjax._style.space import (
     StylePCA,
@@ -34,6 +35,9 @@ __all__ = [
     "characteristic",
     "characteristic_function",
     "check_compatible",
+    "cycle_distance",
+    "cycle_distance_shift",
+    "cycle_distances",
     "ease",
     "fit_style_weights",
     "interpolate",
