@@ -26,6 +26,7 @@ import numpy as np
 from experiments._util import ROOT, parse, run_main, write_table
 from fourierjax import config as _config
 
+
 def _is_str(v):
     return None if isinstance(v, str) and v else f"expected a non-empty string, got {v!r}"
 
@@ -141,9 +142,9 @@ def align_to_left_step(model, skeleton, body_map, num_samples: int = 64):
     the event is the same for walks, runs, backward and sideways walks.
     """
     from fourierjax import fourier
-    from fourierjax._style.distance import cycle_positions
+    from fourierjax._style.distance import cycle_positions_jit
 
-    p = np.asarray(cycle_positions(model, skeleton, num_samples))  # [K, J, 3], heading frame, y up
+    p = np.asarray(cycle_positions_jit(model, skeleton, num_samples))  # [K, J, 3], heading frame, y up
     left, right = body_map.left, body_map.right
     d = (p[:, left.ankle] - p[:, right.ankle])[:, [0, 2]]  # [K, 2]
     if left.toe >= 0 and right.toe >= 0:
@@ -198,12 +199,32 @@ def fit_clips(clips, harmonics: int, representation: str, cache: pathlib.Path):
                 print(f"  not fitted: {f.message}", flush=True)
     import jax.numpy as jnp
 
+    ok = np.asarray(ok).copy()
+    bad = [i for i in range(len(clips)) if not ok[i]]
+    if bad:  # a clip whose steady stretch is too short for a cycle: fit the whole clip instead
+        fb = cache / f"{path.stem}_whole.npz"
+        if fb.exists():
+            z = np.load(fb)
+            res = [(bool(z["ok"][k]), fourier.FourierModel(z["offset"][k], z["amplitude"][k], z["phase"][k],
+                                                          z["omega"][k], representation=representation,
+                                                          channel_names=names)) for k in range(len(bad))]
+        else:
+            fits = fit_motions([motions[i] for i in bad], harmonics, representation, segment=False, throw=False)
+            res = [(f.successful, f.model) for f in fits]
+            np.savez(fb, ok=np.array([r[0] for r in res]), offset=np.stack([np.asarray(r[1].offset) for r in res]),
+                     amplitude=np.stack([np.asarray(r[1].amplitude) for r in res]),
+                     phase=np.stack([np.asarray(r[1].phase) for r in res]),
+                     omega=np.stack([np.asarray(r[1].omega) for r in res]))
+        for i, (good, m) in zip(bad, res, strict=True):
+            if good:
+                ok[i], raw[i] = True, m
+                print(f"  {clips[i]['path'].name}: fitted on the whole clip", flush=True)
     models = [align_to_left_step(fourier.FourierModel(jnp.asarray(m.offset), jnp.asarray(m.amplitude),
                                                       jnp.asarray(m.phase), jnp.asarray(m.omega),
                                                       representation=representation, channel_names=names),
                                  motions[i].skeleton(), maps[i]) for i, m in enumerate(raw)]
-    return models, [m.skeleton() for m in motions], maps, motions, [c["path"].name for c, o in zip(clips, ok, strict=True)
-                                                                    if not o]
+    failed = [c["path"].name for c, o in zip(clips, ok, strict=True) if not o]
+    return models, [m.skeleton() for m in motions], maps, motions, failed
 
 
 # ----------------------------------------------------------------------------- classifiers
@@ -245,6 +266,8 @@ def classify(method: str, xtr, ytr, xte, *, k: int = 1, shrinkage: float = 0.5):
         m, dim = r.shape
         s = shrinkage
         alpha = s * float((r * r).sum()) / max(m, 1) / dim  # s tr(S) / D, S = R^T R / M
+        if alpha <= 1e-12:  # one row per class: no within-class scatter, the identity (z-scored NCM)
+            alpha, s = 1.0, 1.0
         # Sigma = (1 - s) R^T R / M + alpha I; apply its inverse by Woodbury (M << D).
         beta = (1 - s) / max(m, 1)
 
@@ -325,19 +348,22 @@ def amplitude_ratio(base, a, b):
 
 def _max_jump(model, skeleton, frame_time_s):
     """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
-    from fourierjax._style.distance import cycle_positions
+    from fourierjax._style.distance import cycle_positions_jit
 
-    k = int(np.clip(round(2 * np.pi / (float(model.omega) * frame_time_s)), 8, 400))
-    p = np.asarray(cycle_positions(model, skeleton, k))
-    return float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
+    k = 256  # fixed (one compile); the per-sample jump scaled to a frame (smooth, so linear)
+    p = np.asarray(cycle_positions_jit(model, skeleton, k))
+    per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
+    return per_sample * k * float(model.omega) * frame_time_s / (2 * np.pi)
 
 
 def _clip_max_jump(motion):
     """Largest root-relative joint displacement between consecutive frames of a real clip."""
-    from fourierjax.features import features_from_motion, root_relative_positions
+    from fourierjax.motion import motion_joint_positions
 
-    x, _ = features_from_motion(motion, "euler")
-    p = np.asarray(root_relative_positions(motion.skeleton(), x, "euler"))
+    f = motion.num_frames
+    frames = np.minimum(np.arange(-(-f // 128) * 128), f - 1)  # padded: few compiled lengths
+    p = motion_joint_positions(motion, frames)[:f]
+    p = p - p[:, :1]
     return float(np.linalg.norm(np.diff(p, axis=0), axis=-1).max())
 
 
@@ -361,6 +387,9 @@ def body(argv=None) -> None:
     lab = {(clips[i]["content"], clips[i]["style"], clips[i]["take"]): i for i in keep}
     V = _vectors([models[i] for i in range(len(models))])
     styles = sorted({clips[i]["style"] for i in keep})
+    np.savez(out / "vectors.npz", vectors=V, names=np.array(models[0].channel_names),
+             style=np.array([c["style"] for c in clips]), content=np.array([c["content"] for c in clips]),
+             take=np.array([c["take"] for c in clips]), fitted=np.array([i in keep for i in range(len(clips))]))
     normal = cfg["normal"]
     summary: dict = {"folder": str(folder), "clips": len(clips), "failed": failed, "styles": styles,
                      "representation": cfg["representation"], "harmonics": cfg["harmonics"]}
@@ -415,7 +444,8 @@ def body(argv=None) -> None:
             continue
         for c in CLASSIFIERS:
             p = classify(c, V[tr], y[tr], V[te], **kw)
-            crow.append({"test_content": content, "classifier": c, "accuracy": float(np.mean(p == y[te])), "n": len(te)})
+            crow.append({"test_content": content, "classifier": c, "accuracy": float(np.mean(p == y[te])),
+                         "n": len(te)})
     write_table(crow, out, "recognition_contents", "Across contents: trained on the other contents, tested on one")
     summary["across_contents"] = crow
 
@@ -516,7 +546,8 @@ def body(argv=None) -> None:
             rs = [r for r in trows if r["transfer"] == tname and r["method"] == mth]
             srows.append({"transfer": tname, "method": mth, "median_ratio": float(np.median([r["ratio"] for r in rs])),
                           "median_distance": float(np.median([r["distance"] for r in rs])),
-                          **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs])) for c in CLASSIFIERS},
+                          **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
+                             for c in CLASSIFIERS},
                           "flip_free": all(f["ok"] for f in flips if f["transfer"] == tname and f["method"] == mth),
                           "n": len(rs)})
     write_table(srows, out, "transfer_summary", "Transfer methods: median distance ratio and recognition rate")

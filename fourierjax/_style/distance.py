@@ -1,4 +1,4 @@
-"""Distances between gait models in body space: one cycle of root-relative joint positions after the best cyclic shift."""
+"""Distances between gait models in body space: a cycle of root-relative joint positions, best cyclic shift."""
 
 from __future__ import annotations
 
@@ -19,6 +19,10 @@ def cycle_positions(model: FourierModel, skeleton: Skeleton, num_samples: int) -
 
     phase = jnp.arange(num_samples, dtype=model.amplitude.dtype) * (2 * jnp.pi / num_samples)
     return features.root_relative_positions(skeleton, fourier.synthesize_phase(model, phase), model.representation)
+
+
+#: `cycle_positions` compiled (one program per skeleton, model layout and `num_samples`).
+cycle_positions_jit = filter_jit(cycle_positions)
 
 
 def shift_distances(pa: Float[Array, "K J 3"], pb: Float[Array, "K J 3"]) -> Float[Array, " K"]:
