@@ -141,10 +141,9 @@ def align_to_left_step(model, skeleton, body_map, num_samples: int = 64):
     ankle-to-toe vector over the cycle (the travel direction when the rig has no toes), so
     the event is the same for walks, runs, backward and sideways walks.
     """
-    from fourierjax import fourier
-    from fourierjax._style.distance import cycle_positions_jit
+    from fourierjax import fourier, style
 
-    p = np.asarray(cycle_positions_jit(model, skeleton, num_samples))  # [K, J, 3], heading frame, y up
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples))  # [K, J, 3], heading frame, y up
     left, right = body_map.left, body_map.right
     d = (p[:, left.ankle] - p[:, right.ankle])[:, [0, 2]]  # [K, 2]
     if left.toe >= 0 and right.toe >= 0:
@@ -348,10 +347,10 @@ def amplitude_ratio(base, a, b):
 
 def _max_jump(model, skeleton, frame_time_s):
     """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
-    from fourierjax._style.distance import cycle_positions_jit
+    from fourierjax import style
 
     k = 256  # fixed (one compile); the per-sample jump scaled to a frame (smooth, so linear)
-    p = np.asarray(cycle_positions_jit(model, skeleton, k))
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=k))
     per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
     return per_sample * k * float(model.omega) * frame_time_s / (2 * np.pi)
 

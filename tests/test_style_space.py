@@ -204,7 +204,6 @@ def test_pelvis_rooting_is_fk_exact_on_bandai():
 @needs_bandai
 def test_alignment_puts_the_left_step_at_phase_zero_on_bandai():
     from experiments.style_space import align_to_left_step, pelvis_rooted
-    from fourierjax._style.distance import cycle_positions
     from fourierjax.body import infer_body_map
     from fourierjax.io.bvh import read_bvh
     from fourierjax.motion import fit_motions
@@ -217,8 +216,21 @@ def test_alignment_puts_the_left_step_at_phase_zero_on_bandai():
     aligned = align_to_left_step(fourier.shift_phase(fit.model, 1.3), skel, bm)
     again = align_to_left_step(fit.model, skel, bm)
     assert float(style.cycle_distance(aligned, again, skel)) < 0.5  # cm: one event, whatever the start
-    p = np.asarray(cycle_positions(aligned, skel, 32))
+    p = np.asarray(style.cycle_positions(aligned, skel, num_samples=32))
     lead = (p[:, bm.left.ankle] - p[:, bm.right.ankle])[:, [0, 2]]
     fwd = (p[:, bm.left.toe] - p[:, bm.left.ankle])[:, [0, 2]].mean(0)
     s = lead @ fwd
     assert s[0] > 0.8 * s.max()  # the left foot is (nearly) at its furthest ahead at phase 0
+
+
+def test_cycle_positions_are_the_root_relative_poses(cmu):
+    from fourierjax.motion import model_joint_positions
+
+    _, skel, names = cmu
+    a = random_model(names, 11)
+    p = np.asarray(style.cycle_positions(a, skel, num_samples=8))
+    ref = np.asarray(model_joint_positions(a, skel, 2 * np.pi * np.arange(8) / 8))
+    assert p.shape == (8, skel.topology.num_joints, 3)
+    np.testing.assert_allclose(p, ref - ref[:, :1], atol=1e-4)
+    with pytest.raises(UserError, match="cycle_positions: `num_samples`"):
+        style.cycle_positions(a, skel, num_samples=0)

@@ -10,7 +10,12 @@ from fourierjax._style.characteristics import (
     stack,
     superpose,
 )
-from fourierjax._style.distance import cycle_distance, cycle_distance_shift, cycle_distances
+from fourierjax._style.distance import (
+    cycle_distance,
+    cycle_distance_shift,
+    cycle_distances,
+    cycle_positions,
+)
 from fourierjax._style.interpolation import blend_time_domain, interpolate, interpolate_omega
 from fourierjax._style.space import (
     StylePCA,
@@ -38,6 +43,7 @@ __all__ = [
     "cycle_distance",
     "cycle_distance_shift",
     "cycle_distances",
+    "cycle_positions",
     "ease",
     "fit_style_weights",
     "interpolate",

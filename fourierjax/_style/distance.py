@@ -13,7 +13,7 @@ from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton
 
 
-def cycle_positions(model: FourierModel, skeleton: Skeleton, num_samples: int) -> Float[Array, "K J 3"]:
+def _positions(model: FourierModel, skeleton: Skeleton, num_samples: int) -> Float[Array, "K J 3"]:
     """Root-relative joint positions of one model at `num_samples` evenly spaced cycle phases (unjitted)."""
     from fourierjax import features, fourier
 
@@ -21,8 +21,22 @@ def cycle_positions(model: FourierModel, skeleton: Skeleton, num_samples: int) -
     return features.root_relative_positions(skeleton, fourier.synthesize_phase(model, phase), model.representation)
 
 
-#: `cycle_positions` compiled (one program per skeleton, model layout and `num_samples`).
-cycle_positions_jit = filter_jit(cycle_positions)
+_positions_jit = filter_jit(_positions)
+
+
+def cycle_positions(model: FourierModel, skeleton: Skeleton, *, num_samples: int = 64) -> Float[Array, "K J 3"]:
+    """One cycle of a gait model's root-relative joint positions, the poses `cycle_distance` compares.
+
+    Arguments:
+        model: one FourierModel (gait channel layout of `skeleton`).
+        skeleton: the Skeleton it was fitted on.
+        num_samples: phases `2πk / num_samples`, `k = 0 … num_samples − 1` (static).
+
+    Returns:
+        `[num_samples, J, 3]` joint positions in file units, root at the origin of the heading frame.
+    """
+    _check("cycle_positions", model, model, skeleton, num_samples)
+    return _positions_jit(model, skeleton, num_samples)
 
 
 def shift_distances(pa: Float[Array, "K J 3"], pb: Float[Array, "K J 3"]) -> Float[Array, " K"]:
@@ -36,8 +50,7 @@ def shift_distances(pa: Float[Array, "K J 3"], pb: Float[Array, "K J 3"]) -> Flo
 
 
 def _cycle_distance(model_a, model_b, skeleton, num_samples):
-    d = shift_distances(cycle_positions(model_a, skeleton, num_samples),
-                        cycle_positions(model_b, skeleton, num_samples))
+    d = shift_distances(_positions(model_a, skeleton, num_samples), _positions(model_b, skeleton, num_samples))
     s = jnp.argmin(d)
     return d[s], s
 
