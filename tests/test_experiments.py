@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from experiments import style_space  # noqa: F401  (registers the style_space config schema)
 from fourierjax.config import ConfigError, load_experiment_config
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -87,3 +88,28 @@ def test_bad_config_on_the_command_line_is_one_line(tmp_path):
     assert len(lines) == 1 and "key 'harmonics'" in lines[0]
     with pytest.raises(ConfigError, match="this script runs 'style'"):
         load_experiment_config(CONFIGS[0], experiment="style")
+
+
+BANDAI = ROOT / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+
+
+@pytest.mark.skipif(not BANDAI.is_dir(), reason="Bandai-1 not found at ../shared/data/mocap/bandai1")
+def test_style_space_runs_small(tmp_path):
+    cfg = (ROOT / "configs" / "experiments" / "style_space.toml").read_text()
+    cfg = cfg.replace('cache = "out/style_space_cache"', f'cache = "{tmp_path / "cache"}"')
+    assert str(tmp_path) in cfg
+    (tmp_path / "c.toml").write_text(cfg)
+    r = subprocess.run([sys.executable, "-m", "experiments.style_space", "--small", "--config",
+                        str(tmp_path / "c.toml"), "--out", str(tmp_path)], cwd=ROOT, capture_output=True,
+                       text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = tmp_path / "style_space"
+    for f in ("recognition.md", "recognition_pca.csv", "transfer.csv", "transfer_summary.md", "flips.csv",
+              "confusion_walk.png", "pca_accuracy.png"):
+        assert (out / f).stat().st_size > 0, f
+    s = json.loads((out / "summary.json").read_text())
+    assert len(s["styles"]) == 5 and not s["failed"]
+    assert max(s["walk_loto"].values()) >= 0.6  # 5 styles: chance 0.2
+    rows = {r["method"]: r for r in s["transfer"]}
+    assert rows["baseline"]["median_ratio"] == pytest.approx(1.0)
+    assert set(rows) >= {"eq8", "content_mean", "ridge_map", "ls_weights"}

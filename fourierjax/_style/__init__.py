@@ -10,6 +10,12 @@ from fourierjax._style.characteristics import (
     stack,
     superpose,
 )
+from fourierjax._style.distance import (
+    cycle_distance,
+    cycle_distance_shift,
+    cycle_distances,
+    cycle_positions,
+)
 from fourierjax._style.interpolation import blend_time_domain, interpolate, interpolate_omega
 from fourierjax._style.space import (
     StylePCA,
@@ -34,6 +40,10 @@ __all__ = [
     "characteristic",
     "characteristic_function",
     "check_compatible",
+    "cycle_distance",
+    "cycle_distance_shift",
+    "cycle_distances",
+    "cycle_positions",
     "ease",
     "fit_style_weights",
     "interpolate",

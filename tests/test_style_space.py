@@ -1,0 +1,236 @@
+"""`style.cycle_distance` (issue #22) and the style-space experiment's pieces: classifiers, the
+pelvis re-rooting and the phase alignment; the Bandai-1 checks read `../shared/data/mocap/bandai1`."""
+
+import pathlib
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import data, fourier, style
+from fourierjax.errors import UserError
+from fourierjax.features import channel_names_for
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+BANDAI = ROOT / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+
+
+@pytest.fixture(scope="module")
+def cmu():
+    m = data.load("07_01")
+    return m, m.skeleton(), channel_names_for(m.topology, "euler")
+
+
+def random_model(names, seed, scale=0.3, n=3):
+    rng = np.random.default_rng(seed)
+    c = len(names)
+    off = rng.normal(0, scale, c)
+    off[:3] = [0.0, 10.0, 17.0]  # root.vx, root.vz, root.y
+    return fourier.FourierModel(jnp.asarray(off), jnp.asarray(np.abs(rng.normal(0, scale / 2, (c, n)))),
+                                jnp.asarray(rng.uniform(-np.pi, np.pi, (c, n))), jnp.asarray(2 * np.pi),
+                                representation="euler", channel_names=names)
+
+
+def reference_distance(a, b, skeleton, k):
+    """Slow NumPy reference: positions through `motion.model_joint_positions`, loops over shifts."""
+    from fourierjax.motion import model_joint_positions
+
+    th = 2 * np.pi * np.arange(k) / k
+    pa = np.asarray(model_joint_positions(a, skeleton, th), float)
+    pb = np.asarray(model_joint_positions(b, skeleton, th), float)
+    pa, pb = pa - pa[:, :1], pb - pb[:, :1]  # root-relative (the root sits at the origin)
+    best = np.inf
+    for s in range(k):
+        tot = 0.0
+        for i in range(k):
+            for j in range(pa.shape[1]):
+                tot += np.sqrt(np.sum((pa[i, j] - pb[(i + s) % k, j]) ** 2))
+        best = min(best, tot / (k * pa.shape[1]))
+    return best
+
+
+def test_zero_for_a_phase_shifted_copy(cmu):
+    _, skel, names = cmu
+    a = random_model(names, 0)
+    assert float(style.cycle_distance(a, a, skel)) < 1e-4
+    for s in (5, 17, 40):
+        b = fourier.shift_phase(a, 2 * np.pi * s / 64)
+        d, shift = style.cycle_distance_shift(a, b, skel, num_samples=64)
+        assert float(d) < 1e-3, s
+        assert int(shift) == (-s) % 64  # b at theta + 2 pi shift / K equals a at theta
+    # off the sampling grid the distance is small, not zero; a different model is far
+    b = fourier.shift_phase(a, 2 * np.pi * 5.5 / 64)
+    far = float(style.cycle_distance(a, random_model(names, 1), skel))
+    assert 0 < float(style.cycle_distance(a, b, skel)) < 0.05 * far
+
+
+def test_symmetric_and_matches_numpy_reference(cmu):
+    _, skel, names = cmu
+    a, b = random_model(names, 2), random_model(names, 3)
+    dab = float(style.cycle_distance(a, b, skel, num_samples=16))
+    dba = float(style.cycle_distance(b, a, skel, num_samples=16))
+    assert dab == pytest.approx(dba, rel=1e-5)
+    assert dab == pytest.approx(reference_distance(a, b, skel, 16), rel=1e-4)
+    assert dab > 0.1
+
+
+def test_root_motion_does_not_count(cmu):
+    _, skel, names = cmu
+    a = random_model(names, 4)
+    b = eqx.tree_at(lambda m: m.offset, a, a.offset.at[:3].add(jnp.asarray([3.0, 5.0, 2.0])))
+    assert float(style.cycle_distance(a, b, skel)) < 1e-4
+
+
+def test_batched_equals_single_and_one_trace(cmu):
+    from fourierjax._style import distance
+
+    _, skel, names = cmu
+    ms = [random_model(names, s) for s in range(5, 9)]
+    A, B = style.stack(ms[:2]), style.stack(ms[2:])
+    d = np.asarray(style.cycle_distances(A, B, skel, num_samples=16))
+    for i in range(2):
+        assert d[i] == pytest.approx(float(style.cycle_distance(ms[i], ms[2 + i], skel, num_samples=16)), rel=1e-5)
+    before = distance._cycle_distance_jit.num_traces()
+    for s in range(3):
+        style.cycle_distance(ms[s], ms[s + 1], skel, num_samples=16)
+    assert distance._cycle_distance_jit.num_traces() == before  # same shapes: no retrace
+
+
+def test_gradient_is_finite_at_zero_distance(cmu):
+    _, skel, names = cmu
+    a = random_model(names, 9)
+    g = jax.grad(lambda off: style.cycle_distance(eqx.tree_at(lambda m: m.offset, a, off), a, skel,
+                                                  num_samples=8))(a.offset)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_argument_errors(cmu):
+    _, skel, names = cmu
+    a = random_model(names, 0)
+    with pytest.raises(UserError, match="num_samples"):
+        style.cycle_distance(a, a, skel, num_samples=1)
+    with pytest.raises(UserError, match="stacked"):
+        style.cycle_distance(style.stack([a, a]), a, skel)
+    with pytest.raises(UserError, match="Skeleton"):
+        style.cycle_distance(a, a, "skeleton")
+
+
+# ----------------------------------------------------------------------------- experiment pieces
+
+
+def test_classifiers_separate_clusters():
+    from experiments.style_space import CLASSIFIERS, classify
+
+    rng = np.random.default_rng(0)
+    centres = rng.normal(0, 3, (4, 50))
+    xtr = np.concatenate([c + rng.normal(0, 1, (3, 50)) for c in centres])
+    ytr = np.repeat(np.array(list("abcd"), object), 3)
+    xte = centres + rng.normal(0, 1, (4, 50))
+    for c in CLASSIFIERS:
+        assert list(classify(c, xtr, ytr, xte, k=1, shrinkage=0.3)) == list("abcd"), c
+    # a useless feature of huge scale does not blind them (z-scoring)
+    xtr2 = np.concatenate([xtr, rng.normal(0, 1e6, (12, 1))], 1)
+    xte2 = np.concatenate([xte, rng.normal(0, 1e6, (4, 1))], 1)
+    assert list(classify("lda", xtr2, ytr, xte2, shrinkage=0.3)) == list("abcd")
+
+
+def test_lda_uses_the_within_class_covariance():
+    """Classes apart along a low-variance axis and mixed along a noisy one: LDA beats the plain mean."""
+    from experiments.style_space import classify
+
+    rng = np.random.default_rng(1)
+    n = 40
+    u, v = np.array([1.0, 1.0]) / np.sqrt(2), np.array([1.0, -1.0]) / np.sqrt(2)
+    shift = 1.0 * u + 0.3 * v  # large along the noisy axis u, small along the quiet axis v
+
+    def sample():
+        e = rng.normal(0, 1, (2 * n, 2))
+        return np.outer(2.0 * e[:, 0], u) + np.outer(0.05 * e[:, 1], v) + np.repeat([[0.0, 0.0], shift], n, 0)
+
+    x, xt = sample(), sample()
+    y = np.repeat(np.array(["a", "b"], object), n)
+    acc = {c: np.mean(classify(c, x, y, xt, shrinkage=0.05) == y) for c in ("ncm", "lda")}
+    assert acc["lda"] > 0.95 and acc["lda"] > acc["ncm"] + 0.05
+
+
+def test_find_clips_parses_labels(tmp_path):
+    from experiments.style_space import find_clips
+
+    for n in ("dataset-1_walk_happy_001.bvh", "dataset-1_walk-back_sad_002.bvh", "dataset-1_bow_sad_001.bvh",
+              "notes.txt"):
+        (tmp_path / n).write_text("")
+    pat = r"dataset-1_(?P<content>[a-z-]+)_(?P<style>[a-z-]+)_(?P<take>\d+)\.bvh$"
+    got = [(c["content"], c["style"], c["take"]) for c in find_clips(tmp_path, pat, ["walk", "walk-back"], [])]
+    assert got == [("walk-back", "sad", "002"), ("walk", "happy", "001")]
+    assert find_clips(tmp_path, pat, ["walk", "walk-back"], ["happy"])[0]["style"] == "happy"
+
+
+def test_config_schema_names_the_key(tmp_path):
+    from experiments import style_space  # noqa: F401  (registers the schema)
+    from fourierjax.config import ConfigError, load_experiment_config
+
+    p = tmp_path / "c.toml"
+    p.write_text('experiment = "style_space"\nfolders = ["x"]\npattern = "(?P<content>a)"\n')
+    with pytest.raises(ConfigError, match="key 'pattern'.*named groups"):
+        load_experiment_config(p)
+    cfg = load_experiment_config(ROOT / "configs" / "experiments" / "style_space.toml", small=True)
+    assert cfg["styles"] and cfg["transfers"] == [["walk", "run"]]
+
+
+needs_bandai = pytest.mark.skipif(not BANDAI.is_dir(), reason="Bandai-1 not found at ../shared/data/mocap/bandai1")
+
+
+@needs_bandai
+def test_pelvis_rooting_is_fk_exact_on_bandai():
+    from experiments.style_space import pelvis_rooted
+    from fourierjax.body import infer_body_map
+    from fourierjax.io.bvh import read_bvh
+    from fourierjax.motion import motion_joint_positions
+
+    for name in ("dataset-1_walk_normal_001.bvh", "dataset-1_run_normal_001.bvh"):
+        m = read_bvh(BANDAI / name)
+        r = pelvis_rooted(m, infer_body_map(m))
+        frames = np.arange(0, m.num_frames, 7)
+        p0, p1 = motion_joint_positions(m, frames), motion_joint_positions(r, frames)
+        assert np.abs(p0[:, 1:] - p1[:, 1:]).max() < 1e-3, name  # every joint but the moved root, cm
+        pel = infer_body_map(m).pelvis
+        # the root now travels with the pelvis
+        assert np.abs(p1[:, 0] - p1[:, pel]).max() < 1e-3
+        assert np.ptp(r.channels[:, 2]) > 100  # the root's Z position carries the travel (cm)
+
+
+@needs_bandai
+def test_alignment_puts_the_left_step_at_phase_zero_on_bandai():
+    from experiments.style_space import align_to_left_step, pelvis_rooted
+    from fourierjax.body import infer_body_map
+    from fourierjax.io.bvh import read_bvh
+    from fourierjax.motion import fit_motions
+
+    m = read_bvh(BANDAI / "dataset-1_walk_normal_001.bvh")
+    bm = infer_body_map(m)
+    r = pelvis_rooted(m, bm)
+    (fit,) = fit_motions([r], 3, throw=True)
+    skel = r.skeleton()
+    aligned = align_to_left_step(fourier.shift_phase(fit.model, 1.3), skel, bm)
+    again = align_to_left_step(fit.model, skel, bm)
+    assert float(style.cycle_distance(aligned, again, skel)) < 0.5  # cm: one event, whatever the start
+    p = np.asarray(style.cycle_positions(aligned, skel, num_samples=32))
+    lead = (p[:, bm.left.ankle] - p[:, bm.right.ankle])[:, [0, 2]]
+    fwd = (p[:, bm.left.toe] - p[:, bm.left.ankle])[:, [0, 2]].mean(0)
+    s = lead @ fwd
+    assert s[0] > 0.8 * s.max()  # the left foot is (nearly) at its furthest ahead at phase 0
+
+
+def test_cycle_positions_are_the_root_relative_poses(cmu):
+    from fourierjax.motion import model_joint_positions
+
+    _, skel, names = cmu
+    a = random_model(names, 11)
+    p = np.asarray(style.cycle_positions(a, skel, num_samples=8))
+    ref = np.asarray(model_joint_positions(a, skel, 2 * np.pi * np.arange(8) / 8))
+    assert p.shape == (8, skel.topology.num_joints, 3)
+    np.testing.assert_allclose(p, ref - ref[:, :1], atol=1e-4)
+    with pytest.raises(UserError, match="cycle_positions: `num_samples`"):
+        style.cycle_positions(a, skel, num_samples=0)
