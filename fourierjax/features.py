@@ -28,6 +28,7 @@ from fourierjax._fourier._layout import (
     local_transform as _local_transform,
 )
 from fourierjax._fourier._layout import (
+    place_root,
     root_joints,
 )
 from fourierjax._fourier._layout import (
@@ -412,46 +413,6 @@ def motion_from_features(
             out[:, base + k] = world[ch[0]]
     return dataclasses.replace(template, channels=out, frame_time_s=float(frame_time_s),
                                source=None)
-
-
-def place_root(motion, root_position: Float[ArrayLike, "F 3"], *, body_map=None):
-    """The motion with its pelvis's world position moved to `root_position` exactly.
-
-    The move goes into the trajectory joint's position channels (in its parent's frame), as
-    `motion_from_features` writes the travel; rotations are unchanged. On CMU both are joint 0,
-    whose position channels are set to `root_position`.
-
-    Arguments:
-        motion: a Motion (e.g. from `motion_from_features`).
-        root_position: `[F, 3]` world positions of the pelvis, file units.
-        body_map: the skeleton's `fourierjax.body.BodyMap`; None infers it from `motion`.
-
-    Returns:
-        A Motion with the same frames.
-    """
-    rj = root_joints(motion, body_map)
-    target = _np(root_position)
-    if target.shape != (motion.num_frames, 3):
-        raise UserError(f"place_root: root_position has shape {target.shape}, expected ({motion.num_frames}, 3)")
-    topo = motion.topology
-    traj, parent = rj.trajectory, topo.parents[rj.trajectory]
-    axes = {c[0]: k for k, c in enumerate(topo.channels[traj]) if c.endswith("position")}
-    if set(axes) != set("XYZ"):
-        raise UserError(f"place_root: the trajectory joint {topo.names[traj]!r} has no X, Y and Z position channels")
-    ch = np.array(motion.channels, np.float64)
-    base = topo.channel_offsets[traj]
-    if traj == rj.pelvis and parent < 0:  # position channels replace the offset: set them exactly
-        for a, k in axes.items():
-            ch[:, base + k] = target[:, "XYZ".index(a)]
-    else:
-        pos, _ = _world_pose(motion, rj.pelvis)
-        delta = target - pos
-        if parent >= 0:
-            _, q_parent = _world_pose(motion, parent)
-            delta = _rot("quat_apply", _rot("quat_conjugate", q_parent), delta)
-        for a, k in axes.items():
-            ch[:, base + k] += delta[:, "XYZ".index(a)]
-    return dataclasses.replace(motion, channels=ch)
 
 
 def channel_model(

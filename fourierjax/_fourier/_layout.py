@@ -7,6 +7,7 @@ import functools
 
 import jax
 import numpy as np
+from jaxtyping import ArrayLike, Float
 
 from fourierjax import _jit, rotations
 from fourierjax.errors import UserError
@@ -226,3 +227,43 @@ def _facing_local(motion, bm) -> tuple[float, float, float]:
         snapped[k] = np.sign(f[k])
         f = snapped
     return tuple(float(v) for v in f)  # type: ignore[return-value]
+
+
+def place_root(motion, root_position: Float[ArrayLike, "F 3"], *, body_map=None):
+    """The motion with its pelvis's world position moved to `root_position` exactly.
+
+    The move goes into the trajectory joint's position channels (in its parent's frame), as
+    `motion_from_features` writes the travel; rotations are unchanged. On CMU both are joint 0,
+    whose position channels are set to `root_position`.
+
+    Arguments:
+        motion: a Motion (e.g. from `motion_from_features`).
+        root_position: `[F, 3]` world positions of the pelvis, file units.
+        body_map: the skeleton's `fourierjax.body.BodyMap`; None infers it from `motion`.
+
+    Returns:
+        A Motion with the same frames.
+    """
+    rj = root_joints(motion, body_map)
+    target = as_f64(root_position)
+    if target.shape != (motion.num_frames, 3):
+        raise UserError(f"place_root: root_position has shape {target.shape}, expected ({motion.num_frames}, 3)")
+    topo = motion.topology
+    traj, parent = rj.trajectory, topo.parents[rj.trajectory]
+    axes = {c[0]: k for k, c in enumerate(topo.channels[traj]) if c.endswith("position")}
+    if set(axes) != set("XYZ"):
+        raise UserError(f"place_root: the trajectory joint {topo.names[traj]!r} has no X, Y and Z position channels")
+    ch = np.array(motion.channels, np.float64)
+    base = topo.channel_offsets[traj]
+    if traj == rj.pelvis and parent < 0:  # position channels replace the offset: set them exactly
+        for a, k in axes.items():
+            ch[:, base + k] = target[:, "XYZ".index(a)]
+    else:
+        pos, _ = world_pose(motion, rj.pelvis)
+        delta = target - pos
+        if parent >= 0:
+            _, q_parent = world_pose(motion, parent)
+            delta = rot("quat_apply", rot("quat_conjugate", q_parent), delta)
+        for a, k in axes.items():
+            ch[:, base + k] += delta[:, "XYZ".index(a)]
+    return dataclasses.replace(motion, channels=ch)
