@@ -174,6 +174,9 @@ def root_joints(motion, body_map=None) -> RootJoints:
         raise UserError(
             f"{motion.source or 'motion'}: its up axis is {'-' if bm.up_sign < 0 else '+'}{'xyz'[bm.up_axis]}; "
             "the Fourier features are Y-up: convert it first with fourierjax.io.axes.to_y_up(motion, up)"
+            + ("" if motion.num_frames > 1 else
+               " (read from a one-frame template: a rest pose that is not a T-pose may mislead it; pass "
+               "body_map=, e.g. ModelFile.body_map or gait.model_body_map(model, skeleton))")
         )
     topo = motion.topology
     pelvis, traj = bm.pelvis, bm.trajectory
