@@ -143,6 +143,25 @@ class Topology:
         return self._levels
 
 
+def common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
+    """The nearest joint above both `a` and `b` (e.g. the pelvis of two hips); -1 when none.
+
+    Arguments:
+        parents: parent index of each joint (-1 for a root), as `Topology.parents`.
+        a, b: joint indices.
+
+    Returns:
+        A joint index, or -1.
+    """
+    up = set()
+    while a >= 0:
+        up.add(a)
+        a = parents[a]
+    while b >= 0 and b not in up:
+        b = parents[b]
+    return b
+
+
 class Skeleton(eqx.Module):
     """A topology with its geometry: bone offsets are arrays, so they can be fitted or batched.
 

@@ -19,6 +19,7 @@ from fourierjax._body._map import (
     resolve_joint,
     resolve_point,
 )
+from fourierjax.skeleton import common_ancestor
 
 _LEG_FIELDS = ("hip", "knee", "ankle", "toe")
 _ARM_FIELDS = ("collar", "shoulder", "elbow", "wrist")
@@ -70,7 +71,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
         else:
             legs = {}
     if legs:
-        pelvis = _common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
+        pelvis = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
         if pelvis < 0:
             raise BodyMapError(missing_legs_message("the two hips have no common ancestor", names))
         mean_world = _mean_relative(points, pelvis)
@@ -183,16 +184,6 @@ def _path(parents, a: int, b: int) -> list[int]:
             return []
         out.append(p)
     return out[::-1]
-
-
-def _common_ancestor(parents, a: int, b: int) -> int:
-    up = set()
-    while a >= 0:
-        up.add(a)
-        a = parents[a]
-    while b >= 0 and b not in up:
-        b = parents[b]
-    return b
 
 
 def _subtree(point_parents, root: int) -> list[int]:

@@ -13,6 +13,7 @@ from jaxtyping import Array, ArrayLike, Float
 from fourierjax._checks import concrete
 from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
+from fourierjax.skeleton import common_ancestor
 
 if TYPE_CHECKING:
     from fourierjax.body import BodyMap
@@ -123,17 +124,6 @@ def groin_joints(
             f" Pass names=(left, right) or body_map= for a skeleton that does not use the CMU names{hint}"
         )
     return joints.index(names[0]), joints.index(names[1])
-
-
-def common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
-    """The nearest joint above both `a` and `b` (the pelvis of two groins); -1 when none."""
-    up = set()
-    while a >= 0:
-        up.add(a)
-        a = parents[a]
-    while b >= 0 and b not in up:
-        b = parents[b]
-    return b
 
 
 def feet_of(body_map: BodyMap) -> FootPoints:
