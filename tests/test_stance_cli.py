@@ -39,6 +39,7 @@ def test_list_names_first_one_per_line():
         (["--shape-set", "posture"], "--out"),
         (["--shape-set", "posture", "--out", "/no/such/dir/x.bvh"], "does not exist"),
         (["--shape-set", "missing.toml", "--out", "x.bvh"], "missing.toml"),
+        (["--shape-set", "posture", "--out", "pose.txt"], "expected a .bvh file"),
     ],
 )
 def test_user_mistakes_give_one_line_and_exit_2(args, message, tmp_path):

@@ -74,6 +74,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--shape-set is required (see `fourierjax stance --list`)")
     if not args.out:
         raise UserError("--out POSE.bvh is required")
+    if not args.out.lower().endswith(".bvh"):  # a BVH under another name: `synth` would refuse it
+        raise UserError(f"--out: {args.out}: expected a .bvh file")
     intensity = _number(args.intensity, "--intensity")
     height = _number(args.height, "--height")
     obj = _point(args.object, "--object")
