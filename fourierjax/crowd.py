@@ -200,6 +200,10 @@ def make_crowd(skeleton: Skeleton, models: FourierModel) -> Crowd:
         )
     if num_chars == 0:
         raise UserError("make_crowd: `models` hold no characters")
+    from fourierjax import _memory
+
+    _memory.check_bytes(f"make_crowd: {num_chars} characters", _memory.crowd_bytes(num_chars, topology.num_joints),
+                        hint="make a smaller crowd")
     dtype = jnp.result_type(models.offset.dtype, jnp.float32)
     _, index, _ = _layout(topology)
     a, b = models.sin_cos()  # [B, C, N]

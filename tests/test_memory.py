@@ -240,3 +240,17 @@ def test_the_memory_benchmark_uses_fit_batch_s_estimate():
     from experiments.benchmarks import memory as bench
 
     assert bench.PER_CLIP_BYTES == _memory.fit_bytes_per_clip(bench.T, bench.C, bench.N, 4)
+
+
+def test_synth_refuses_a_length_over_the_memory_budget(tmp_path, monkeypatch, capsys):
+    """`fourierjax synth` checks the bytes its frame count implies before synthesizing."""
+    from fourierjax import _memory
+    from fourierjax.cli import main
+
+    assert main(["fit", "07_01", "--harmonics", "2", "--out", str(tmp_path / "m.npz")]) == 0
+    monkeypatch.setattr(_memory, "default_limit", lambda: 10_000)
+    capsys.readouterr()
+    assert main(["synth", str(tmp_path / "m.npz"), "--seconds", "2", "--out", str(tmp_path / "s.bvh")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--seconds 2" in err[0] and "limit" in err[0], err
+    assert not (tmp_path / "s.bvh").exists()

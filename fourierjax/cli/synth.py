@@ -97,6 +97,10 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.cli.interpolate import frame_count
 
     num = frame_count(args.seconds, dt)
+    from fourierjax import _memory
+
+    _memory.check_synthesis(f"--seconds {args.seconds:g} at {1 / dt:g} fps", num, model.num_channels,
+                            model.num_harmonics)
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
     motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None))
