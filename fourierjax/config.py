@@ -157,6 +157,58 @@ SCHEMAS: dict[str, dict[str, Field]] = {
 }
 
 
+def _is_str(v) -> str | None:
+    return None if isinstance(v, str) and v else f"expected a non-empty string, got {v!r}"
+
+
+def _pattern(v) -> str | None:
+    import re
+
+    try:
+        rx = re.compile(v)
+    except (re.error, TypeError) as err:
+        return f"expected a regular expression, got {v!r} ({err})"
+    missing = {"content", "style", "take"} - set(rx.groupindex)
+    return f"the pattern needs named groups {sorted(missing)}" if missing else None
+
+
+def _pairs(v) -> str | None:
+    if not isinstance(v, list) or not all(isinstance(p, list) and len(p) == 2 and all(isinstance(s, str) for s in p)
+                                          for p in v):
+        return f"expected a list of [source, target] content pairs, got {v!r}"
+    return None
+
+
+_STRS = list_of(_is_str, "strings")
+
+SCHEMAS["style_space"] = {
+    "folders": Field(_STRS, doc="folders to search, relative to the repository root; the first that exists"),
+    "pattern": Field(_pattern, r"dataset-1_(?P<content>[a-z-]+)_(?P<style>[a-z-]+)_(?P<take>\d+)\.bvh$",
+                     "file-name regular expression with groups content, style, take"),
+    "contents": Field(_STRS, ["walk", "run", "dash", "walk-back", "walk-left", "walk-right"],
+                      "locomotion contents to fit"),
+    "styles": Field(list_of(_is_str, "strings", min_len=0), [], "styles to use (empty: all)"),
+    "normal": Field(_is_str, "normal", "the neutral style"),
+    "recognition_content": Field(_is_str, "walk", "the content of the leave-one-take-out recognition"),
+    "harmonics": Field(integer(1, 16), 3),
+    "representations": Field(list_of(choice("euler", "expmap"), "representations"), ["euler", "expmap"],
+                             "rotation channels to compare (the first is the main one)"),
+    "pca_k": Field(list_of(integer(1, 1000), "integers"), [2, 5, 10, 20]),
+    "knn": Field(integer(1, 50), 1, "k of the k-NN classifier"),
+    "shrinkage": Field(number(0, 1), 0.5, "LDA covariance shrinkage towards the identity"),
+    "l2": Field(number(0, 1e6), 0.01, "L2 penalty of the logistic regression (z-scored features)"),
+    "ridge": Field(number(0, 1e6), 30.0, "ridge penalty of the style-space map (z-scored)"),
+    "transfer_weight": Field(number(0, 3), 0.5, "weight of the fixed-weight content-mean transfer"),
+    "weight_grid": Field(list_of(number(0, 3), "numbers"), [0.25, 0.5, 0.75, 1.0],
+                         "weights the cross-validated content-mean transfer chooses from"),
+    "transfers": Field(_pairs, [["walk", "run"], ["walk", "dash"], ["walk", "walk-back"], ["run", "walk"]]),
+    "weights": Field(list_of(number(0, 3), "numbers"), [0.0, 0.5, 1.0, 1.5], "weights of the limb-flip check"),
+    "num_samples": Field(integer(8, 512), 32, "cycle samples of the distance"),
+    "cache": Field(_is_str, "/tmp/fourierjax_style_space_cache",
+                   "where fitted models are cached (outside the repository)"),
+}
+
+
 def validate(raw: dict, schema: dict[str, Field], where: str) -> dict:
     """Check ``raw`` against ``schema``; return it with defaults filled in.
 

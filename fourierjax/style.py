@@ -1,5 +1,6 @@
 """Style algebra on Fourier gait models (Unuma 1995; Tilmanne & Dutoit): inter/extrapolation,
-transitions, characteristics and superposition, noise harmonics, style space and PCA.
+transitions, characteristics and superposition, transfer across contents, noise harmonics, style space
+and PCA.
 
 Every function takes `fourierjax.fourier.FourierModel`s, `Θ_c(θ) = A0_c + Σ_n A_cn sin(nθ + φ_cn)`
 at a common cycle phase θ, and returns new models or channel values; angle offsets of two
@@ -15,11 +16,13 @@ from fourierjax._style import (
     Method,
     OmegaMode,
     StylePCA,
+    TransferMethod,
     add_noise,
     blend_time_domain,
     characteristic,
     characteristic_function,
     check_compatible,
+    content_mean,
     cycle_distance,
     cycle_distance_shift,
     cycle_distances,
@@ -38,6 +41,7 @@ from fourierjax._style import (
     style_pca,
     style_vector,
     superpose,
+    transfer,
     transition,
     transition_schedule,
 )
@@ -48,11 +52,13 @@ __all__ = [
     "Method",
     "OmegaMode",
     "StylePCA",
+    "TransferMethod",
     "add_noise",
     "blend_time_domain",
     "characteristic",
     "characteristic_function",
     "check_compatible",
+    "content_mean",
     "cycle_distance",
     "cycle_distance_shift",
     "cycle_distances",
@@ -71,6 +77,7 @@ __all__ = [
     "style_pca",
     "style_vector",
     "superpose",
+    "transfer",
     "transition",
     "transition_schedule",
     "wrap_angle",

@@ -27,6 +27,7 @@ from fourierjax._style.space import (
     style_pca,
     style_vector,
 )
+from fourierjax._style.transfer import TransferMethod, content_mean, transfer
 from fourierjax._style.transitions import ease, transition, transition_schedule
 
 __all__ = [
@@ -35,11 +36,13 @@ __all__ = [
     "Method",
     "OmegaMode",
     "StylePCA",
+    "TransferMethod",
     "add_noise",
     "blend_time_domain",
     "characteristic",
     "characteristic_function",
     "check_compatible",
+    "content_mean",
     "cycle_distance",
     "cycle_distance_shift",
     "cycle_distances",
@@ -58,6 +61,7 @@ __all__ = [
     "style_pca",
     "style_vector",
     "superpose",
+    "transfer",
     "transition",
     "transition_schedule",
 ]

@@ -1,0 +1,76 @@
+"""Style features of fitted clips for recognition: joint-angle harmonics and body-space (FK) harmonics, in groups."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Feature groups, in the order `features` concatenates them.
+GROUPS = ("angles", "positions", "timing")
+
+
+def _position_harmonics(model, skeleton, body_map, num_harmonics: int, num_samples: int = 32):
+    """Fourier coefficients over one cycle of the pelvis-relative joint positions, per leg length.
+
+    Returns ``[J, 3, 1 + 2 N]``: the mean and ``(re, im)`` of harmonics ``1..N`` of every
+    joint coordinate in the heading frame, divided by the body map's leg length, so rigs of
+    different sizes and units compare.
+    """
+    from fourierjax import style
+
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples), float)  # [K, J, 3]
+    p = (p - p[:, body_map.pelvis : body_map.pelvis + 1]) / body_map.leg_length
+    c = np.fft.rfft(p, axis=0) / num_samples  # [K/2+1, J, 3]
+    h = c[1 : num_harmonics + 1] * 2
+    return np.concatenate([c[:1].real, h.real, h.imag], axis=0).transpose(1, 2, 0)
+
+
+def _angle_harmonics(model, skip):
+    """Per rotation channel: the offset (wrapped to (-pi, pi]) and the harmonics' phasors."""
+    off = np.asarray(model.offset, float)
+    amp, ph = np.asarray(model.amplitude, float), np.asarray(model.phase, float)
+    keep = np.array([not any(n.startswith(s) for s in skip) for n in model.channel_names])
+    off = np.angle(np.exp(1j * off))
+    re, im = amp * np.cos(ph), amp * np.sin(ph)
+    return np.concatenate([off[:, None], re, im], axis=1)[keep]
+
+
+def _timing(model, body_map):
+    """Cadence and stride: log omega, travel per cycle and root height per leg length, root height sway."""
+    names = list(model.channel_names)
+    off, amp = np.asarray(model.offset, float), np.asarray(model.amplitude, float)
+    omega = float(model.omega)
+    vx, vz, y = (names.index(n) for n in ("root.vx", "root.vz", "root.y"))
+    stride = np.hypot(off[vx], off[vz]) * 2 * np.pi / omega / body_map.leg_length
+    return np.array([np.log(omega), stride, off[y] / body_map.leg_length, *(amp[y] / body_map.leg_length)])
+
+
+def features(model, skeleton, body_map, *, num_harmonics: int | None = None) -> dict[str, np.ndarray]:
+    """The feature groups of one fitted clip (flat arrays, see `GROUPS`).
+
+    ``angles``: the joint-angle channels (the root's velocity and height channels left out);
+    ``positions``: body-space harmonics of the pelvis-relative joint positions through FK, per
+    leg length (rig- and unit-independent); ``timing``: cadence, stride and root height.
+    """
+    n = model.amplitude.shape[1] if num_harmonics is None else num_harmonics
+    return {"angles": _angle_harmonics(model, ("root.",)).ravel(),
+            "positions": _position_harmonics(model, skeleton, body_map, n).ravel(),
+            "timing": _timing(model, body_map)}
+
+
+def feature_matrix(models, skeletons, body_maps, groups=GROUPS, weights=None):
+    """Rows of concatenated feature groups and the column weights that balance them.
+
+    Returns:
+        ``(x [M, D], column_weights [D])``: a group ``g`` of ``d`` columns gets the weight
+        ``weights[g] / sqrt(d)`` (default weight 1), to apply after z-scoring
+        (`classify(..., column_weights=)`), so that each group counts by its weight and not by
+        its size.
+    """
+    feats = [features(m, s, b) for m, s, b in zip(models, skeletons, body_maps, strict=True)]
+    weights = weights or {}
+    cols, w = [], []
+    for g in groups:
+        x = np.stack([f[g] for f in feats])
+        cols.append(x)
+        w.append(np.full(x.shape[1], weights.get(g, 1.0) / np.sqrt(x.shape[1])))
+    return np.concatenate(cols, axis=1), np.concatenate(w)

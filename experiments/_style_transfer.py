@@ -1,0 +1,112 @@
+"""Transfer methods of the style-space experiment: each builds the target content's model in the held-out style."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Transfer methods in table order; "baseline" is the target content's neutral clip unchanged and
+#: "content_mean_only" the mean of its other styles (no style information at all).
+METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
+           "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
+           "content_mean_cv")
+
+
+def branch_vectors(models, reference):
+    """Style vectors (phasor coordinates, `style.style_vector`) with every model's angle
+    offsets first moved onto ``reference``'s branch, so that means and regressions over clips
+    compare angles on one branch."""
+    from fourierjax import style
+
+    return np.asarray(style.style_matrix([_on_branch(reference, m) for m in models]), float)
+
+
+def _on_branch(reference, model):
+    from fourierjax import style
+
+    # superpose(reference, [characteristic(model, reference)], [1], "phasor") is `model` on the
+    # reference's branch (characteristic compares offsets on one branch).
+    return style.superpose(reference, [style.characteristic(model, reference)], [1.0], method="phasor")
+
+
+def channel_groups(model, body_map, topology) -> np.ndarray:
+    """Joint group of every channel: 0 legs (and root channels), 1 trunk and head, 2 arms and hands."""
+    names = model.channel_names
+    legs = {body_map.left.hip, body_map.left.knee, body_map.left.ankle, body_map.left.toe,
+            body_map.right.hip, body_map.right.knee, body_map.right.ankle, body_map.right.toe} - {-1}
+    arms = set()
+    for a in (body_map.left_arm, body_map.right_arm):
+        if a is not None:
+            arms |= {a.collar, a.shoulder, a.elbow, a.wrist} - {-1}
+    group = np.ones(topology.num_joints, int)
+    for j in range(topology.num_joints):
+        chain, p = [j], topology.parents[j]
+        while p >= 0:
+            chain.append(p)
+            p = topology.parents[p]
+        if any(k in legs for k in chain):
+            group[j] = 0
+        elif any(k in arms for k in chain):
+            group[j] = 2
+    index = {n: i for i, n in enumerate(topology.names)}
+    return np.array([0 if n.startswith("root.") else group[index[n.rsplit(".", 1)[0]]] for n in names])
+
+
+def _ls(dx, dy):
+    return float((dx * dy).sum() / max((dx * dx).sum(), 1e-12))
+
+
+def vector_methods(vs, vt, styles, target, normal, *, ridge, weight, column_groups, harmonic_kinds):
+    """Target-content style vectors of the style ``target`` by the style-space methods.
+
+    ``vs``, ``vt``: dicts style -> branch-aligned style vector of the source and the target
+    content. Nothing here reads ``vt[target]``: every mean, weight and map is fitted on the
+    other styles.
+    """
+    others = [s for s in styles if s != target]
+    xs, ys = np.stack([vs[s] for s in others]), np.stack([vt[s] for s in others])
+    ms, mt = xs.mean(0), ys.mean(0)
+    d = vs[target] - ms
+    dx, dy = xs - ms, ys - mt
+    out = {"content_mean_only": mt, "content_mean": mt + d, "content_mean_w": mt + weight * d}
+    # one least-squares weight per channel, per harmonic (offset, 1..N, log omega), per joint group
+    per = np.array([_ls(dx[:, i], dy[:, i]) for i in range(dx.shape[1])])
+    out["ls_weights"] = mt + np.clip(per, 0.0, 1.5) * d
+    for name, kinds in (("harmonic_weights", harmonic_kinds), ("group_weights", column_groups)):
+        w = np.zeros(d.shape)
+        for k in np.unique(kinds):
+            m = kinds == k
+            w[m] = np.clip(_ls(dx[:, m], dy[:, m]), 0.0, 1.5)
+        out[name] = mt + w * d
+    # eq. 8 with one weight fitted on the other styles' normal-relative pairs
+    train = [s for s in others if s != normal]
+    ex = np.stack([vs[s] - vs[normal] for s in train])
+    ey = np.stack([vt[s] - vt[normal] for s in train])
+    out["eq8_ls_weight"] = vt[normal] + _ls(ex, ey) * (vs[target] - vs[normal])
+    # ridge regression (dual form, z-scored inputs) from source styles to target styles
+    sx = np.where(xs.std(0) > 1e-12, xs.std(0), 1.0)
+    zx = dx / sx
+    a = np.linalg.solve(zx @ zx.T + ridge * np.eye(len(others)), dy)
+    out["ridge_map"] = mt + (d / sx) @ zx.T @ a
+    return out
+
+
+def amplitude_ratio(base, a, b):
+    """Eq. 8 with the amplitudes scaled by ``A_a / A_b`` instead of shifted by ``A_a - A_b``."""
+    import equinox as eqx
+    import jax.numpy as jnp
+
+    from fourierjax import style
+
+    out = style.superpose(base, [style.characteristic(a, b)], [1.0])
+    ratio = jnp.clip((a.amplitude + 1e-3) / (b.amplitude + 1e-3), 0.0, 4.0)
+    return eqx.tree_at(lambda m: m.amplitude, out, base.amplitude * ratio)
+
+
+def max_jump(model, skeleton, frame_time_s, num_samples: int = 256) -> float:
+    """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
+    from fourierjax import style
+
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples))
+    per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
+    # the per-sample jump scaled to a frame (a smooth cycle, so linear)
+    return per_sample * num_samples * float(model.omega) * frame_time_s / (2 * np.pi)
