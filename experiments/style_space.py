@@ -195,8 +195,9 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             harm = np.concatenate([np.tile(np.array([0] + [1 + k // 2 for k in range(2 * n_)]), c_), [n_ + 1]])
         groups = np.concatenate([np.repeat(channel_groups(ref, maps[g[(dst, normal)]], skels[0].topology),
                                            1 + 2 * ref.amplitude.shape[1]), [3]])
-        # classifier of the transferred models: real target-content clips only (every take)
-        real = [i for i, c in enumerate(clips) if c["content"] == dst and c["style"] in sty]
+        # classifier of the transferred models: real target-content clips only, one take per style
+        # (the first; a second take, where there is one, is the oracle and must not be in it)
+        real = [g[(dst, s)] for s in sty]
         fx_real = [features(models[i], skels[i], maps[i]) for i in real]
         for s in sty:
             if s == normal:

@@ -1,4 +1,4 @@
-"""Write the three tutorial notebooks (outputs stripped) from the cells below: run
+"""Write the tutorial notebooks (outputs stripped) from the cells below: run
 ``python notebooks/make_notebooks.py`` after editing, commit the .ipynb files without outputs."""
 
 from __future__ import annotations
@@ -179,6 +179,111 @@ def build(cells) -> nbformat.NotebookNode:
 
 NOTEBOOKS = {"01_gait_fitting_and_style.ipynb": GAIT, "02_step_constraints_and_hip_rule.ipynb": HIP,
              "03_expressive_stance.ipynb": STANCE}
+
+
+def style_on_real_data() -> list[tuple[str, str]]:
+    """Cells of notebook 04: recognising and transferring a style on Bandai-1 (issue #22).
+
+    Every cell runs without the data: it then says so, and the figures say so too.
+    """
+    return [
+        ("md", """# Style on real labelled data: recognise it, transfer it (Bandai-1)
+
+Bandai-Namco Research Motion Dataset 1 (CC BY-NC 4.0; never copied into the repository) has 15 acted
+styles of walks and runs. We fit a few styles through the body-map pipeline, recognise the style of a
+held-out walk take, and put a walk's style on a run two ways: Unuma's eq. 8 (relative to the normal
+clips) and relative to each content's mean (`style.transfer(..., method="content_mean")`). The full
+study is `python -m experiments style_space` and `docs/findings.md`."""),
+        ("code", """import pathlib
+import numpy as np
+import matplotlib.pyplot as plt
+import fourierjax
+from fourierjax import style
+
+ROOT = pathlib.Path(fourierjax.__file__).resolve().parent.parent
+BANDAI = ROOT / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+HAVE = BANDAI.is_dir()
+print("Bandai-1:", BANDAI.resolve() if HAVE else "not found; the cells below skip and say so")
+
+def no_data_figure(title):
+    fig, ax = plt.subplots(figsize=(5, 1.5))
+    ax.text(0.5, 0.5, "Bandai-1 not found at ../shared/data/mocap/bandai1", ha="center", va="center")
+    ax.set_title(title)
+    ax.set_axis_off()
+    return fig"""),
+        ("md", "Fit walks (two takes) and runs of five styles; the fits are cached under /tmp."),
+        ("code", """STYLES = ["normal", "happy", "sad", "old", "proud"]
+if HAVE:
+    from experiments._style_data import find_clips, fit_clips
+    pattern = r"dataset-1_(?P<content>[a-z-]+)_(?P<style>[a-z-]+)_(?P<take>\\d+)\\.bvh$"
+    clips = find_clips(BANDAI, pattern, ["walk", "run"], STYLES)
+    models, skels, maps, motions, failed = fit_clips(clips, 3, "euler",
+                                                     pathlib.Path("/tmp/fourierjax_style_space_cache"))
+    lab = {(c["content"], c["style"], c["take"]): i for i, c in enumerate(clips)}
+    print(len(clips), "clips fitted; failed:", failed)"""),
+        ("md", """Recognition, leaving one walk take out: the classifier is trained on the other walk take and on
+the runs (each content centred on its training mean), and tested on the held-out take."""),
+        ("code", """if HAVE:
+    from experiments._style_features import features
+    from experiments.style_space import FEATURE_SETS, _matrix, loto
+    feats = [features(m, s, b) for m, s, b in zip(models, skels, maps)]
+    x, cw = _matrix(feats, FEATURE_SETS["angles+positions"])
+    y = np.array([c["style"] for c in clips], object)
+    content = np.array([c["content"] for c in clips])
+    take = np.array([c["take"] for c in clips])
+    idx, preds = loto(x, cw, y, content, take, "walk", pooled=True, kw={"k": 1, "shrinkage": 0.5, "l2": 0.01})
+    for name, p in preds.items():
+        print(f"{name}: {np.mean(p == y[idx]):.0%} (chance {1 / len(STYLES):.0%})")"""),
+        ("code", """if HAVE:
+    cm = np.zeros((len(STYLES), len(STYLES)), int)
+    for t, p in zip(y[idx], preds["lda"]):
+        cm[STYLES.index(t), STYLES.index(p)] += 1
+    fig, ax = plt.subplots(figsize=(4, 3.5))
+    ax.imshow(cm, cmap="Blues")
+    ax.set_xticks(range(len(STYLES)), STYLES, rotation=45)
+    ax.set_yticks(range(len(STYLES)), STYLES)
+    ax.set_xlabel("predicted")
+    ax.set_ylabel("true")
+    ax.set_title("walks, leave one take out (LDA)")
+else:
+    fig = no_data_figure("recognition")
+fig"""),
+        ("md", """Transfer walk -> run for each non-normal style S, leaving S out of the content means. The score is
+`style.cycle_distance` (root-relative joint positions over one cycle, best cyclic shift) to the real run
+in style S, as a ratio to the normal run's distance (1 = no better than not transferring at all)."""),
+        ("code", """if HAVE:
+    g = lambda c, s: models[lab[(c, s, "001")]]
+    skel = skels[lab[("run", "normal", "001")]]
+    ratios = {"eq8": [], "content_mean (w=0.5)": []}
+    for s in STYLES[1:]:
+        target, base = g("run", s), g("run", "normal")
+        d0 = float(style.cycle_distance(base, target, skel))
+        others = [o for o in STYLES if o != s]
+        eq8 = style.transfer(g("walk", s), g("walk", "normal"), base)
+        cmt = style.transfer(g("walk", s), [g("walk", o) for o in others], [g("run", o) for o in others],
+                            method="content_mean", weight=0.5)
+        ratios["eq8"].append(float(style.cycle_distance(eq8, target, skel)) / d0)
+        ratios["content_mean (w=0.5)"].append(float(style.cycle_distance(cmt, target, skel)) / d0)
+    for k, v in ratios.items():
+        print(f"{k}: median distance ratio {np.median(v):.2f}", np.round(v, 2))"""),
+        ("code", """if HAVE:
+    fig, ax = plt.subplots(figsize=(6, 3))
+    xs = np.arange(len(STYLES) - 1)
+    for k, (name, v) in enumerate(ratios.items()):
+        ax.bar(xs + 0.4 * k - 0.2, v, 0.4, label=name)
+    ax.axhline(1.0, color="k", lw=1)
+    ax.axhline(0.8, color="k", lw=1, ls=":")
+    ax.set_xticks(xs, STYLES[1:])
+    ax.set_ylabel("distance / normal run's")
+    ax.set_title("walk -> run: lower is closer to the real styled run")
+    ax.legend()
+else:
+    fig = no_data_figure("transfer")
+fig"""),
+    ]
+
+
+NOTEBOOKS["04_style_on_real_data.ipynb"] = style_on_real_data()
 
 
 def main() -> None:

@@ -8,7 +8,6 @@ import sys
 
 import pytest
 
-from experiments import style_space  # noqa: F401  (registers the style_space config schema)
 from fourierjax.config import ConfigError, load_experiment_config
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
@@ -96,7 +95,7 @@ BANDAI = ROOT / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
 @pytest.mark.skipif(not BANDAI.is_dir(), reason="Bandai-1 not found at ../shared/data/mocap/bandai1")
 def test_style_space_runs_small(tmp_path):
     cfg = (ROOT / "configs" / "experiments" / "style_space.toml").read_text()
-    cfg = cfg.replace('cache = "out/style_space_cache"', f'cache = "{tmp_path / "cache"}"')
+    cfg = cfg.replace('cache = "/tmp/fourierjax_style_space_cache"', f'cache = "{tmp_path / "cache"}"')
     assert str(tmp_path) in cfg
     (tmp_path / "c.toml").write_text(cfg)
     r = subprocess.run([sys.executable, "-m", "experiments.style_space", "--small", "--config",
@@ -104,12 +103,16 @@ def test_style_space_runs_small(tmp_path):
                        text=True, timeout=900)
     assert r.returncode == 0, r.stderr[-3000:]
     out = tmp_path / "style_space"
-    for f in ("recognition.md", "recognition_pca.csv", "transfer.csv", "transfer_summary.md", "flips.csv",
-              "confusion_walk.png", "pca_accuracy.png"):
+    for f in ("recognition.md", "recognition_pca.csv", "recognition_contents.csv", "transfer.csv",
+              "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png"):
         assert (out / f).stat().st_size > 0, f
+    assert list((tmp_path / "cache").glob("fits_euler_3_*.npz"))  # the fits are cached
     s = json.loads((out / "summary.json").read_text())
     assert len(s["styles"]) == 5 and not s["failed"]
-    assert max(s["walk_loto"].values()) >= 0.6  # 5 styles: chance 0.2
+    assert max(r["accuracy"] for r in s["recognition"]) >= 0.6  # 5 styles: chance 0.2
+    assert {r["classifier"] for r in s["recognition"]} == {"ncm", "lda", "logreg", "knn"}
     rows = {r["method"]: r for r in s["transfer"]}
     assert rows["baseline"]["median_ratio"] == pytest.approx(1.0)
-    assert set(rows) >= {"eq8", "content_mean", "ridge_map", "ls_weights"}
+    assert set(rows) >= {"eq8", "content_mean", "content_mean_w", "ridge_map", "ls_weights", "harmonic_weights",
+                         "group_weights"}
+    assert rows["content_mean_w"]["median_ratio"] < rows["baseline"]["median_ratio"]

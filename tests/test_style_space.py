@@ -1,5 +1,5 @@
-"""`style.cycle_distance` (issue #22) and the style-space experiment's pieces: classifiers, the
-pelvis re-rooting and the phase alignment; the Bandai-1 checks read `../shared/data/mocap/bandai1`."""
+"""`style.cycle_distance` (issue #22) and the style-space experiment's pieces: classifiers, leave-one-take-out
+without leakage, the body-map fitting pipeline; the Bandai-1 checks read `../shared/data/mocap/bandai1`."""
 
 import pathlib
 
@@ -168,7 +168,6 @@ def test_find_clips_parses_labels(tmp_path):
 
 
 def test_config_schema_names_the_key(tmp_path):
-    from experiments import style_space  # noqa: F401  (registers the schema)
     from fourierjax.config import ConfigError, load_experiment_config
 
     p = tmp_path / "c.toml"
@@ -183,44 +182,71 @@ needs_bandai = pytest.mark.skipif(not BANDAI.is_dir(), reason="Bandai-1 not foun
 
 
 @needs_bandai
-def test_pelvis_rooting_is_fk_exact_on_bandai():
-    from experiments.style_space import pelvis_rooted
-    from fourierjax.body import infer_body_map
-    from fourierjax.io.bvh import read_bvh
-    from fourierjax.motion import motion_joint_positions
-
-    for name in ("dataset-1_walk_normal_001.bvh", "dataset-1_run_normal_001.bvh"):
-        m = read_bvh(BANDAI / name)
-        r = pelvis_rooted(m, infer_body_map(m))
-        frames = np.arange(0, m.num_frames, 7)
-        p0, p1 = motion_joint_positions(m, frames), motion_joint_positions(r, frames)
-        assert np.abs(p0[:, 1:] - p1[:, 1:]).max() < 1e-3, name  # every joint but the moved root, cm
-        pel = infer_body_map(m).pelvis
-        # the root now travels with the pelvis
-        assert np.abs(p1[:, 0] - p1[:, pel]).max() < 1e-3
-        assert np.ptp(r.channels[:, 2]) > 100  # the root's Z position carries the travel (cm)
-
-
-@needs_bandai
-def test_alignment_puts_the_left_step_at_phase_zero_on_bandai():
-    from experiments.style_space import align_to_left_step, pelvis_rooted
-    from fourierjax.body import infer_body_map
-    from fourierjax.io.bvh import read_bvh
+def test_the_pipeline_roots_and_aligns_bandai_clips(tmp_path):
+    """Through `fit_clips` (fit_motions with each clip's body map): the root channels follow the
+    pelvis both in walks (travel on `Hips`) and in runs, phase 0 is the left heel strike, and
+    the fits come back from the on-disk cache unchanged. (This replaces the hand-made
+    re-rooting and alignment the experiment had before the body-map pipeline.)"""
+    from experiments._style_data import fit_clips
     from fourierjax.motion import fit_motions
 
-    m = read_bvh(BANDAI / "dataset-1_walk_normal_001.bvh")
-    bm = infer_body_map(m)
-    r = pelvis_rooted(m, bm)
-    (fit,) = fit_motions([r], 3, throw=True)
-    skel = r.skeleton()
-    aligned = align_to_left_step(fourier.shift_phase(fit.model, 1.3), skel, bm)
-    again = align_to_left_step(fit.model, skel, bm)
-    assert float(style.cycle_distance(aligned, again, skel)) < 0.5  # cm: one event, whatever the start
-    p = np.asarray(style.cycle_positions(aligned, skel, num_samples=32))
-    lead = (p[:, bm.left.ankle] - p[:, bm.right.ankle])[:, [0, 2]]
-    fwd = (p[:, bm.left.toe] - p[:, bm.left.ankle])[:, [0, 2]].mean(0)
-    s = lead @ fwd
-    assert s[0] > 0.8 * s.max()  # the left foot is (nearly) at its furthest ahead at phase 0
+    clips = [{"path": BANDAI / f"dataset-1_{c}_normal_001.bvh", "content": c, "style": "normal", "take": "001"}
+             for c in ("walk", "run")]
+    models, skels, maps, motions, failed = fit_clips(clips, 3, "euler", tmp_path)
+    assert not failed
+    for m, bm, mo in zip(models, maps, motions, strict=True):
+        names = list(m.channel_names)
+        speed = float(np.hypot(m.offset[names.index("root.vx")], m.offset[names.index("root.vz")]))
+        assert speed > 50, mo.source  # cm/s: the pelvis travels, whichever joint carries it in the file
+        assert bm.pelvis == mo.topology.names.index("Hips")
+    (fit,) = fit_motions([motions[0]], 3, body_map=maps[0], throw=True)
+    assert fit.alignment == "left_heel_strike"
+    np.testing.assert_allclose(fit.model.phase, models[0].phase, atol=1e-4)
+    again, *_ = fit_clips(clips, 3, "euler", tmp_path)  # from the cache
+    for a, b in zip(models, again, strict=True):
+        np.testing.assert_allclose(a.amplitude, b.amplitude)
+        assert a.channel_names == b.channel_names
+
+
+def test_leave_one_take_out_uses_no_statistic_of_the_held_out_take():
+    """Changing one held-out clip changes no other prediction: neither the z-scoring, the
+    content centring, the PCA nor a classifier saw it."""
+    from experiments._style_classify import CLASSIFIERS
+    from experiments.style_space import loto
+
+    rng = np.random.default_rng(3)
+    styles = list("abcde")
+    rows, y, content, take = [], [], [], []
+    for c, shift in (("walk", 0.0), ("run", 5.0)):
+        for t in (("1", "2") if c == "walk" else ("1",)):
+            for k, s in enumerate(styles):
+                rows.append(shift + np.eye(5)[k] * 3 + rng.normal(0, 0.3, 5))
+                y.append(s)
+                content.append(c)
+                take.append(t)
+    x, y, content, take = np.array(rows), np.array(y, object), np.array(content), np.array(take)
+    kw = {"k": 1, "shrinkage": 0.5, "l2": 0.01}
+    for pooled in (False, True):
+        for k in (None, 3):
+            idx, p0 = loto(x, np.ones(5), y, content, take, "walk", pooled=pooled, kw=kw, k=k)
+            x2 = x.copy()
+            x2[idx[0]] += 100.0  # the first held-out walk (take 1) changes wildly
+            _, p1 = loto(x2, np.ones(5), y, content, take, "walk", pooled=pooled, kw=kw, k=k)
+            fold = take[idx] == take[idx[0]]
+            fold[0] = False  # the other clips of the held-out take
+            for c in CLASSIFIERS:
+                assert list(p0[c][fold]) == list(p1[c][fold]), (pooled, k, c)
+                assert np.mean(p0[c] == y[idx]) >= 0.8, (pooled, k, c)
+
+
+def test_style_space_schema_lives_in_config():
+    """The experiment's schema is in `fourierjax.config.SCHEMAS` without importing the experiment."""
+    import subprocess
+    import sys
+
+    code = ("import sys, fourierjax.config as c; assert 'style_space' in c.SCHEMAS; "
+            "assert not any(m.startswith('experiments') for m in sys.modules)")
+    subprocess.run([sys.executable, "-c", code], cwd=ROOT, check=True, timeout=120)
 
 
 def test_cycle_positions_are_the_root_relative_poses(cmu):
