@@ -57,20 +57,17 @@ def features(model, skeleton, body_map, *, num_harmonics: int | None = None) -> 
             "timing": _timing(model, body_map)}
 
 
-def feature_matrix(models, skeletons, body_maps, groups=GROUPS, weights=None):
+def feature_matrix(feats, groups=GROUPS):
     """Rows of concatenated feature groups and the column weights that balance them.
 
+    Arguments:
+        feats: one `features` dict per clip; groups: the keys to concatenate, in order.
+
     Returns:
-        ``(x [M, D], column_weights [D])``: a group ``g`` of ``d`` columns gets the weight
-        ``weights[g] / sqrt(d)`` (default weight 1), to apply after z-scoring
-        (`classify(..., column_weights=)`), so that each group counts by its weight and not by
-        its size.
+        ``(x [M, D], column_weights [D])``: a group of ``d`` columns gets the weight
+        ``1 / sqrt(d)``, to apply after z-scoring (`classify(..., column_weights=)`), so that
+        each group counts the same and not by its size.
     """
-    feats = [features(m, s, b) for m, s, b in zip(models, skeletons, body_maps, strict=True)]
-    weights = weights or {}
-    cols, w = [], []
-    for g in groups:
-        x = np.stack([f[g] for f in feats])
-        cols.append(x)
-        w.append(np.full(x.shape[1], weights.get(g, 1.0) / np.sqrt(x.shape[1])))
-    return np.concatenate(cols, axis=1), np.concatenate(w)
+    x = np.concatenate([np.stack([f[g] for f in feats]) for g in groups], 1)
+    w = np.concatenate([np.full(feats[0][g].size, 1 / np.sqrt(feats[0][g].size)) for g in groups])
+    return x, w

@@ -19,7 +19,7 @@ import numpy as np
 
 from experiments._style_classify import CLASSIFIERS, classify, pca_fit
 from experiments._style_data import find_clips, fit_clips
-from experiments._style_features import GROUPS, features
+from experiments._style_features import feature_matrix, features
 from experiments._style_transfer import (
     METHODS,
     amplitude_ratio,
@@ -35,12 +35,6 @@ FEATURE_SETS = {"style_vector": ("vector",), "angles": ("angles",), "positions":
                 "angles+positions": ("angles", "positions"), "all": ("angles", "positions", "timing")}
 #: The feature set of the transfer's recognition check.
 MAIN_FEATURES = "angles+positions"
-
-
-def _matrix(feats, groups):
-    x = np.concatenate([np.stack([f[g] for f in feats]) for g in groups], 1)
-    w = np.concatenate([np.full(feats[0][g].size, 1 / np.sqrt(feats[0][g].size)) for g in groups])
-    return x, w
 
 
 def loto(x, cw, y, content, take, test_content, *, pooled, kw, k=None):
@@ -107,7 +101,7 @@ def recognition(cfg, out, clips, feats, summary):
     kw = {"k": cfg["knn"], "shrinkage": cfg["shrinkage"], "l2": cfg["l2"]}
     rows, best = [], (None, -1.0)
     for name, groups in FEATURE_SETS.items():
-        x, cw = _matrix(feats, groups)
+        x, cw = feature_matrix(feats, groups)
         for pooled in (False, True):
             idx, preds = loto(x, cw, y, content, take, rc, pooled=pooled, kw=kw)
             for c in CLASSIFIERS:
@@ -124,7 +118,7 @@ def recognition(cfg, out, clips, feats, summary):
     _confusion_plot(truth, pred, styles, f"{rc}, leave one take out{' + other contents' if pooled else ''}: "
                     f"{name}, {c} {acc:.0%} (chance {1 / len(styles):.1%})", out / "confusion_walk.png")
     # PCA spaces of the training fold, on the best feature set and protocol
-    x, cw = _matrix(feats, FEATURE_SETS[name])
+    x, cw = feature_matrix(feats, FEATURE_SETS[name])
     pca_rows = []
     for k in cfg["pca_k"]:
         idx, preds = loto(x, cw, y, content, take, rc, pooled=pooled, kw=kw, k=k)
@@ -156,7 +150,7 @@ def recognition(cfg, out, clips, feats, summary):
         if not len(te) or len(set(y[tr])) < 2:
             continue
         for fname in ("style_vector", MAIN_FEATURES):
-            x, cw = _matrix(feats, FEATURE_SETS[fname])
+            x, cw = feature_matrix(feats, FEATURE_SETS[fname])
             for cl in CLASSIFIERS:
                 p = classify(cl, x[tr], y[tr], x[te], column_weights=cw, **kw)
                 crow.append({"test_content": test, "features": fname, "classifier": cl,
@@ -239,10 +233,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 cand["oracle_other_take"] = models[other[0]]
             names = list(cand)
             fx = [features(cand[m], skel, maps[i_t]) for m in names]
-            x_real = np.concatenate([np.stack([f[gr] for f in fx_real]) for gr in FEATURE_SETS[MAIN_FEATURES]], 1)
-            x_c = np.concatenate([np.stack([f[gr] for f in fx]) for gr in FEATURE_SETS[MAIN_FEATURES]], 1)
-            cw = np.concatenate([np.full(fx_real[0][gr].size, 1 / np.sqrt(fx_real[0][gr].size))
-                                 for gr in FEATURE_SETS[MAIN_FEATURES]])
+            x_real, cw = feature_matrix(fx_real, FEATURE_SETS[MAIN_FEATURES])
+            x_c, _ = feature_matrix(fx, FEATURE_SETS[MAIN_FEATURES])
             rec = {c: classify(c, x_real, y[real], x_c, column_weights=cw, **kw) for c in CLASSIFIERS}
             for k, mth in enumerate(names):
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns))
@@ -321,6 +313,7 @@ def body(argv=None) -> None:
     write_table(all_f, out, "flips", "Largest joint jump per frame at the configured weights vs the sources'")
     write_table(all_s, out, "transfer_summary", "Transfer methods: median distance ratio and recognition rate")
     summary["transfer"] = all_s
+    _transfer_plot(all_s, cfg["representations"][0], out / "transfer_ratios.png")
     # take-to-take floor: two takes of one style against the neutral-to-style distance (walks)
     summary["take_to_take"] = take_floor(cfg, clips, fit_clips(clips, cfg["harmonics"], cfg["representations"][0],
                                                                  cache))
@@ -329,6 +322,36 @@ def body(argv=None) -> None:
     print(json.dumps(summary["take_to_take"]))
     for row in all_s:
         print({k: (round(v, 3) if isinstance(v, float) else v) for k, v in row.items()})
+
+
+def _transfer_plot(srows, representation, path):
+    """Median distance ratio of every method per transfer (bars), the 0.8 target and the oracle."""
+    import matplotlib.pyplot as plt
+
+    from fourierjax import viz
+
+    rows = [r for r in srows if r["representation"] == representation]
+    transfers = list(dict.fromkeys(r["transfer"] for r in rows))
+    methods = [m for m in METHODS if m != "baseline"]
+    fig, ax = plt.subplots(figsize=(10, 4))
+    width = 0.8 / len(transfers)
+    for k, t in enumerate(transfers):
+        by = {r["method"]: r for r in rows if r["transfer"] == t}
+        xs = np.arange(len(methods)) + (k - (len(transfers) - 1) / 2) * width
+        ax.bar(xs, [by[m]["median_ratio"] if m in by else np.nan for m in methods], width, label=t)
+        if "oracle_other_take" in by:
+            ax.axhline(by["oracle_other_take"]["median_ratio"], color="k", ls="--", lw=1,
+                       label=f"{t}: another real take (oracle)")
+    ax.axhline(1.0, color="k", lw=1)
+    ax.axhline(0.8, color="r", ls=":", lw=1, label="target 0.8")
+    ax.set_xticks(range(len(methods)), methods, rotation=35, ha="right", fontsize=8)
+    ax.set_ylabel("median distance ratio to the baseline's")
+    ax.set_ylim(0, 1.8)
+    ax.set_title(f"Style transfer on Bandai-1 ({representation}): lower is closer to the real styled clip", fontsize=9)
+    ax.legend(fontsize=7, ncol=2)
+    ax.grid(alpha=0.3, axis="y")
+    fig.tight_layout()
+    viz.save_figure(fig, path)
 
 
 def take_floor(cfg, clips, fitted) -> dict:
@@ -355,9 +378,6 @@ def take_floor(cfg, clips, fitted) -> dict:
             out[content] = {"median": float(np.median(r)), "min": float(np.min(r)), "max": float(np.max(r)),
                             "n": len(r)}
     return out
-
-
-GROUPS = GROUPS  # the feature groups, re-exported for the notebook
 
 
 def main(argv=None) -> int:

@@ -224,10 +224,10 @@ if HAVE:
         ("md", """Recognition, leaving one walk take out: the classifier is trained on the other walk take and on
 the runs (each content centred on its training mean), and tested on the held-out take."""),
         ("code", """if HAVE:
-    from experiments._style_features import features
-    from experiments.style_space import FEATURE_SETS, _matrix, loto
+    from experiments._style_features import feature_matrix, features
+    from experiments.style_space import FEATURE_SETS, loto
     feats = [features(m, s, b) for m, s, b in zip(models, skels, maps)]
-    x, cw = _matrix(feats, FEATURE_SETS["angles+positions"])
+    x, cw = feature_matrix(feats, FEATURE_SETS["angles+positions"])
     y = np.array([c["style"] for c in clips], object)
     content = np.array([c["content"] for c in clips])
     take = np.array([c["take"] for c in clips])

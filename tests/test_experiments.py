@@ -104,7 +104,7 @@ def test_style_space_runs_small(tmp_path):
     assert r.returncode == 0, r.stderr[-3000:]
     out = tmp_path / "style_space"
     for f in ("recognition.md", "recognition_pca.csv", "recognition_contents.csv", "transfer.csv",
-              "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png"):
+              "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png", "transfer_ratios.png"):
         assert (out / f).stat().st_size > 0, f
     assert list((tmp_path / "cache").glob("fits_euler_3_*.npz"))  # the fits are cached
     s = json.loads((out / "summary.json").read_text())
