@@ -192,6 +192,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         # classifier of the transferred models: real target-content clips only, one take per style
         # (the first; a second take, where there is one, is the oracle and must not be in it)
         real = [g[(dst, s)] for s in sty]
+        jump: dict[int, float] = {}  # largest joint jump per frame of each clip's model
         fx_real = [features(models[i], skels[i], maps[i]) for i in real]
         for s in sty:
             if s == normal:
@@ -243,11 +244,19 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                               "weight": w_cv if mth == "content_mean_cv" else None,
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
+            # Reference: the largest jump of the clips a method reads, through the same fit ->
+            # synthesize -> FK path: eq. 8 and its variants read three (the two neutral clips and
+            # the styled source), the style-space methods every clip of both contents but the
+            # target's.
             fts = motions[i_t].frame_time_s
-            ref_jump = max(max_jump(models[i], skel, fts) for i in (i_b, g[(src, s)], g[(src, normal)], i_t))
+            for i in {i_b, *g.values()} - set(jump):
+                jump[i] = max_jump(models[i], skel, fts)
+            ref_eq8 = max(jump[i] for i in (i_b, g[(src, s)], g[(src, normal)]))
+            ref_all = max(jump[g[(c, x)]] for c in (src, dst) for x in sty if (c, x) != (dst, s))
             for mth in names:
                 if mth in ("baseline", "oracle_other_take"):
                     continue
+                ref_jump = ref_eq8 if mth in ("eq8", "eq8_phasor", "amplitude_ratio") else ref_all
                 char = style.characteristic(cand[mth], base)
                 jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts)
                          for w in cfg["weights"]}
