@@ -206,7 +206,8 @@ HAVE = BANDAI.is_dir()
 print("Bandai-1:", BANDAI.resolve() if HAVE else "not found; the cells below skip and say so")
 
 def no_data_figure(title):
-    fig, ax = plt.subplots(figsize=(5, 1.5))
+    from matplotlib import pyplot
+    fig, ax = pyplot.subplots(figsize=(5, 1.5))
     ax.text(0.5, 0.5, "Bandai-1 not found at ../shared/data/mocap/bandai1", ha="center", va="center")
     ax.set_title(title)
     ax.set_axis_off()
@@ -247,7 +248,7 @@ the runs (each content centred on its training mean), and tested on the held-out
     ax.set_title("walks, leave one take out (LDA)")
 else:
     fig = no_data_figure("recognition")
-fig"""),
+plt.show()"""),
         ("md", """Transfer walk -> run for each non-normal style S, leaving S out of the content means. The score is
 `style.cycle_distance` (root-relative joint positions over one cycle, best cyclic shift) to the real run
 in style S, as a ratio to the normal run's distance (1 = no better than not transferring at all)."""),
@@ -279,7 +280,7 @@ in style S, as a ratio to the normal run's distance (1 = no better than not tran
     ax.legend()
 else:
     fig = no_data_figure("transfer")
-fig"""),
+plt.show()"""),
     ]
 
 
