@@ -142,3 +142,22 @@ def test_no_limb_flip_at_any_weight_on_bandai():
         m = style.transfer(models[("walk", "sad")], [models[("walk", s)] for s in others],
                            [models[("run", s)] for s in others], method="content_mean", weight=w)
         assert max_jump(m, skel, dt) <= 1.01 * ref, w
+
+
+def test_no_retrace_for_new_weights_or_models(cmu):
+    """Weights are arrays and models leaves: new values of either reuse the compiled programs."""
+    import importlib
+
+    from fourierjax._style import characteristics
+
+    # the module (its package re-exports the function `transfer` under the same name)
+    transfer = importlib.import_module("fourierjax._style.transfer")
+    _, names = cmu
+    ms = [model(names, s) for s in range(6)]
+    style.transfer(ms[0], ms[1:3], ms[3:5], method="content_mean", weight=0.5)
+    style.transfer(ms[0], ms[1], ms[2], weight=0.5)
+    before = (transfer._content_mean.num_traces(), characteristics._superpose.num_traces())
+    for w in (0.25, 0.75, 1.5):
+        style.transfer(ms[5], ms[2:4], ms[0:2], method="content_mean", weight=w)
+        style.transfer(ms[5], ms[3], ms[4], weight=w)
+    assert (transfer._content_mean.num_traces(), characteristics._superpose.num_traces()) == before
