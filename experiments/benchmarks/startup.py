@@ -161,7 +161,7 @@ def _phases(py: str, cmd: list[str], env: dict, cwd: str) -> dict:
 def run(size: str) -> list[Record]:
     py = sys.executable
     small = size != "full"
-    repeats = 2 if small else 7
+    repeats = 1 if small else 7
     records = []
     with tempfile.TemporaryDirectory(prefix="fourierjax-startup-") as tmp:
         env = _env(os.path.join(tmp, "cache"))
