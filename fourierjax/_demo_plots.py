@@ -30,7 +30,9 @@ def _plot_spectrum(st: _State) -> None:
     x, names = joint_expmaps(sub)
     moving = np.ptp(x, axis=0) > 1e-4
     freqs, amp = windowed_amplitude_spectrum(x[:, moving], sub.frame_time_s)
-    fig = viz.plot_spectrum(freqs, amp, fundamental_hz=f.fundamental_hz, max_hz=8.0,
+    groups = viz.channel_groups([n for n, k in zip(names, moving, strict=True) if k],
+                                sub.topology.names, sub.topology.parents, f.body_map)
+    fig = viz.plot_spectrum(freqs, amp, fundamental_hz=f.fundamental_hz, max_hz=8.0, groups=groups,
                             title=f"CMU 07_01 walk: spectra of {int(moving.sum())} exponential-map "
                             "values (cf. Tilmanne & Dutoit Fig. 1)")
     viz.save_figure(fig, st.path("plots", "spectrum_07_01.png"))

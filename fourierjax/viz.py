@@ -13,13 +13,18 @@ from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib import animation
+from matplotlib.text import Text
 
-from fourierjax.io.atomic import temporary_beside, write_bytes_atomic
+from fourierjax._viz_gif import CMU_UNIT_M, gif_figure, save_gif
+from fourierjax.io.atomic import write_bytes_atomic
 
 __all__ = [
     "CMU_UNIT_M",
     "limb_colors",
+    "joint_groups",
+    "channel_groups",
+    "GROUP_COLORS",
+    "place_labels",
     "project",
     "plot_spectrum",
     "plot_decomposition",
@@ -32,10 +37,8 @@ __all__ = [
     "plot_crowd",
     "save_figure",
     "save_gif",
+    "gif_figure",
 ]
-
-#: One CMU length unit in metres (the CMU skeletons are in inches / 0.45).
-CMU_UNIT_M = 0.0564
 
 _LEFT, _RIGHT, _TRUNK = "#1f5fbf", "#c8322a", "#555555"
 
@@ -72,6 +75,56 @@ def limb_colors(names: Sequence[str]) -> list[str]:
         else:
             out.append(_TRUNK)
     return out
+
+
+#: Colours of the body parts of `joint_groups` (left blue, right red, as `limb_colors`).
+GROUP_COLORS = {"left leg": "#1f5fbf", "right leg": "#c8322a", "left arm": "#6fa8ff",
+                "right arm": "#ff8a70", "trunk and head": "#555555"}
+_CYCLE = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+          "#7f7f7f", "#bcbd22", "#17becf"]
+
+
+def joint_groups(parents: Sequence[int], body_map) -> list[str]:
+    """The body part of each joint, from a body map (never from joint names).
+
+    Arguments:
+        parents: parent index per joint (-1 for a root); body_map: a `fourierjax.body.BodyMap`
+            of the same skeleton (its legs' hips and arms' collars start the limbs).
+    Returns:
+        One of `GROUP_COLORS`' keys per joint: a joint belongs to the limb whose first joint it
+        is or descends from, else to "trunk and head".
+    """
+    starts = {body_map.left.hip: "left leg", body_map.right.hip: "right leg"}
+    for arm, name in ((body_map.left_arm, "left arm"), (body_map.right_arm, "right arm")):
+        if arm is not None:
+            starts[arm.collar] = name
+    out = []
+    for j in range(len(parents)):
+        k, group = j, "trunk and head"
+        while k >= 0:
+            if k in starts:
+                group = starts[k]
+                break
+            k = parents[k]
+        out.append(group)
+    return out
+
+
+def channel_groups(channel_names: Sequence[str], joint_names: Sequence[str],
+                   parents: Sequence[int], body_map) -> list[str] | None:
+    """The body part (`joint_groups`) of each ``"Joint.xxx"`` channel, for `plot_spectrum`.
+
+    Arguments:
+        channel_names: ``"Joint.suffix"`` names (e.g. ``"LeftLeg.expmap0"``); joint_names,
+            parents: the skeleton; body_map: its `fourierjax.body.BodyMap`, or None.
+    Returns:
+        One part per channel (channels of no joint, e.g. ``root.vz``, count as the trunk), or
+        None when ``body_map`` is None.
+    """
+    if body_map is None:
+        return None
+    by_joint = dict(zip(joint_names, joint_groups(parents, body_map), strict=True))
+    return [by_joint.get(n.split(".")[0], "trunk and head") for n in channel_names]
 
 
 def project(positions, azimuth_deg: float = 25.0, up_axis: int = 1,
@@ -208,7 +261,7 @@ def plot_stick_strip(poses: Sequence, parents: Sequence[int], labels: Sequence[s
 def plot_spectrum(freqs_hz, amplitude, *, channel_names: Sequence[str] | None = None,
                   fundamental_hz: float | None = None, max_hz: float = 8.0,
                   unit: str = "rad", title: str | None = None, skip_dc: bool = False,
-                  stems: bool = False):
+                  stems: bool = False, groups: Sequence[str] | None = None):
     """Amplitude spectra of many channels superimposed (Tilmanne & Dutoit Fig. 1).
 
     Arguments:
@@ -216,6 +269,9 @@ def plot_spectrum(freqs_hz, amplitude, *, channel_names: Sequence[str] | None = 
             ``fourier.amplitude_spectrum``); fundamental_hz: draws the gait-cycle frequency and
             its harmonics as dashed lines; unit: the channels' unit for the y label; stems:
             draw each frequency as a vertical stem (a line spectrum, e.g. a model's harmonics).
+        groups: a body part per channel (e.g. from `joint_groups`): one colour and one legend
+            entry per part. Without it, up to 10 channels are named in the legend
+            (``channel_names``); more share a legend entry.
     Returns:
         Figure.
     """
@@ -226,18 +282,35 @@ def plot_spectrum(freqs_hz, amplitude, *, channel_names: Sequence[str] | None = 
     keep = f <= max_hz
     if skip_dc:
         keep &= f > 0
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
-    if stems:
-        for k in range(a.shape[1]):
-            ax.plot(f[keep], a[keep, k], "o", ms=3, alpha=0.6)
-        ax.vlines(np.repeat(f[keep], a.shape[1]), 0, a[keep].ravel(), lw=0.6, alpha=0.4)
+    C = a.shape[1]
+    if groups is not None and len(groups) != C:
+        raise ValueError(f"plot_spectrum: {len(groups)} groups for {C} channels")
+    fig, ax = plt.subplots(figsize=(7.2, 4.0))
+    if groups is not None:
+        colors = {g: GROUP_COLORS.get(g, _CYCLE[k % len(_CYCLE)])
+                  for k, g in enumerate(dict.fromkeys(groups))}
+        counts = {g: list(groups).count(g) for g in colors}
+        label_of = {g: f"{g} ({counts[g]})" for g in colors}
+        styles = [(colors[g], label_of[g]) for g in groups]
+    elif channel_names is not None and C <= 10:
+        styles = [(_CYCLE[k % len(_CYCLE)], channel_names[k]) for k in range(C)]
     else:
-        ax.plot(f[keep], a[keep], lw=0.8, alpha=0.7)
+        styles = [(_CYCLE[k % len(_CYCLE)], f"{C} channels" if k == 0 else None) for k in range(C)]
+    seen = set()
+    for k, (color, label) in enumerate(styles):
+        label = None if label in seen else label
+        seen.add(label)
+        if stems:
+            ax.vlines(f[keep], 0, a[keep, k], lw=0.6, alpha=0.4, color=color)
+            ax.plot(f[keep], a[keep, k], "o", ms=3, alpha=0.7, color=color, label=label)
+        else:
+            ax.plot(f[keep], a[keep, k], lw=0.8, alpha=0.75, color=color, label=label)
     if fundamental_hz is not None and np.isfinite(fundamental_hz):
         for n in range(1, int(max_hz / fundamental_hz) + 1):
-            ax.axvline(n * fundamental_hz, color="r" if n == 1 else "#e08080", ls="--", lw=0.9,
+            ax.axvline(n * fundamental_hz, color="k" if n == 1 else "#999999", ls="--", lw=0.9,
                        label=f"gait cycle {fundamental_hz:.2f} Hz and harmonics" if n == 1 else None)
-        ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper right", fontsize=8, title="channels by body part" if groups else None,
+              title_fontsize=8)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"amplitude ({unit})")
     ax.set_xlim(0, max_hz)
@@ -316,8 +389,6 @@ def plot_style_scatter(coords, labels: Sequence[str], *, explained: Sequence[flo
     for k, g in enumerate(dict.fromkeys(groups)):
         idx = [i for i, gi in enumerate(groups) if gi == g]
         ax.scatter(c[idx, 0], c[idx, 1], s=40, color=colors[k % len(colors)], label=g, zorder=3)
-    for i, lab in enumerate(labels):
-        ax.annotate(lab, c[i, :2], textcoords="offset points", xytext=(4, 4), fontsize=8)
     for i, j in arrows:
         ax.annotate("", c[j, :2], c[i, :2], arrowprops=dict(arrowstyle="->", color="#888888"))
     ev = list(explained) if explained is not None else None
@@ -325,10 +396,74 @@ def plot_style_scatter(coords, labels: Sequence[str], *, explained: Sequence[flo
     ax.set_ylabel("PC 2" + (f" ({100 * ev[1]:.0f}% of variance)" if ev and len(ev) > 1 else ""))
     ax.axhline(0, color="#cccccc", lw=0.8, zorder=0)
     ax.axvline(0, color="#cccccc", lw=0.8, zorder=0)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="best")
     ax.grid(alpha=0.3)
     ax.set_title(title or "Style space (PCA of phasor style vectors)", fontsize=10)
+    ax.margins(0.18)  # room for labels at the edges
+    place_labels(ax, c[:, :2], labels, fontsize=8)
     return fig
+
+
+#: Label offsets tried by `place_labels`, in points from the point (then farther, with a line).
+_OFFSETS = ((5, 5), (5, -5), (-5, 5), (-5, -5), (7, 0), (-7, 0), (0, 8), (0, -8))
+
+
+def place_labels(ax, points, labels: Sequence[str], *, fontsize: float = 8.0) -> list:
+    """Annotate points with labels that overlap neither each other nor the points.
+
+    Each label tries offsets around its point (`_OFFSETS`, then 2, 3, 4 and 6 times as far,
+    joined to the point by a thin line); the first whose box is clear of the labels already
+    placed, of every point's marker and inside the axes is kept (else the last one tried).
+    The axes' limits must be final: call it after plotting, and do not autoscale after.
+
+    Arguments:
+        ax: matplotlib Axes; points: ``[M, 2]`` data coordinates; labels: one per point;
+        fontsize: in points.
+    Returns:
+        The annotations, in the order of ``labels``.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    fig = ax.figure
+    renderer = fig.canvas.get_renderer()
+    ax.autoscale_view()
+    ax.set_xlim(ax.get_xlim())  # freeze the limits: placement is in screen coordinates
+    ax.set_ylim(ax.get_ylim())
+    to_px = ax.transData.transform
+    r = 5.0 * fig.dpi / 72  # a marker's half size, pixels
+    markers = [(x - r, y - r, x + r, y + r) for x, y in to_px(p)]
+    frame = ax.get_window_extent(renderer)
+    placed: list[tuple[float, float, float, float]] = []
+    out = []
+    for i, lab in enumerate(labels):
+        ann = None
+        for scale in (1, 2, 3, 4, 6):
+            for dx, dy in _OFFSETS:
+                if ann is not None:
+                    ann.remove()
+                ha = "left" if dx > 0 else "right" if dx < 0 else "center"
+                va = "bottom" if dy > 0 else "top" if dy < 0 else "center"
+                line = dict(arrowstyle="-", color="#999999", lw=0.6) if scale > 1 else None
+                ann = ax.annotate(lab, p[i], textcoords="offset points",
+                                  xytext=(dx * scale, dy * scale), ha=ha, va=va,
+                                  fontsize=fontsize, arrowprops=line, zorder=4)
+                ann.update_positions(renderer)  # else the box is at the origin until drawn
+                bb = Text.get_window_extent(ann, renderer)  # the text, not its line
+                box = (bb.x0 - 1, bb.y0 - 1, bb.x1 + 1, bb.y1 + 1)
+                inside = (box[0] >= frame.x0 and box[2] <= frame.x1 and box[1] >= frame.y0
+                          and box[3] <= frame.y1)
+                others = placed + [m for k, m in enumerate(markers) if k != i or scale > 1]
+                if inside and not any(_overlap(box, o) for o in others):
+                    break
+            else:
+                continue
+            break
+        placed.append(box)
+        out.append(ann)
+    return out
+
+
+def _overlap(a, b) -> bool:
+    return a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]
 
 
 def plot_hip_rule(phase, curves: dict, *, gait: float, jump: float, unit: str = "file units",
@@ -425,87 +560,3 @@ def plot_crowd(positions, parents: Sequence[int], values, *, value_label: str = 
     fig.colorbar(lc, ax=ax, label=value_label, shrink=0.7, pad=0.02)
     ax.set_title(title or f"{len(v)} characters", fontsize=10)
     return fig
-
-
-def save_gif(sequences: Sequence, parents: Sequence[int], path: str | os.PathLike, *,
-             frame_time_s: float, names: Sequence[str] | None = None,
-             titles: Sequence[str] | None = None, max_frames: int = 40, dpi: int = 50,
-             azimuth_deg: float = 25.0, scale: float = CMU_UNIT_M, unit: str = "m",
-             follow: bool = True, title: str | None = None) -> str:
-    """Animated stick figures side by side, written as a GIF (pillow writer).
-
-    Arguments:
-        sequences: one ``[F, J, 3]`` array per figure (same skeleton, same F); parents, names:
-            the skeleton; frame_time_s: seconds per frame of the sequences; titles: a caption
-            per figure; max_frames: the animation is subsampled to at most this many frames
-            (playback stays real time); dpi: resolution (keep GIFs small);
-            follow: the camera follows each figure's root along the ground (ticks on the
-            ground line show the motion), else a fixed camera over the whole path.
-    Returns:
-        The path written.
-    """
-    seqs = [np.asarray(s, dtype=np.float64) for s in sequences]
-    if not seqs:
-        raise ValueError("save_gif: no sequences")
-    F = seqs[0].shape[0]
-    for s in seqs:
-        if s.ndim != 3 or s.shape[0] != F:
-            raise ValueError(f"save_gif: every sequence must be [F={F}, J, 3] (the same F), got {s.shape}")
-        _check_skeleton(s, parents)
-    step = max(1, int(np.ceil(F / max_frames)))
-    idx = np.arange(0, F, step)
-    proj = [project(s, azimuth_deg) * scale for s in seqs]  # [F, J, 2]
-    ground = min(s[..., 1].min() for s in seqs) * scale
-    height = max(s[..., 1].max() for s in seqs) * scale - ground
-    half = 0.5 * height
-    n = len(seqs)
-    fig, axes = plt.subplots(1, n, figsize=(1.9 * n, 2.7), squeeze=False)
-    fig.subplots_adjust(left=0.03, right=0.97, bottom=0.08, top=0.84 if title else 0.9,
-                        wspace=0.08)
-    axes = axes[0]
-    colors = limb_colors(names) if names is not None else [_TRUNK] * len(parents)
-    artists = []
-    for k, ax in enumerate(axes):
-        lines = [ax.plot([], [], color=colors[j], lw=2.0, solid_capstyle="round")[0]
-                 for j, par in enumerate(parents) if par >= 0]
-        ticks = ax.plot([], [], "|", color="#999999", ms=6)[0]
-        ax.axhline(ground, color="#999999", lw=1.0, zorder=0)
-        ax.set_ylim(ground - 0.05 * height, ground + 1.1 * height)
-        if not follow:
-            lo, hi = proj[k][..., 0].min(), proj[k][..., 0].max()
-            ax.set_xlim(lo - 0.1 * height, hi + 0.1 * height)
-        ax.set_aspect("equal")
-        ax.set_yticks([])
-        ax.set_xticks([])
-        ax.set_xlabel(f"forward Z ({unit})" if k == 0 else "", fontsize=7)
-        if titles is not None:
-            ax.set_title(titles[k], fontsize=8)
-        artists.append((lines, ticks))
-    if title:
-        fig.suptitle(title, fontsize=9)
-    bones = [(j, par) for j, par in enumerate(parents) if par >= 0]
-
-    def update(i):
-        out = []
-        for k, (lines, ticks) in enumerate(artists):
-            q = proj[k][idx[i]]
-            for ln, (j, par) in zip(lines, bones, strict=True):
-                ln.set_data(q[[par, j], 0], q[[par, j], 1])
-            if follow:
-                cx = q[0, 0]
-                axes[k].set_xlim(cx - half * 1.2, cx + half * 1.2)
-                spacing = 0.25 * height
-                first = np.floor((cx - 2 * half) / spacing) * spacing
-                tx = first + spacing * np.arange(int(4 * half / spacing) + 3)
-                ticks.set_data(tx, np.full_like(tx, ground))
-            out += lines + [ticks]
-        return out
-
-    anim = animation.FuncAnimation(fig, update, frames=len(idx), blit=False)
-    fps = max(1.0, 1.0 / (frame_time_s * step))
-    try:
-        with temporary_beside(path) as tmp:  # whole or nothing
-            anim.save(tmp, writer=animation.PillowWriter(fps=fps), dpi=dpi)
-    finally:
-        _close(fig)
-    return os.fspath(path)

@@ -164,3 +164,35 @@ def test_characteristic_fits_bvh_clips_on_the_fly(tmp_path):
     assert float(np.exp(char.log_omega)) == pytest.approx(1.300 / 0.907, rel=0.02)
     vz = char.channel_names.index("root.vz")
     assert 15.0 < float(char.offset[vz]) < 35.0  # ≈ 46 − 21 units/s
+
+
+def test_model_file_inputs_are_not_fitted_again(files, monkeypatch, capsys):
+    # Model files are used as they are: interpolate, transition and characteristic never fit
+    # (issue 25: transition re-fitted both clips on every call).
+    from fourierjax import _compile_cache
+    from fourierjax.cli import main
+
+    d, models = files
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fit_motions called for model-file inputs")
+
+    monkeypatch.setattr(fmotion, "fit_motions", no_fit)
+    monkeypatch.setattr(_compile_cache, "enable_compile_cache", lambda: False)
+    monkeypatch.chdir(d)
+    assert main(["characteristic", "a.npz", "b.npz", "--out", "c.npz"]) == 0
+    char, _ = model_io.load_characteristic(d / "c.npz")
+    np.testing.assert_allclose(char.offset, np.asarray(models["a"].offset - models["b"].offset), atol=1e-6)
+    assert main(["interpolate", "a.npz", "b.npz", "--s", "0.5", "--out", "m.bvh", "--seconds", "1"]) == 0
+    assert read_bvh(d / "m.bvh").num_frames == 120
+    assert main(["transition", "a.npz", "b.npz", "--seconds", "1", "--start", "0.2", "--duration", "0.5",
+                 "--out", "t2.bvh"]) == 0
+    assert read_bvh(d / "t2.bvh").num_frames == 120
+    assert "wrote t2.bvh" in capsys.readouterr().out
+
+
+def test_interpolate_reexports_the_input_helpers():
+    from fourierjax.cli import _inputs, interpolate
+
+    for name in ("Gait", "add_gait_arguments", "fit_bvhs", "load_gait_pair", "load_gaits"):
+        assert getattr(interpolate, name) is getattr(_inputs, name)

@@ -5,6 +5,7 @@ import os
 import matplotlib
 import numpy as np
 import pytest
+from matplotlib.text import Text
 from PIL import Image
 
 from fourierjax import viz
@@ -199,3 +200,120 @@ def test_the_cli_and_the_demo_choose_agg():
 
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # this tree, for subprocesses
+
+
+# ---------------------------------------------------------------- pictures a person can read (issue 25)
+
+
+def _walk(F=30):
+    seq = np.repeat(POSE[None], F, 0) * 5.0  # ~1 m tall in CMU units
+    seq[:, :, 2] += np.arange(F)[:, None] * 2.0  # walks forward
+    seq[:, 4, 2] += 3 * np.sin(np.arange(F) / 3)
+    return seq
+
+
+def test_gif_panels_are_at_least_480_px(tmp_path):
+    seq = _walk()
+    path = viz.save_gif([seq, seq, seq], PARENTS, tmp_path / "a.gif", frame_time_s=1 / 30,
+                        names=NAMES, titles=["a", "b", "c"], max_frames=6, title="three",
+                        dpi=64)  # pixel sizes do not depend on dpi
+    with Image.open(path) as im:
+        w, h = im.size
+    assert w >= 3 * 480 and h >= 480, (w, h)  # was 121 x 172 px per panel
+
+
+def _px(text, dpi):
+    return text.get_fontsize() * dpi / 72
+
+
+def test_gif_text_is_readable_and_ground_ticks_are_labelled():
+    dpi = 64
+    fig, update, num, _ = viz.gif_figure([_walk(), _walk()], PARENTS, frame_time_s=1 / 30,
+                                         names=NAMES, titles=["brisk", "tired"], dpi=dpi,
+                                         title="styles", max_frames=10)
+    try:
+        for i in (0, num - 1):
+            update(i)
+            fig.canvas.draw()
+            renderer = fig.canvas.get_renderer()
+            fig_box = fig.bbox
+            for ax in fig.axes:
+                labels = [t for t in ax.get_xticklabels() if t.get_visible() and t.get_text()]
+                visible = [t for t in labels
+                           if ax.get_xlim()[0] <= t.get_position()[0] <= ax.get_xlim()[1]]
+                assert len(visible) >= 2, [t.get_text() for t in labels]
+                for t in visible:
+                    float(t.get_text().replace("\u2212", "-"))  # numbers (metres along the ground)
+                    assert _px(t, dpi) >= 12
+                    bb = t.get_window_extent(renderer)
+                    assert fig_box.x0 <= bb.x0 and bb.y0 >= fig_box.y0  # inside the picture
+                assert _px(ax.title, dpi) >= 14 and ax.title.get_text()
+                assert "(m)" in ax.get_xlabel()
+            assert _px(fig._suptitle, dpi) >= 14
+        # The camera follows the walker: the ticks under it change from first to last frame.
+        update(0)
+        x_first = fig.axes[0].get_xlim()
+        update(num - 1)
+        assert fig.axes[0].get_xlim()[0] > x_first[0]
+    finally:
+        matplotlib.pyplot.close(fig)
+
+
+def test_spectrum_colours_channels_by_body_part_with_a_legend(tmp_path):
+    from fourierjax import data
+    from fourierjax.body import infer_body_map
+
+    motion = data.load("07_01")
+    groups = viz.joint_groups(motion.topology.parents, infer_body_map(motion))
+    names = motion.topology.names
+    assert groups[names.index("LeftFoot")] == "left leg"
+    assert groups[names.index("RightHand")] == "right arm"
+    assert groups[names.index("Head")] == "trunk and head"
+    freqs = np.linspace(0, 8, 50)
+    C = len(names)
+    amp = np.abs(np.random.default_rng(0).normal(size=(50, C)))
+    chans = [f"{n}.expmap0" for n in names] + ["root.vz"]
+    assert viz.channel_groups(chans, names, motion.topology.parents, infer_body_map(motion)) == [
+        *groups, "trunk and head"]
+    assert viz.channel_groups(chans, names, motion.topology.parents, None) is None
+    fig = viz.plot_spectrum(freqs, amp, groups=groups, fundamental_hz=1.0)
+    ax = fig.axes[0]
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    for part in ("left leg", "right leg", "left arm", "right arm", "trunk and head"):
+        assert any(t.startswith(part + " (") for t in texts), texts
+    assert sum(int(t.rsplit("(", 1)[1].rstrip(")")) for t in texts if "(" in t and "Hz" not in t) == C
+    curve_colors = {ln.get_color() for ln in ax.lines if ln.get_linestyle() == "-"}
+    assert len(curve_colors) == 5  # one colour per body part, not one per channel
+    viz.save_figure(fig, tmp_path / "s.png")
+    with pytest.raises(ValueError, match="groups"):
+        viz.plot_spectrum(freqs, amp, groups=groups[:3])
+    fig = viz.plot_spectrum(freqs, amp[:, :3], channel_names=["a", "b", "c"])
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == ["a", "b", "c"]
+    matplotlib.pyplot.close(fig)
+
+
+def _label_boxes(fig):
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    # The text's own box (an Annotation's box would include its callout line).
+    return ([Text.get_window_extent(t, r) for t in ax.texts if t.get_text()],
+            ax.get_window_extent(r))
+
+
+def test_pca_labels_do_not_overlap():
+    # Clusters of nearly equal styles (as the CMU walks of one subject are): the labels used to
+    # sit at one fixed offset and pile on top of each other.
+    rng = np.random.default_rng(1)
+    centres = np.array([[0.0, 0.0], [0.02, 0.01], [-0.01, 0.015], [0.01, -0.02], [1.0, 1.0],
+                        [1.01, 0.99], [0.98, 1.02], [-1.0, 0.5], [-0.99, 0.52], [0.5, -1.0]])
+    coords = centres + rng.normal(scale=1e-3, size=centres.shape)
+    labels = [f"{k:02d}_0{k % 7} walk" for k in range(len(coords))]
+    fig = viz.plot_style_scatter(coords, labels, groups=["walk"] * 7 + ["run"] * 3)
+    boxes, frame = _label_boxes(fig)
+    assert len(boxes) == len(labels)
+    for i in range(len(boxes)):
+        for j in range(i):
+            assert not boxes[i].overlaps(boxes[j]), (labels[i], labels[j])
+        assert frame.x0 <= boxes[i].x0 and boxes[i].x1 <= frame.x1  # inside the axes
+    matplotlib.pyplot.close(fig)

@@ -39,17 +39,26 @@ def use_agg() -> None:
     matplotlib.use("Agg")
 
 
+_NO_CACHE_HELP = ("do not use the persistent compile cache (default: on, in $FOURIERJAX_CACHE_DIR "
+                  "or ~/.cache/fourierjax/jax; a second call then compiles nothing)")
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fourierjax",
         description="Fourier gait models and expressive stance for human motion (JAX).",
     )
+    parser.add_argument("--no-cache", action="store_true", help=_NO_CACHE_HELP)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name, module_name in COMMANDS.items():
         module = importlib.import_module(f"fourierjax.cli.{module_name}")
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
+        # Also after the subcommand (`fourierjax fit --no-cache ...`); SUPPRESS keeps the
+        # subparser's default from overwriting a `fourierjax --no-cache fit ...`.
+        p.add_argument("--no-cache", action="store_true", default=argparse.SUPPRESS,
+                       help=_NO_CACHE_HELP)
         p.set_defaults(_run=module.run)
     return parser
 
@@ -60,6 +69,13 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = _build_parser()
     args = parser.parse_args(argv)
+    from fourierjax import _compile_cache
+
+    # Every command: set before JAX is imported (by the command), so nothing is imported here.
+    if args.no_cache:
+        _compile_cache.disable_compile_cache()
+    else:
+        _compile_cache.enable_compile_cache()
     if args.command in _DRAWS:
         use_agg()
     try:

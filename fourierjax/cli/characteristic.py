@@ -27,7 +27,7 @@ HELP = "Fourier characteristics A - B of two gaits (Unuma eq. 7), e.g. briskness
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from fourierjax.cli.interpolate import add_gait_arguments
+    from fourierjax.cli._inputs import add_gait_arguments
 
     add_gait_arguments(parser)
     parser.add_argument(
@@ -39,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fourierjax import style
-    from fourierjax.cli.interpolate import check_out, load_gait_pair
+    from fourierjax.cli._inputs import load_gait_pair
+    from fourierjax.cli.interpolate import check_out
     from fourierjax.io.model_io import save_characteristic
 
     out = check_out(args.out, (".npz",))

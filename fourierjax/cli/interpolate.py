@@ -1,143 +1,30 @@
 """`fourierjax interpolate`: a model between (or beyond) two gaits, Unuma 1995 eq. 3.
 
-Also home of the helpers the style commands share (`characteristic`, `transition`): reading a
-gait argument that is either a model file or a BVH clip fitted on the fly, and writing a
-synthesized motion (numbers and frame counts: `cli._numbers`, re-exported here).
+Also home of the output helpers the style commands share (`characteristic`, `transition`):
+writing a synthesized motion. Gait arguments (a model file, or a BVH clip fitted on the fly) are
+read by `cli._inputs`, numbers and frame counts by `cli._numbers`; both are re-exported here.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import pathlib
-import sys
 
-# Re-exported: synth and transition import them from here.
+# Re-exported: synth, transition and characteristic imported them from here.
+from fourierjax.cli._inputs import (  # noqa: F401
+    DEFAULT_HARMONICS,
+    Gait,
+    add_gait_arguments,
+    fit_bvhs,
+    load_gait_pair,
+    load_gaits,
+)
 from fourierjax.cli._numbers import MAX_FRAMES, frame_count, parse_number  # noqa: F401
 
 HELP = "Inter/extrapolate two gaits (Unuma eq. 3): write the model (.npz) or a motion (.bvh)."
 
-DEFAULT_HARMONICS = 5
-
 
 # ----------------------------------------------------------------------------- shared helpers
-
-
-@dataclasses.dataclass(frozen=True)
-class Gait:
-    """A gait argument, resolved: its model, a Motion whose skeleton can be written (or None),
-    and where it came from."""
-
-    model: object
-    template: object | None
-    frame_time_s: float | None
-    source: str
-    provenance: dict
-    alignment: str = "none"
-
-
-def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
-    """The two positional gaits and the on-the-fly fit options."""
-    parser.add_argument("a", metavar="A", help="first gait: a model file (.npz) or a BVH clip")
-    parser.add_argument("b", metavar="B", help="second gait: a model file (.npz) or a BVH clip")
-    parser.add_argument(
-        "--harmonics",
-        default=str(DEFAULT_HARMONICS),
-        metavar="N",
-        help=f"harmonics when fitting a BVH argument (default {DEFAULT_HARMONICS})",
-    )
-    parser.add_argument(
-        "--representation",
-        default="euler",
-        metavar="REP",
-        help="channel representation when fitting a BVH argument: euler (default) or expmap",
-    )
-
-
-def _read_clip(path: pathlib.Path):
-    from fourierjax.data import detect_rest_frames
-    from fourierjax.errors import UserError
-    from fourierjax.io.bvh import read_bvh
-
-    motion = read_bvh(path)
-    rest = detect_rest_frames(motion)
-    motion = motion[rest:]
-    if motion.num_frames < 16:
-        raise UserError(f"{path}: only {motion.num_frames} motion frames, too short to fit")
-    return motion, rest
-
-
-def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
-    """Fit BVH clips as `fourierjax fit` does, in one batched call: drop leading rest frames,
-    then `fourierjax.motion.fit_motions` (steady straight stretch, fit, phase aligned to the
-    left heel strike, falling back to the left hip flexion peak)."""
-    from fourierjax import motion as fmotion
-
-    clips = [_read_clip(p) for p in paths]
-    fits = fmotion.fit_motions([m for m, _ in clips], harmonics, representation, throw=True)
-    gaits = []
-    for path, (motion, rest), fit in zip(paths, clips, fits):
-        provenance = fit.summary()
-        provenance.update(source=str(path), rest_frames_dropped=rest)
-        gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment))
-    return gaits
-
-
-def _check_path(text: str, argument: str) -> pathlib.Path:
-    from fourierjax.cli._paths import resolve_input
-
-    return resolve_input(text, argument, "a BVH or model file")
-
-
-def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
-    from fourierjax.errors import UserError
-    from fourierjax.io import model_io
-
-    try:
-        mf = model_io.load_model(path)
-    except UserError as err:
-        hint = ""
-        if "fourier_characteristic" in str(err):
-            hint = " (a characteristic file: apply it with `fourierjax synth --add`)"
-        raise UserError(f"{argument}: {err}{hint}") from None
-    return Gait(
-        mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none"
-    )
-
-
-def load_gaits(texts, arguments, harmonics: int, representation: str) -> list[Gait]:
-    """Gait arguments: model files, or BVH files fitted on the fly (all BVH arguments in one
-    batched fit). Every path is checked before any fitting starts. One-line UserErrors."""
-    paths = [_check_path(t, a) for t, a in zip(texts, arguments)]
-    is_bvh = [p.suffix.lower() == ".bvh" for p in paths]
-    gaits: list[Gait | None] = [None if bvh else _load_model_file(p, a) for p, a, bvh in zip(paths, arguments, is_bvh)]
-    fitted = iter(
-        fit_bvhs([p for p, bvh in zip(paths, is_bvh) if bvh], harmonics, representation) if any(is_bvh) else []
-    )
-    return [g if g is not None else next(fitted) for g in gaits]
-
-
-def load_gait_pair(args: argparse.Namespace):
-    """Both gait arguments of a style command, checked compatible (one-line UserError)."""
-    from fourierjax import fourier, style
-    from fourierjax.errors import UserError
-
-    harmonics = parse_number(args.harmonics, "--harmonics", positive=True, integer=True)
-    if args.representation not in fourier.REPRESENTATIONS:
-        raise UserError(f"--representation: {args.representation!r} is not one of {fourier.REPRESENTATIONS}")
-    a, b = load_gaits((args.a, args.b), ("A", "B"), harmonics, args.representation)
-    try:
-        style.check_compatible(a.model, b.model, names=(f"A ({args.a})", f"B ({args.b})"))
-    except ValueError as err:
-        raise UserError(f"incompatible models: {err}") from None
-    if a.alignment != b.alignment:
-        # Phases are only comparable when θ = 0 is the same gait event in both models.
-        print(
-            f"fourierjax: warning: A is aligned to {a.alignment!r} and B to {b.alignment!r}; "
-            "their phases may not be comparable",
-            file=sys.stderr,
-        )
-    return a, b
 
 
 def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None, body_map=None) -> None:

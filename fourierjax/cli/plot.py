@@ -168,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         dt = (frames[1] - frames[0]) * motion.frame_time_s if len(frames) > 1 else 0.1
         viz.save_gif([seq], motion.topology.parents, out, frame_time_s=dt,
                      names=motion.topology.names, titles=[pathlib.Path(args.input).name],
-                     max_frames=max_frames, dpi=64)
+                     max_frames=max_frames)
     print(f"wrote {out}")
     return 0
 
@@ -179,13 +179,20 @@ def _spectrum(what, obj, args, out) -> None:
     from fourierjax import viz
 
     if what == "bvh":
+        from fourierjax.body import BodyMapError, infer_body_map
         from fourierjax.motion import joint_expmaps
         from fourierjax.spectrum import windowed_amplitude_spectrum
 
-        x, _ = joint_expmaps(obj)
+        x, names = joint_expmaps(obj)
         moving = np.ptp(x, axis=0) > 1e-4
         freqs, amp = windowed_amplitude_spectrum(x[:, moving], obj.frame_time_s)
-        fig = viz.plot_spectrum(freqs, amp, title=f"{pathlib.Path(args.input).name}: spectra of "
+        try:
+            bmap = infer_body_map(obj)
+        except BodyMapError:  # colours by body part need a body map; without one, plain curves
+            bmap = None
+        groups = viz.channel_groups([n for n, k in zip(names, moving, strict=True) if k],
+                                    obj.topology.names, obj.topology.parents, bmap)
+        fig = viz.plot_spectrum(freqs, amp, groups=groups, title=f"{pathlib.Path(args.input).name}: spectra of "
                                 f"{int(moving.sum())} exponential-map values")
     else:
         m = obj.model

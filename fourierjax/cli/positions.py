@@ -10,7 +10,7 @@ HELP = "World positions of every joint for every frame of a BVH file, saved as [
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", metavar="FILE.bvh", help="BVH file to read")
+    parser.add_argument("file", metavar="FILE.bvh", help="BVH file to read, or a bundled clip name (e.g. 07_01)")
     parser.add_argument("--out", required=True, metavar="P.npy", help="output .npy file")
 
 
@@ -28,7 +28,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--out {args.out}: the output file must end in .npy")
     if not out.parent.exists():
         raise UserError(f"--out {args.out}: folder {out.parent} does not exist")
-    motion = read_bvh(args.file)
+    from fourierjax.cli._paths import resolve_input
+
+    motion = read_bvh(resolve_input(args.file))
     # float64 keeps the file's precision; FK in float32 would add ~1e-5 units of rounding.
     import jax
 

@@ -9,7 +9,7 @@ HELP = "Transition from gait A to gait B (e.g. walk -> run, run -> walk) and wri
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from fourierjax.cli.interpolate import add_gait_arguments
+    from fourierjax.cli._inputs import add_gait_arguments
 
     add_gait_arguments(parser)
     parser.add_argument("--seconds", required=True, metavar="S", help="length of the motion")
@@ -40,14 +40,8 @@ def run(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from fourierjax import style
-    from fourierjax.cli.interpolate import (
-        check_out,
-        frame_count,
-        load_gait_pair,
-        parse_number,
-        template_of,
-        write_motion,
-    )
+    from fourierjax.cli._inputs import load_gait_pair
+    from fourierjax.cli.interpolate import check_out, frame_count, parse_number, template_of, write_motion
     from fourierjax.errors import UserError
 
     seconds = parse_number(args.seconds, "--seconds", positive=True)

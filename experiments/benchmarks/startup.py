@@ -1,0 +1,232 @@
+"""Start-up costs (issue 25): `--help`, imports, a fresh parse + FK, and second calls of commands.
+
+Every figure is the wall time of a fresh process (`subprocess`), against a baseline measured in
+the same run, interleaved with it: `python -c pass` for `--help`, `python -c "import jax.numpy"`
+for the imports and the parse + FK, the first (cold-cache) call for the second calls. pymotion's
+parse + FK of the same clip is measured when an interpreter that imports it is found
+(``$PYMOTION_PYTHON``, else this one); never installed here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+from experiments.benchmarks._common import Record, not_measured
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+CLIP = "07_01"
+
+#: Parse a bundled clip and run FK, in a fresh process with the compile cache on; prints the
+#: phases (seconds) as JSON.
+FK_SCRIPT = """
+import json, sys, time
+t0 = time.perf_counter()
+import fourierjax as fj
+fj.enable_compile_cache()
+from fourierjax import data
+from fourierjax.io.bvh import read_bvh
+from fourierjax.kinematics import joint_positions
+t1 = time.perf_counter()
+m = read_bvh(data.path(sys.argv[1]))
+t2 = time.perf_counter()
+sk = m.skeleton()
+t3 = time.perf_counter()
+p = joint_positions(sk, m.channels).block_until_ready()
+t4 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "parse_s": t2 - t1, "skeleton_s": t3 - t2, "fk_s": t4 - t3}))
+"""
+
+PYMOTION_SCRIPT = """
+import sys
+from pymotion.io.bvh import BVH
+from pymotion.ops.skeleton_np import fk
+bvh = BVH()
+bvh.load(sys.argv[1])
+rots, pos, parents, offsets, _, _ = bvh.get_data()
+fk(rots, pos[:, 0, :], offsets, parents)
+"""
+
+#: Runs one command under JAX's monitoring events and writes where its seconds went.
+PHASES_SCRIPT = """
+import json, sys, time
+t0 = time.perf_counter()
+from jax import monitoring
+ev = {}
+def listener(event, duration_secs, **_):
+    a = ev.setdefault(event.rsplit("/", 1)[-1], [0, 0.0]); a[0] += 1; a[1] += duration_secs
+monitoring.register_event_duration_secs_listener(listener)
+import logging
+class Misses(logging.Handler):
+    def emit(self, record):
+        msg = record.getMessage()
+        if msg.startswith("Not writing persistent cache entry"):
+            ev.setdefault("uncacheable", []).append(msg.split("'")[1])
+logging.getLogger("jax._src.compiler").addHandler(Misses())
+logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
+from fourierjax.cli import main
+code = main(sys.argv[2:])
+ev["total_s"] = time.perf_counter() - t0
+with open(sys.argv[1], "w") as f:
+    json.dump(ev, f)
+sys.exit(code)
+"""
+
+
+def _env(cache: str) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in ("FOURIERJAX_NO_CACHE", "MPLBACKEND")}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")]))
+    env["FOURIERJAX_CACHE_DIR"] = cache
+    env.setdefault("JAX_PLATFORMS", "cpu")
+    return env
+
+
+def _wall(cmd: list[str], env: dict, cwd: str) -> tuple[float, str]:
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, timeout=900)
+    dt = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd[-6:])} failed ({proc.returncode}): {proc.stderr[-800:]}")
+    return dt, proc.stdout
+
+
+def _interleaved(cmds: dict[str, list[str]], repeats: int, env: dict, cwd: str) -> dict[str, list[float]]:
+    """Wall seconds of each command, `repeats` rounds, one of each per round (same load)."""
+    out: dict[str, list[float]] = {k: [] for k in cmds}
+    for _ in range(repeats):
+        for k, cmd in cmds.items():
+            out[k].append(_wall(cmd, env, cwd)[0])
+    return out
+
+
+def _stats(ts: list[float]) -> dict:
+    return {"median": statistics.median(ts), "min": min(ts), "max": max(ts), "repeats": len(ts)}
+
+
+def _vs(name, ours, base, target_extra, description, baseline_name, **details) -> Record:
+    mo, mb = statistics.median(ours), statistics.median(base)
+    return Record(name, mo, mb, "s", target=target_extra, target_on="extra_s", target_op="<=",
+                  lower_is_better=True, description=description, baseline_name=baseline_name,
+                  ours_stats=_stats(ours), baseline_stats=_stats(base),
+                  details={"extra_s": round(mo - mb, 4), **details})
+
+
+def _pymotion_python(env: dict, cwd: str) -> str | None:
+    for py in filter(None, [os.environ.get("PYMOTION_PYTHON"), sys.executable]):
+        try:
+            ok = subprocess.run([py, "-c", "import pymotion.io.bvh"], env=env, cwd=cwd,
+                                capture_output=True, timeout=120).returncode == 0
+        except (OSError, subprocess.SubprocessError):
+            ok = False
+        if ok:
+            return py
+    return None
+
+
+def _commands(py: str) -> dict[str, tuple[list[str], list[list[str]]]]:
+    """name -> (the command, commands that make its inputs first)."""
+    cli = [py, "-m", "fourierjax"]
+    fit = [*cli, "fit", CLIP, "--harmonics", "3", "--out", "m.npz"]
+    fit_run = [*cli, "fit", "09_01", "--harmonics", "3", "--out", "r.npz"]
+    return {
+        "fit": (fit, []),
+        "synth": ([*cli, "synth", "m.npz", "--seconds", "4", "--out", "s.bvh"], [fit]),
+        "transition": ([*cli, "transition", "m.npz", "r.npz", "--seconds", "4", "--start", "1",
+                        "--duration", "1.5", "--out", "t.bvh"], [fit, fit_run]),
+        "stance": ([*cli, "stance", "--shape-set", "posture", "--out", "p.bvh"], []),
+    }
+
+
+def _phases(py: str, cmd: list[str], env: dict, cwd: str) -> dict:
+    """Where a warm call's seconds go: JAX's trace / lowering / compile / cache-read totals."""
+    path = os.path.join(cwd, "phases.json")
+    _wall([py, "-c", PHASES_SCRIPT, path, *cmd[3:]], env, cwd)
+    with open(path) as f:
+        ev = json.load(f)
+    pick = {"trace": "jaxpr_trace_duration", "lower": "jaxpr_to_mlir_module_duration",
+            "xla_compile_or_load": "backend_compile_duration",
+            "cache_read": "cache_retrieval_time_sec"}
+    out = {f"{k}_s": round(ev[v][1], 3) for k, v in pick.items() if v in ev}
+    out["programs"] = ev.get("backend_compile_duration", [0])[0]
+    out["programs_not_cacheable"] = sorted(set(ev.get("uncacheable", [])))
+    out["total_in_process_s"] = round(ev["total_s"], 3)
+    return out
+
+
+def run(size: str) -> list[Record]:
+    py = sys.executable
+    small = size != "full"
+    repeats = 1 if small else 7
+    records = []
+    with tempfile.TemporaryDirectory(prefix="fourierjax-startup-") as tmp:
+        env = _env(os.path.join(tmp, "cache"))
+        t = _interleaved({
+            "pass": [py, "-c", "pass"],
+            "help": [py, "-m", "fourierjax", "--help"],
+            "jnp": [py, "-c", "import jax.numpy"],
+            "fj": [py, "-c", "import fourierjax"],
+            "fj_fk": [py, "-c", "import fourierjax.io.bvh, fourierjax.kinematics"],
+        }, repeats, env, tmp)
+        records.append(_vs("startup_help", t["help"], t["pass"], 0.15,
+                           "`fourierjax --help` (python -m) against `python -c pass`", "python -c pass"))
+        records.append(_vs(
+            "startup_import", t["fj"], t["jnp"], 0.15, "`import fourierjax` against `import jax.numpy`",
+            "import jax.numpy",
+            import_fk_modules_s=round(statistics.median(t["fj_fk"]), 4),
+            import_fk_modules_extra_s=round(statistics.median(t["fj_fk"]) - statistics.median(t["jnp"]), 4),
+            note="import fourierjax loads nothing (PEP 562); import_fk_modules_* is "
+                 "`import fourierjax.io.bvh, fourierjax.kinematics` (equinox included)"))
+        if small:
+            for name in ("startup_parse_fk", *(f"startup_second_{c}" for c in _commands(py))):
+                records.append(not_measured(name, "s", "small size (CI): full size only"))
+            return records
+
+        # A fresh process that parses a clip and runs FK, with a warm cache.
+        fk_cmd = [py, "-c", FK_SCRIPT, CLIP]
+        _wall(fk_cmd, env, tmp)  # fills the cache
+        phases = []
+        fk_t, jnp_t = [], []
+        for _ in range(repeats):
+            dt, out = _wall(fk_cmd, env, tmp)
+            fk_t.append(dt)
+            phases.append(json.loads(out))
+            jnp_t.append(_wall([py, "-c", "import jax.numpy"], env, tmp)[0])
+        details = {f"median_{k}": round(statistics.median(p[k] for p in phases), 4) for k in phases[0]}
+        from fourierjax import data
+
+        clip_path = str(data.path(CLIP))
+        pm_py = _pymotion_python(env, tmp)
+        notes = []
+        if pm_py is None:
+            notes.append("pymotion not importable (set PYMOTION_PYTHON to a private venv's python): skipped")
+        else:
+            pm = [_wall([pm_py, "-c", PYMOTION_SCRIPT, clip_path], env, tmp)[0] for _ in range(repeats)]
+            details["pymotion_parse_fk_s"] = round(statistics.median(pm), 4)
+            details["ours_over_pymotion"] = round(statistics.median(fk_t) / statistics.median(pm), 2)
+            details["import_fourierjax_over_pymotion"] = round(statistics.median(t["fj_fk"]) / statistics.median(pm), 2)
+        rec = _vs("startup_parse_fk", fk_t, jnp_t, 0.3,
+                  f"fresh process: parse {CLIP} + FK, warm cache, against `import jax.numpy`",
+                  "import jax.numpy", **details)
+        rec.notes += notes
+        records.append(rec)
+
+        # Second calls of commands (cache warm from the first).
+        work = os.path.join(tmp, "work")
+        os.makedirs(work)
+        for name, (cmd, prepare) in _commands(py).items():
+            for p in prepare:
+                _wall(p, env, work)
+            cold = _wall(cmd, env, work)[0]
+            warm = [_wall(cmd, env, work)[0] for _ in range(3)]
+            rec = Record(f"startup_second_{name}", statistics.median(warm), cold, "s", target=3.0,
+                         target_on="ours", target_op="<=", lower_is_better=True,
+                         description=f"second call of `fourierjax {' '.join(cmd[3:])}` (warm cache)",
+                         baseline_name="first call (cold cache)", ours_stats=_stats(warm),
+                         details=_phases(py, cmd, env, work))
+            records.append(rec)
+    return records
