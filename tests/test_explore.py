@@ -1,0 +1,198 @@
+"""`fourierjax explore` without a browser: parameter set, TOML config, synth --config, no recompiles, bad input."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fourierjax import data, explore, style
+from fourierjax.cli import main
+from fourierjax.errors import UserError
+from fourierjax.explore import Params
+
+pytest.importorskip("viser", reason="explore needs viser: pip install 'fourierjax[explore]'")
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def library():
+    from fourierjax.explore import _engine
+
+    gaits = _engine.fit_clips({n: data.load(n) for n in ("07_01", "02_03")}, {"07_01": "walk", "02_03": "run"})
+    return explore.Library(gaits, {"run": style.characteristic(gaits["02_03"].model, gaits["07_01"].model)})
+
+
+@pytest.fixture(scope="module")
+def explorer(library):
+    from fourierjax.explore._server import Explorer
+
+    ex = Explorer(library, port=free_port(), stance=False, seconds=1.0, fps=60.0)
+    ex.playing = False
+    yield ex
+    ex.close()
+
+
+def test_params_refuse_out_of_range():
+    Params("a", "b", s=-1.0)
+    Params("a", "b", s=2.0)
+    for bad in (dict(s=2.01), dict(s=float("nan")), dict(step=-1.0), dict(gait=1.5), dict(hip_rule="x"),
+                dict(noise_harmonics=0), dict(fps=0.0), dict(weights=(("w", float("inf")),))):
+        with pytest.raises(UserError):
+            Params("a", "b", **bad)
+
+
+def test_edited_model_is_eq3_at_zero_weights(library):
+    a, b = library.gait("07_01").model, library.gait("02_03").model
+    chars = [library.characteristics["run"]]
+    p = Params("07_01", "02_03", s=0.0, weights=(("run", 0.0),))
+    m0 = explore.edited_model(a, b, chars, p)
+    np.testing.assert_allclose(np.asarray(m0.offset), np.asarray(a.offset), atol=1e-5)
+    m1 = explore.edited_model(a, b, chars, dataclasses.replace(p, s=1.0))
+    ref = style.interpolate(a, b, 1.0)
+    np.testing.assert_allclose(np.asarray(m1.amplitude), np.asarray(ref.amplitude), atol=1e-5)
+    # A characteristic weight moves the model (eq. 8).
+    m2 = explore.edited_model(a, b, chars, dataclasses.replace(p, weights=(("run", 1.0),)))
+    assert np.abs(np.asarray(m2.amplitude) - np.asarray(m0.amplitude)).max() > 1e-2
+
+
+def test_sliders_do_not_compile_again(explorer):
+    from jax import monitoring
+
+    explorer.set(s=0.2, noise_deg=1.0)  # warm: the noise path compiles once
+    compiled = []
+
+    def listener(event, duration_secs, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(duration_secs)
+
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        before = explorer.current_positions()
+        for change in (dict(s=0.7), dict(s=-0.5), dict(s=1.8), dict(step=1.3), dict(speed=0.6), dict(gait=0.05),
+                       dict(jump=0.4), dict(weight_run=0.8), dict(noise_deg=2.5), dict(root_motion=False)):
+            assert explorer.set(**change), explorer.messages[-1:]
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    assert compiled == [], f"{len(compiled)} programs compiled on slider moves"
+    assert np.abs(explorer.current_positions() - before).max() > 1e-3
+    explorer.set(noise_deg=0.0, root_motion=True, s=0.0, step=1.0, speed=1.0, gait=1.0, jump=0.0, weight_run=0.0)
+
+
+def test_export_equals_synth_config(explorer, tmp_path):
+    from fourierjax.io.bvh import read_bvh
+
+    assert explorer.set(s=0.6, step=1.1, weight_run=0.5, noise_deg=1.5, hip_rule="continuous")
+    bvh, config = explorer.export(tmp_path)
+    assert main(["synth", "--config", str(config), "--out", str(tmp_path / "again.bvh")]) == 0
+    a, b = read_bvh(bvh), read_bvh(tmp_path / "again.bvh")
+    assert a.channels.shape == (60, 96)
+    np.testing.assert_array_equal(a.channels, b.channels)
+    assert a.frame_time_s == b.frame_time_s
+    # Another parameter set gives other frames: the config carries the values.
+    text = config.read_text().replace("s = 0.6", "s = 0.1")
+    (tmp_path / "other.toml").write_text(text)
+    assert main(["synth", "--config", str(tmp_path / "other.toml"), "--out", str(tmp_path / "other.bvh")]) == 0
+    assert np.abs(read_bvh(tmp_path / "other.bvh").channels - a.channels).max() > 0.1
+    explorer.set(s=0.0, step=1.0, weight_run=0.0, noise_deg=0.0, hip_rule="unuma1995")
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace('format = "fourierjax.explore_config"', 'format = "x"'), "format"),
+    (lambda t: t.replace("version = 1", "version = 9"), "version"),
+    (lambda t: t.replace("[gait]", "[gait]\nbogus = 1"), "gait.bogus"),
+    (lambda t: t.replace("s = 0.0", "s = 5.0"), "s: must be in"),
+    (lambda t: t.replace("root_motion = true", "root_motion = 1"), "root_motion"),
+    (lambda t: t + "\n[[[", "not a TOML file"),
+])
+def test_synth_config_refuses_bad_files(explorer, tmp_path, capsys, edit, message):
+    _, config = explorer.export(tmp_path)
+    config.write_text(edit(config.read_text()))
+    capsys.readouterr()
+    assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_synth_without_model_or_config_is_one_line(capsys, tmp_path):
+    assert main(["synth", "--out", str(tmp_path / "x.bvh")]) == 2
+    assert "--config" in capsys.readouterr().err
+
+
+def test_bad_input_is_one_message_and_the_server_keeps_running(explorer, library, tmp_path):
+    from fourierjax import fourier
+
+    count = len(explorer.messages)
+    assert not explorer.set(s=3.0)
+    assert explorer.messages[-1].startswith("s: must be in [-1, 2]")
+    assert explorer.params.s == 0.0 and explorer.gui_s.value == 0.0
+    assert "Message" in explorer._status.content
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    assert not explorer.load(str(bad))
+    assert "broken.bvh" in explorer.messages[-1]
+    assert not explorer.load(str(tmp_path / "missing.npz"))
+    assert "missing.npz" in explorer.messages[-1]
+    # A model that does not fit the skeleton of gait A.
+    m = library.gait("02_03").model
+    half = fourier.FourierModel(m.offset[:40], m.amplitude[:40], m.phase[:40], m.omega, m.representation,
+                                m.channel_names[:40])
+    g = library.gait("02_03")
+    library.gaits["half"] = explore.Gait("half", half, g.template, g.body_map, "test")
+    try:
+        assert not explorer.set(b="half")
+        assert "half" in explorer.messages[-1]
+        assert explorer.params.b == "02_03"
+    finally:
+        del library.gaits["half"]
+    assert len(explorer.messages) == count + 4
+    assert explorer.set(s=0.5)  # still serving
+    assert explorer._status.content == "Ready."
+    explorer.set(s=0.0)
+
+
+def test_binds_localhost_by_default(explorer):
+    import argparse
+
+    from fourierjax.cli import explore as cli_explore
+
+    assert explorer.server.get_host() == "127.0.0.1"
+    parser = argparse.ArgumentParser()
+    cli_explore.add_arguments(parser)
+    assert parser.parse_args([]).host == "127.0.0.1"
+
+
+def test_load_sources_reports_each_bad_source(tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("not a bvh")
+    lib, messages = explore.load_sources([str(bad), "no_such_clip"], fallback=False)
+    assert lib.gaits == {} and len(messages) == 2
+    assert "bad.bvh" in messages[0] and "no_such_clip" in messages[1]
+
+
+def test_foot_lock_passed_only_where_supported(library, monkeypatch):
+    from fourierjax import gait
+    from fourierjax.explore import _engine
+
+    seen = {}
+    real = gait.synthesize_gait
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        kw.pop("foot_lock", None)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(gait, "synthesize_gait", spy)
+    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: False)
+    p = Params("07_01", "02_03", foot_lock=True, seconds=0.5)
+    explore.render(library, p)
+    assert "foot_lock" not in seen
+    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: True)
+    explore.render(library, p)
+    assert seen["foot_lock"] is True
