@@ -56,6 +56,7 @@ class Explorer:
         self.frame = 0
         self.pose_sent_at = 0.0  # time.perf_counter() of the last pose sent
         self._build_gui()
+        self.server.on_client_connect(self._on_connect)
         self._recompute(self.params)
         self._bones = self.server.scene.add_line_segments(
             "/gait/bones", self._segments(self.frame), _BONE_COLOUR, thickness=0.035)
@@ -215,6 +216,12 @@ class Explorer:
             load.on_click(lambda _: self.load(self.gui_path.value))
             export = gui.add_button("Export BVH + config")
             export.on_click(lambda _: self.export())
+
+    @staticmethod
+    def _on_connect(client) -> None:
+        # Both characters in view: the walker starts at the origin, the stance stands at x = -1.5 m.
+        client.camera.position = (2.2, 1.9, 4.6)
+        client.camera.look_at = (-0.6, 0.8, 0.6)
 
     def _on_control(self, key):
         def callback(event):

@@ -52,9 +52,13 @@ class StancePanel:
         for handle in (self.gui_set, self.gui_intensity, self.gui_reach):
             handle.on_update(lambda _: self.request())
         for gizmo in (self.gizmo_object, self.gizmo_target):
-            gizmo.on_drag_end(lambda _: self.request())
+            gizmo.on_update(self._on_gizmo)
         self._bones = None
         self.request(delay=0.0)
+
+    def _on_gizmo(self, event) -> None:
+        if event.phase == "end":  # on release, not on every drag event
+            self.request()
 
     def request(self, delay: float = SETTLE_S) -> None:
         """Solve once the controls have been still for `delay` seconds."""
