@@ -196,3 +196,57 @@ def test_foot_lock_passed_only_where_supported(library, monkeypatch):
     monkeypatch.setattr(_engine, "foot_lock_supported", lambda: True)
     explore.render(library, p)
     assert seen["foot_lock"] is True
+
+
+def test_transition_plays_and_is_not_exported_as_a_config(explorer, tmp_path):
+    gait_pos = explorer.positions.copy()
+    assert not explorer.transition(5.0)  # longer than the preview after its start
+    assert "transition: duration" in explorer.messages[-1]
+    assert explorer.transition(0.5)
+    assert explorer.mode == "transition"
+    assert explorer.positions.shape == gait_pos.shape
+    # It starts as gait a (s = 0) and ends as gait b: the last frames differ from a's walk.
+    assert np.abs(explorer.positions[-1] - gait_pos[-1]).max() > 0.02
+    assert explorer.export(tmp_path) is None and "transition" in explorer.messages[-1]
+    assert explorer.set(s=0.0) and explorer.mode == "gait"
+
+
+def test_bend_path_puts_the_walk_on_a_circle():
+    from fourierjax.explore._engine import bend_path
+
+    T = 50
+    pos = np.zeros((T, 2, 3))
+    pos[:, 0, 2] = np.linspace(0.0, 3.0, T)  # pelvis walks 3 m along +Z
+    pos[:, 1] = pos[:, 0] + [0.0, 1.0, 0.2]  # a head 1 m up and 0.2 m ahead
+    assert bend_path(pos, 0, None) is pos
+    out = bend_path(pos, 0, 2.0)
+    centre = np.array([2.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.linalg.norm(out[:, 0] - centre, axis=-1), 2.0, atol=1e-12)
+    np.testing.assert_allclose(out[:, 1, 1], 1.0)
+    # The body faces along the circle: the head stays 0.2 m ahead of the pelvis, tangent to it.
+    ahead = out[:, 1] - out[:, 0]
+    tangent = np.stack([np.sin(pos[:, 0, 2] / 2.0), np.zeros(T), np.cos(pos[:, 0, 2] / 2.0)], -1)
+    np.testing.assert_allclose(ahead[:, [0, 2]], 0.2 * tangent[:, [0, 2]], atol=1e-12)
+
+
+def test_crowd_jitters_the_current_style(explorer):
+    crowd = explorer.crowd
+    crowd.gui_num.value, crowd.gui_jitter.value = 16, 0.0
+    crowd.rebuild()
+    same = crowd.frame(0.3).astype(np.float64).reshape(16, -1, 3)
+    same -= same[:, :1] * [1, 0, 1]  # each walker about its spot
+    np.testing.assert_allclose(same, np.broadcast_to(same[:1], same.shape), atol=0.02)
+    crowd.gui_jitter.value = 0.5
+    crowd.rebuild()
+    mixed = crowd.frame(0.3).astype(np.float64).reshape(16, -1, 3)
+    mixed -= mixed[:, :1] * [1, 0, 1]
+    assert np.abs(mixed - mixed[:1]).max() > 0.05
+    crowd.toggle(True)
+    try:
+        import time
+
+        time.sleep(2.5)
+        assert crowd.frames > 2 and crowd.fps > 0 and "frames/s" in crowd.gui_fps.content
+    finally:
+        crowd.toggle(False)
+    assert crowd._thread is None

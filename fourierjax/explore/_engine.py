@@ -211,3 +211,50 @@ def render(library: Library, p: Params):
     a, b = library.gait(p.a), library.gait(p.b)
     chars = [library.characteristics[n] for n, _ in p.weights]
     return synthesize_motion(a, edited_model(a.model, b.model, chars, p), p)
+
+
+def transition_motion(library: Library, p: Params, start_s: float, duration_s: float):
+    """Gait a → gait b over `duration_s` from `start_s` (Unuma §2.3, `style.transition`), grounded by
+    the stance feet (`gait.ground_features`), `p.seconds` long.
+
+    Returns:
+        A writeable `io.bvh.Motion`.
+    """
+    import jax.numpy as jnp
+
+    from fourierjax import gait, style
+    from fourierjax.io.gait_bvh import grounded_motion
+
+    check_pair(library, p)
+    a, b = library.gait(p.a), library.gait(p.b)
+    dtype = jnp.asarray(a.model.offset).dtype
+    t = jnp.arange(p.num_frames, dtype=dtype) * p.frame_time_s
+    feats = style.transition(a.model, b.model, t, jnp.asarray(start_s, dtype), jnp.asarray(duration_s, dtype))
+    feats, root, _, _ = gait.ground_features(feats, a.template.skeleton(), a.model.representation, p.frame_time_s,
+                                             body_map=a.body_map)
+    return grounded_motion(a.template, feats, root, a.model.channel_names, p.frame_time_s, body_map=a.body_map)
+
+
+def bend_path(positions, pelvis: int, radius_m: float | None):
+    """Display a straight walk along +Z on a circle of `radius_m` (None: straight, unchanged).
+
+    Arguments:
+        positions: `[T, J, 3]` joints (m, Y up), walking along +Z from the origin.
+        pelvis: the body map's pelvis joint.
+        radius_m: circle radius (m), turning left.
+
+    Returns:
+        `[T, J, 3]`: each frame turned about Y by (distance walked) / radius and carried onto the circle.
+    """
+    if radius_m is None:
+        return positions
+    root = positions[:, pelvis].copy()
+    root[:, 1] = 0.0
+    theta = root[:, 2] / radius_m
+    rel = positions - root[:, None, :]
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    out = np.empty_like(positions)
+    out[..., 0] = rel[..., 0] * c + rel[..., 2] * s + (radius_m * (1 - np.cos(theta)) + root[:, 0])[:, None]
+    out[..., 1] = rel[..., 1]
+    out[..., 2] = -rel[..., 0] * s + rel[..., 2] * c + (radius_m * np.sin(theta))[:, None]
+    return out

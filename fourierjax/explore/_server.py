@@ -55,6 +55,8 @@ class Explorer:
         self.time_s = 0.0
         self.frame = 0
         self.pose_sent_at = 0.0  # time.perf_counter() of the last pose sent
+        self.mode = "gait"  # or "transition": what the preview plays
+        self.path_radius_m = None  # None: straight; else the circle the walk is bent onto
         self._build_gui()
         self.server.on_client_connect(self._on_connect)
         self._recompute(self.params)
@@ -65,6 +67,9 @@ class Explorer:
             from fourierjax.explore._stance import StancePanel
 
             self.stance = StancePanel(self.server, self.show_message)
+        from fourierjax.explore._crowd import CrowdPanel
+
+        self.crowd = CrowdPanel(self.server, self)
         for m in messages:
             self.show_message(m)
         self._threads = [threading.Thread(target=self._playback_loop, daemon=True),
@@ -112,19 +117,55 @@ class Explorer:
                     weights = dict(self._weights_for(changes["a"], weights))
                 p = dataclasses.replace(self.params, weights=tuple(weights.items()), **changes)
                 self._recompute(p)
+                self.mode = "gait"
             except (UserError, ValueError) as err:
                 self.show_message(str(err))
                 self._sync_gui()
                 return False
             self._send_frame(self.frame)
-            return True
+        if self.crowd.gui_on.value:
+            self.crowd.rebuild()
+        return True
 
-    def _recompute(self, p: Params) -> None:
+    def transition(self, duration_s: float | None = None) -> bool:
+        """Play gait a → gait b over `duration_s` seconds (from a quarter of the preview on).
+
+        Returns:
+            True if it plays; False if refused (one message).
+        """
+        d = float(self.gui_duration.value if duration_s is None else duration_s)
+        with self._lock:
+            p = self.params
+            start = 0.25 * p.seconds
+            try:
+                if not 0.0 < d <= p.seconds - start:
+                    raise UserError(f"transition: duration must be in (0, {p.seconds - start:g}] s, got {d:g}")
+                self._recompute(p, _engine.transition_motion(self.library, p, start, d))
+            except (UserError, ValueError) as err:
+                self.show_message(str(err))
+                return False
+            self.mode = "transition"
+            self.time_s, self.playing = 0.0, True
+            self._send_frame(0)
+        self._status.content = f"Transition {p.a} → {p.b} over {d:g} s from t = {start:g} s."
+        return True
+
+    def set_path(self, radius_m: float | None) -> None:
+        """Show the walk on a straight line (None) or bent onto a circle of `radius_m` (display only)."""
+        with self._lock:
+            self.path_radius_m = radius_m
+            gait_a = self.library.gait(self.params.a)
+            self.positions = _engine.bend_path(self._straight, gait_a.body_map.pelvis, radius_m)
+            self._send_frame(self.frame)
+
+    def _recompute(self, p: Params, motion=None) -> None:
         import jax.numpy as jnp
 
         from fourierjax import kinematics
 
-        motion, result = _engine.render(self.library, p)
+        result = None
+        if motion is None:
+            motion, result = _engine.render(self.library, p)
         gait_a = self.library.gait(p.a)
         pos = np.asarray(kinematics.joint_positions(gait_a.template.skeleton(), jnp.asarray(motion.channels)))
         scale = float(gait_a.body_map.metres_per_unit or 1.0)
@@ -133,7 +174,8 @@ class Explorer:
         start = pos[0, gait_a.body_map.pelvis].copy()
         start[up] = 0.0
         self.params, self.motion, self.result = p, motion, result
-        self.positions = pos - start  # [T, J, 3] metres, starting over the origin
+        self._straight = pos - start  # [T, J, 3] metres, starting over the origin
+        self.positions = _engine.bend_path(self._straight, gait_a.body_map.pelvis, self.path_radius_m)
         self._parents = np.asarray(gait_a.template.topology.parents)
         self.frame %= p.num_frames
         self.clear_message()
@@ -210,10 +252,18 @@ class Explorer:
             self.gui_rate = gui.add_slider("playback speed", 0.1, 2.0, 0.05, 1.0)
             self.gui_time.on_update(self._on_scrub)
             self.gui_rate.on_update(lambda e: setattr(self, "playback_rate", float(e.target.value)))
+        with gui.add_folder("Transition and path"):
+            self.gui_duration = gui.add_slider("transition D (s)", 0.1, 5.0, 0.1, 1.0)
+            go = gui.add_button("Transition A→B")
+            go.on_click(lambda _: self.transition())
+            self.gui_path = gui.add_dropdown("path", ("straight", "circle r = 2 m", "circle r = 4 m"),
+                                             initial_value="straight", hint="display only: the export walks straight")
+            self.gui_path.on_update(lambda e: self.set_path(
+                None if e.target.value == "straight" else float(e.target.value.split("= ")[1].split()[0])))
         with gui.add_folder("Load and export"):
-            self.gui_path = gui.add_text("BVH or model file", "")
+            self.gui_file = gui.add_text("BVH or model file", "")
             load = gui.add_button("Load")
-            load.on_click(lambda _: self.load(self.gui_path.value))
+            load.on_click(lambda _: self.load(self.gui_file.value))
             export = gui.add_button("Export BVH + config")
             export.on_click(lambda _: self.export())
 
@@ -321,6 +371,10 @@ class Explorer:
         from fourierjax.io.bvh import write_bvh
 
         out = pathlib.Path(out_dir) if out_dir is not None else self.out_dir
+        if self.mode != "gait":
+            self.show_message("export: the transition is not a parameter set; move a slider to go back to the "
+                              "gait panel, then export")
+            return None
         with self._lock:
             self._exports += 1
             stem = f"explore_{self._exports:03d}"
@@ -356,6 +410,7 @@ class Explorer:
             t.join(timeout=2.0)
         if self.stance is not None:
             self.stance.close()
+        self.crowd.close()
         self.server.stop()
 
 
