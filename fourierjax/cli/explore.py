@@ -31,8 +31,7 @@ def run(args: argparse.Namespace) -> int:
     except ImportError:
         raise UserError("explore needs viser: pip install 'fourierjax[explore]'") from None
     from fourierjax._compile_cache import enable_compile_cache
-    from fourierjax.explore import Params, load_sources
-    from fourierjax.explore._server import Explorer
+    from fourierjax.explore import Explorer, Params, load_sources
 
     Params("a", "b", seconds=args.seconds, fps=args.fps)  # refuse a bad --seconds or --fps before any fit
     enable_compile_cache()

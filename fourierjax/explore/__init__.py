@@ -5,20 +5,23 @@ from fourierjax.explore._engine import (
     DEFAULT_GAITS,
     Gait,
     Library,
+    bend_path,
     check_pair,
     default_library,
     edited_model,
+    fit_clips,
     foot_lock_supported,
     load_sources,
     render,
     synthesize_motion,
+    transition_motion,
 )
 from fourierjax.explore._params import CONFIG_FORMAT, CONFIG_VERSION, HIP_RULES, Params, config_text
 
 __all__ = [
     "CONFIG_FORMAT", "CONFIG_VERSION", "DEFAULT_CHARACTERISTICS", "DEFAULT_GAITS", "HIP_RULES", "Explorer",
-    "Gait", "Library", "Params", "check_pair", "config_text", "default_library", "edited_model",
-    "foot_lock_supported", "load_sources", "render", "synthesize_motion",
+    "Gait", "Library", "Params", "bend_path", "check_pair", "config_text", "default_library", "edited_model",
+    "fit_clips", "foot_lock_supported", "load_sources", "render", "synthesize_motion", "transition_motion",
 ]  # fmt: skip
 
 

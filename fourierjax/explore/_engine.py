@@ -7,6 +7,7 @@ import inspect
 import pathlib
 
 import numpy as np
+from jaxtyping import Float
 
 from fourierjax.errors import UserError
 from fourierjax.explore._params import Params
@@ -235,7 +236,7 @@ def transition_motion(library: Library, p: Params, start_s: float, duration_s: f
     return grounded_motion(a.template, feats, root, a.model.channel_names, p.frame_time_s, body_map=a.body_map)
 
 
-def bend_path(positions, pelvis: int, radius_m: float | None):
+def bend_path(positions: Float[np.ndarray, "T J 3"], pelvis: int, radius_m: float | None) -> Float[np.ndarray, "T J 3"]:
     """Display a straight walk along +Z on a circle of `radius_m` (None: straight, unchanged).
 
     Arguments:
