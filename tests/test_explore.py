@@ -250,3 +250,26 @@ def test_crowd_jitters_the_current_style(explorer):
     finally:
         crowd.toggle(False)
     assert crowd._thread is None
+
+
+def test_style_space_point_sets_least_squares_weights(explorer, library):
+    panel = explorer.style_space
+    assert panel.pca is None  # two gaits: no plane yet
+    a, b = library.gait("07_01"), library.gait("02_03")
+    library.gaits["mid"] = explore.Gait("mid", style.interpolate(a.model, b.model, 0.5, method="phasor"),
+                                        a.template, a.body_map, "test")
+    try:
+        panel.refresh()
+        assert panel.names == ["07_01", "02_03", "mid"]
+        # Three models span the plane exactly: the point on the run is the run, whose least-squares
+        # weight on the characteristic run - walk, from the walk, is 1.
+        assert panel.apply(panel.coords[1])
+        (name, w), = explorer.params.weights
+        assert name == "run" and abs(w - 1.0) < 0.05, w
+        assert explorer.params.s == 0.0 and explorer.gui_weights["run"].value == w
+        assert panel.apply(panel.coords[0])
+        assert abs(explorer.params.weights[0][1]) < 0.05
+    finally:
+        del library.gaits["mid"]
+        panel.refresh()
+    explorer.set(weight_run=0.0)

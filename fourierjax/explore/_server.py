@@ -70,6 +70,9 @@ class Explorer:
         from fourierjax.explore._crowd import CrowdPanel
 
         self.crowd = CrowdPanel(self.server, self)
+        from fourierjax.explore._style_space import StyleSpacePanel
+
+        self.style_space = StyleSpacePanel(self.server, self)
         for m in messages:
             self.show_message(m)
         self._threads = [threading.Thread(target=self._playback_loop, daemon=True),
@@ -125,6 +128,8 @@ class Explorer:
             self._send_frame(self.frame)
         if self.crowd.gui_on.value:
             self.crowd.rebuild()
+        if "a" in changes:
+            self.style_space.refresh()
         return True
 
     def transition(self, duration_s: float | None = None) -> bool:
@@ -356,6 +361,7 @@ class Explorer:
             names = tuple(self.library.gaits)
             self.gui_a.options = names
             self.gui_b.options = names
+        self.style_space.refresh()
         loaded = ", ".join([*lib.gaits, *lib.characteristics])
         self._status.content = f"Loaded {loaded}."
         return True
