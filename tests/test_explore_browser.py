@@ -74,6 +74,16 @@ def _until(cond, timeout_s: float = 60.0) -> bool:
     return True
 
 
+def _check_gif(path, num_frames: int) -> None:
+    from PIL import Image, ImageSequence
+
+    with Image.open(path) as im:
+        frames = [np.asarray(f.convert("L"), dtype=np.int16) for f in ImageSequence.Iterator(im)]
+    # Pillow merges a frame equal to the one before into it (a longer duration).
+    assert num_frames // 2 <= len(frames) <= num_frames and frames[0].shape == (360, 480)
+    assert max(float(np.mean(np.abs(f - frames[0]) > 24)) for f in frames) > 0.001, "the GIF does not move"
+
+
 def _slider(page, handle):
     return page.locator(f'[id="{handle._impl.uuid}"] [role="slider"]')
 
@@ -113,6 +123,12 @@ def test_browser_slider_shape_set_export_two_tabs(explorer, tmp_path):
             assert _until(bvh.exists, 30)
             assert main(["synth", "--config", str(config), "--out", str(tmp_path / "synth.bvh")]) == 0
             np.testing.assert_array_equal(read_bvh(bvh).channels, read_bvh(tmp_path / "synth.bvh").channels)
+            # A GIF of the view: one pass of the preview, frames that move.
+            page.get_by_role("button", name="Export GIF of this view").click()
+            assert _until(lambda: list(explorer.out_dir.glob("*.gif")), 240), explorer.messages[-3:]
+            gif = sorted(explorer.out_dir.glob("*.gif"))[-1]
+            assert _until(lambda: "frames)" in explorer._status.content, 60)
+            _check_gif(gif, explorer.params.num_frames // 4)
             # A second tab: both are connected, a slider in one moves the other.
             page2 = browser.new_page(viewport={"width": 1000, "height": 700})
             page2.goto(explorer.url)

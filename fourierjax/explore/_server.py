@@ -271,6 +271,8 @@ class Explorer:
             load.on_click(lambda _: self.load(self.gui_file.value))
             export = gui.add_button("Export BVH + config")
             export.on_click(lambda _: self.export())
+            gif = gui.add_button("Export GIF of this view")
+            gif.on_click(lambda e: self.export_gif(e.client))
 
     @staticmethod
     def _on_connect(client) -> None:
@@ -406,6 +408,41 @@ class Explorer:
         self._status.content = f"Exported `{bvh}` and `{config}`"
         print(f"fourierjax explore: wrote {bvh} and {config}", file=sys.stderr, flush=True)
         return bvh, config
+
+    def export_gif(self, client, out_dir=None, *, fps: float = 15.0, size: tuple[int, int] = (360, 480)):
+        """Record one pass of the preview as the browser tab `client` shows it (its camera), as a GIF.
+
+        Arguments:
+            client: the `viser.ClientHandle` of the tab (the one whose button was clicked).
+            out_dir: folder (default the explorer's `out_dir`).
+            fps: frames per second of the GIF.
+            size: `(height, width)` in pixels, at most the tab's.
+
+        Returns:
+            The GIF's path, or None (one message) when the tab could not render.
+        """
+        from PIL import Image
+
+        out = pathlib.Path(out_dir) if out_dir is not None else self.out_dir
+        was_playing, self.playing = self.playing, False
+        images = []
+        try:
+            p = self.params
+            for frame in range(0, p.num_frames, max(1, int(round(p.fps / fps)))):
+                self._send_frame(frame)
+                images.append(Image.fromarray(client.get_render(*size, timeout=30.0)))
+            out.mkdir(parents=True, exist_ok=True)
+            self._exports += 1
+            path = out / f"explore_{self._exports:03d}.gif"
+            images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+        except (OSError, TimeoutError, RuntimeError) as err:
+            self.show_message(f"GIF export failed: {err}")
+            return None
+        finally:
+            self.playing = was_playing
+        self._status.content = f"Exported `{path}` ({len(images)} frames)"
+        print(f"fourierjax explore: wrote {path}", file=sys.stderr, flush=True)
+        return path
 
     def close(self) -> None:
         """Stop the threads and the server."""
