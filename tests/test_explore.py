@@ -120,6 +120,15 @@ def test_synth_config_refuses_bad_files(explorer, tmp_path, capsys, edit, messag
     assert len(err.splitlines()) == 1 and message in err, err
 
 
+def test_synth_config_refuses_other_flags(explorer, tmp_path, capsys):
+    _, config = explorer.export(tmp_path)
+    capsys.readouterr()
+    for extra in (["--seconds", "3"], ["--step", "1.2"], ["--add", "x.npz=1"]):
+        assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh"), *extra]) == 2
+        assert f"{extra[0]} cannot be combined with --config" in capsys.readouterr().err
+    assert not (tmp_path / "x.bvh").exists()
+
+
 def test_synth_without_model_or_config_is_one_line(capsys, tmp_path):
     assert main(["synth", "--out", str(tmp_path / "x.bvh")]) == 2
     assert "--config" in capsys.readouterr().err

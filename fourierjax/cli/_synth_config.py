@@ -88,11 +88,23 @@ def load_config(path):
     return explore.Library(gaits, chars), params
 
 
+#: `synth` flags the config replaces, with their defaults: given with --config, they are refused
+#: (the config says everything; a flag silently ignored would mislead).
+_REPLACED = {"model": None, "seconds": None, "fps": None, "add": [], "noise": 0.0, "noise_harmonics": 3,
+             "seed": 0, "step": 1.0, "speed": 1.0, "gait": 1.0, "jump": 0.0, "hip_rule": "unuma1995",
+             "body_map": None, "root_motion": True}
+
+
 def run_config(args) -> int:
     """`synth --config FILE --out OUT.bvh`: the explorer's export, frame for frame."""
     from fourierjax import explore
     from fourierjax.errors import UserError
     from fourierjax.io.bvh import write_bvh
+
+    given = [k for k, v in _REPLACED.items() if hasattr(args, k) and getattr(args, k) != v]
+    if given:
+        flag = "MODEL" if given[0] == "model" else "--" + given[0].replace("_", "-")
+        raise UserError(f"--config: {flag} cannot be combined with --config (the config sets it)")
 
     out = pathlib.Path(args.out)
     if out.suffix.lower() != ".bvh":
