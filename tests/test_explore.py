@@ -282,3 +282,16 @@ def test_style_space_point_sets_least_squares_weights(explorer, library):
         del library.gaits["mid"]
         panel.refresh()
     explorer.set(weight_run=0.0)
+
+
+def test_synth_config_refuses_files_that_are_not_configs(tmp_path, capsys):
+    (tmp_path / "model.npz").write_bytes(b"PK\x03\x04\x00\xff\xfe binary")
+    (tmp_path / "v.toml").write_text('format = "fourierjax.explore_config"\nversion = true\n')
+    (tmp_path / "huge.toml").write_text('format = "fourierjax.explore_config"\nversion = 1\n[models]\na = 1\n')
+    for config, message in ((tmp_path, ""), (tmp_path / "model.npz", "not a text file"),
+                            (tmp_path / "missing.toml", "missing.toml"), (tmp_path / "v.toml", "version"),
+                            (tmp_path / "huge.toml", "models.a")):
+        capsys.readouterr()
+        assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh")]) == 2, config
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, err

@@ -41,7 +41,7 @@ def load_config(path):
         raise UserError(f"--config {path}: not a text file") from None
     if doc.get("format") != explore.CONFIG_FORMAT:
         raise UserError(f"--config {path}: format must be {explore.CONFIG_FORMAT!r}, got {doc.get('format')!r}")
-    if doc.get("version") != explore.CONFIG_VERSION:
+    if type(doc.get("version")) is not int or doc["version"] != explore.CONFIG_VERSION:
         raise UserError(f"--config {path}: version {doc.get('version')!r} is not supported "
                         f"(this fourierjax reads version {explore.CONFIG_VERSION})")
     unknown = set(doc) - {"format", "version", "characteristics", *_SECTIONS}
@@ -112,6 +112,11 @@ def run_config(args) -> int:
     if not out.parent.exists():
         raise UserError(f"--out: {out.parent}: no such directory")
     library, params = load_config(args.config)
+    from fourierjax import _memory
+
+    model = library.gait("a").model
+    _memory.check_synthesis(f"--config {args.config}: {params.seconds:g} s at {params.fps:g} fps", params.num_frames,
+                            model.num_channels, model.num_harmonics)
     motion, _ = explore.render(library, params)
     write_bvh(motion, out)
     print(f"wrote {out}: {params.num_frames} frames at {params.fps:g} fps (config {args.config})")
