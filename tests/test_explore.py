@@ -295,3 +295,17 @@ def test_synth_config_refuses_files_that_are_not_configs(tmp_path, capsys):
         assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh")]) == 2, config
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, err
+
+
+def test_view_is_the_fk_of_the_exported_bvh(explorer):
+    import jax.numpy as jnp
+
+    from fourierjax import kinematics
+
+    assert explorer.set(s=0.7, step=1.2, weight_run=0.3)
+    g = explorer.library.gait(explorer.params.a)
+    pos = np.asarray(kinematics.joint_positions(g.template.skeleton(), jnp.asarray(explorer.motion.channels)))
+    pos = pos * g.body_map.metres_per_unit
+    start = pos[0, g.body_map.pelvis] * [1, 0, 1]
+    np.testing.assert_allclose(explorer.positions, pos - start, atol=2e-4)  # metres
+    explorer.set(s=0.0, step=1.0, weight_run=0.0)

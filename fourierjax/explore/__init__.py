@@ -13,15 +13,19 @@ from fourierjax.explore._engine import (
     foot_lock_supported,
     load_sources,
     render,
+    result_motion,
     synthesize_motion,
+    synthesize_result,
     transition_motion,
+    view_positions,
 )
 from fourierjax.explore._params import CONFIG_FORMAT, CONFIG_VERSION, HIP_RULES, Params, config_text
 
 __all__ = [
     "CONFIG_FORMAT", "CONFIG_VERSION", "DEFAULT_CHARACTERISTICS", "DEFAULT_GAITS", "HIP_RULES", "Explorer",
     "Gait", "Library", "Params", "bend_path", "check_pair", "config_text", "default_library", "edited_model",
-    "fit_clips", "foot_lock_supported", "load_sources", "render", "synthesize_motion", "transition_motion",
+    "fit_clips", "foot_lock_supported", "load_sources", "render", "result_motion", "synthesize_motion",
+    "synthesize_result", "transition_motion", "view_positions",
 ]  # fmt: skip
 
 

@@ -9,6 +9,7 @@ import pathlib
 import numpy as np
 from jaxtyping import Float
 
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 from fourierjax.explore._params import Params
 
@@ -183,6 +184,28 @@ def edited_model(a, b, characteristics, p: Params):
     return model
 
 
+def synthesize_result(gait_a: Gait, model, p: Params):
+    """`gait.synthesize_gait` of `model` for `p.seconds` on gait a's skeleton and body map.
+
+    Returns:
+        The `gait.GaitResult`.
+    """
+    from fourierjax import gait
+
+    kw = {"foot_lock": True} if p.foot_lock and foot_lock_supported() else {}
+    return gait.synthesize_gait(
+        model, gait_a.template.skeleton(), p.num_frames, p.frame_time_s, body_map=gait_a.body_map,
+        step=p.step, speed=p.speed, gait=p.gait, jump=p.jump, rule=p.hip_rule, root_motion=p.root_motion, **kw,
+    )
+
+
+def result_motion(gait_a: Gait, channel_names, result, p: Params):
+    """The writeable `io.bvh.Motion` of a `synthesize_result` (`io.gait_bvh.gait_motion`)."""
+    from fourierjax.io.gait_bvh import gait_motion
+
+    return gait_motion(gait_a.template, result, channel_names, p.frame_time_s, body_map=gait_a.body_map)
+
+
 def synthesize_motion(gait_a: Gait, model, p: Params):
     """Synthesize `p.seconds` of `model` on gait `a`'s skeleton under the step constraints.
 
@@ -194,16 +217,31 @@ def synthesize_motion(gait_a: Gait, model, p: Params):
     Returns:
         `(motion, result)`: a writeable `io.bvh.Motion` and the `gait.GaitResult`.
     """
-    from fourierjax import gait
-    from fourierjax.io.gait_bvh import gait_motion
+    result = synthesize_result(gait_a, model, p)
+    return result_motion(gait_a, model.channel_names, result, p), result
 
-    kw = {"foot_lock": True} if p.foot_lock and foot_lock_supported() else {}
-    result = gait.synthesize_gait(
-        model, gait_a.template.skeleton(), p.num_frames, p.frame_time_s, body_map=gait_a.body_map,
-        step=p.step, speed=p.speed, gait=p.gait, jump=p.jump, rule=p.hip_rule, root_motion=p.root_motion, **kw,
-    )
-    motion = gait_motion(gait_a.template, result, model.channel_names, p.frame_time_s, body_map=gait_a.body_map)
-    return motion, result
+
+@filter_jit
+def _view_positions(skeleton, features, root_position, *, representation, pelvis):
+    from fourierjax.features import root_relative_positions
+
+    return root_relative_positions(skeleton, features, representation, pelvis) + root_position[:, None, :]
+
+
+def view_positions(gait_a: Gait, representation: str, result) -> Float[np.ndarray, "T J 3"]:
+    """`[T, J, 3]` joint positions (file units) of a `synthesize_result`, straight from its features
+    (one jitted FK; the BVH channels are only built for an export).
+
+    Arguments:
+        gait_a: the gait whose skeleton and body map were synthesized on.
+        representation: the model's representation.
+        result: the `gait.GaitResult`.
+
+    Returns:
+        The positions FK of the exported BVH gives, up to float32 rounding.
+    """
+    return np.asarray(_view_positions(gait_a.template.skeleton(), result.features, result.root_position,
+                                      representation=representation, pelvis=int(gait_a.body_map.pelvis)))
 
 
 def render(library: Library, p: Params):

@@ -168,22 +168,38 @@ class Explorer:
 
         from fourierjax import kinematics
 
+        gait_a = self.library.gait(p.a)
         result = None
         if motion is None:
-            motion, result = _engine.render(self.library, p)
-        gait_a = self.library.gait(p.a)
-        pos = np.asarray(kinematics.joint_positions(gait_a.template.skeleton(), jnp.asarray(motion.channels)))
+            # The view straight from the features (one jitted FK); the BVH channels wait for an export.
+            _engine.check_pair(self.library, p)
+            b, lib = self.library.gait(p.b), self.library
+            model = _engine.edited_model(gait_a.model, b.model, [lib.characteristics[n] for n, _ in p.weights], p)
+            result = _engine.synthesize_result(gait_a, model, p)
+            pos = _engine.view_positions(gait_a, model.representation, result)
+            self._channel_names = model.channel_names
+        else:
+            pos = np.asarray(kinematics.joint_positions(gait_a.template.skeleton(), jnp.asarray(motion.channels)))
         scale = float(gait_a.body_map.metres_per_unit or 1.0)
         pos = pos * scale
         up = gait_a.body_map.up_axis
         start = pos[0, gait_a.body_map.pelvis].copy()
         start[up] = 0.0
-        self.params, self.motion, self.result = p, motion, result
+        self.params, self._motion, self.result = p, motion, result
         self._straight = pos - start  # [T, J, 3] metres, starting over the origin
         self.positions = _engine.bend_path(self._straight, gait_a.body_map.pelvis, self.path_radius_m)
         self._parents = np.asarray(gait_a.template.topology.parents)
         self.frame %= p.num_frames
         self.clear_message()
+
+    @property
+    def motion(self):
+        """The `io.bvh.Motion` on screen (built on first use after each change)."""
+        with self._lock:
+            if self._motion is None:
+                self._motion = _engine.result_motion(self.library.gait(self.params.a), self._channel_names,
+                                                     self.result, self.params)
+            return self._motion
 
     def current_positions(self) -> np.ndarray:
         """`[J, 3]` joint positions (m) of the frame on screen."""
