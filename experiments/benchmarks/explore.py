@@ -65,13 +65,17 @@ def run(size: str) -> list[Record]:
         model = explore.edited_model(a.model, b.model, chars, p)
         motion, _ = explore.synthesize_motion(a, model, p)
         skel = a.template.skeleton()
-        parts = {
+        result = explore.synthesize_result(a, model, p)
+        parts = {  # a slider move: edited model, synthesis, view FK; an export adds the BVH channels
             "edited_model_s": timeit(lambda: explore.edited_model(a.model, b.model, chars, p).offset,
                                      repeats=5)["median"],
-            "synthesize_and_bvh_channels_s": timeit(lambda: explore.synthesize_motion(a, model, p)[0].channels,
-                                                    repeats=5)["median"],
-            "joint_positions_s": timeit(lambda: kinematics.joint_positions(skel, jnp.asarray(motion.channels)),
-                                        repeats=5)["median"],
+            "synthesize_result_s": timeit(lambda: explore.synthesize_result(a, model, p).features, repeats=5)["median"],
+            "view_positions_s": timeit(lambda: explore.view_positions(a, model.representation, result),
+                                       repeats=5)["median"],
+            "export_bvh_channels_s": timeit(lambda: explore.result_motion(a, model.channel_names, result, p).channels,
+                                            repeats=3)["median"],
+            "joint_positions_of_bvh_s": timeit(lambda: kinematics.joint_positions(skel, jnp.asarray(motion.channels)),
+                                               repeats=5)["median"],
         }
         # Baseline: a fresh `synth --config` process of the same parameter set.
         with tempfile.TemporaryDirectory() as tmp:
