@@ -207,7 +207,7 @@ def test_foot_lock_passed_only_where_supported(library, monkeypatch):
     assert seen["foot_lock"] is True
 
 
-def test_transition_plays_and_is_not_exported_as_a_config(explorer, tmp_path):
+def test_transition_plays_and_exports_a_bvh_without_config(explorer, tmp_path):
     gait_pos = explorer.positions.copy()
     assert not explorer.transition(5.0)  # longer than the preview after its start
     assert "transition: duration" in explorer.messages[-1]
@@ -216,7 +216,12 @@ def test_transition_plays_and_is_not_exported_as_a_config(explorer, tmp_path):
     assert explorer.positions.shape == gait_pos.shape
     # It starts as gait a (s = 0) and ends as gait b: the last frames differ from a's walk.
     assert np.abs(explorer.positions[-1] - gait_pos[-1]).max() > 0.02
-    assert explorer.export(tmp_path) is None and "transition" in explorer.messages[-1]
+    bvh, config = explorer.export(tmp_path)
+    assert config is None and "no config written" in explorer.messages[-1]
+    assert list(tmp_path.glob("*.toml")) == []
+    from fourierjax.io.bvh import read_bvh
+
+    np.testing.assert_allclose(read_bvh(bvh).channels, explorer.motion.channels, atol=1e-5)  # 6 decimals
     assert explorer.set(s=0.0) and explorer.mode == "gait"
 
 

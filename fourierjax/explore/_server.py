@@ -389,16 +389,26 @@ class Explorer:
         names; `fourierjax synth --config CONFIG --out X.bvh` writes the same frames.
 
         Returns:
-            `(bvh path, config path)`, or None when writing failed (message in the page).
+            `(bvh path, config path)` (config None for a transition), or None when writing failed
+            (message in the page).
         """
         from fourierjax.io import model_io
         from fourierjax.io.bvh import write_bvh
 
         out = pathlib.Path(out_dir) if out_dir is not None else self.out_dir
-        if self.mode != "gait":
-            self.show_message("export: the transition is not a parameter set; move a slider to go back to the "
-                              "gait panel, then export")
-            return None
+        if self.mode != "gait":  # a transition: its BVH, but no parameter set reproduces it
+            with self._lock:
+                self._exports += 1
+                bvh = out / f"explore_{self._exports:03d}.bvh"
+                try:
+                    out.mkdir(parents=True, exist_ok=True)
+                    write_bvh(self.motion, bvh)
+                except OSError as err:
+                    self.show_message(f"export failed: {err}")
+                    return None
+            self.show_message(f"exported {bvh}; a transition has no parameter set (no config written): move a "
+                              "slider to go back to the gait panel")
+            return bvh, None
         with self._lock:
             self._exports += 1
             stem = f"explore_{self._exports:03d}"
