@@ -22,6 +22,7 @@ COMMANDS: dict[str, str] = {
     "plot": "plot",
     "demo": "demo",
     "stance": "stance",
+    "explore": "explore",
 }
 
 

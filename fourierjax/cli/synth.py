@@ -10,9 +10,10 @@ HELP = ("Synthesize a BVH motion from a model file, optionally with weighted cha
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", metavar="MODEL", help="model file written by `fourierjax fit`")
-    parser.add_argument("--seconds", required=True, type=float, metavar="S",
-                        help="length of the motion in seconds")
+    parser.add_argument("model", metavar="MODEL", nargs="?", help="model file written by `fourierjax fit`")
+    parser.add_argument("--config", metavar="FILE.toml", help="a parameter set written by `fourierjax explore` "
+                        "(in place of MODEL and the other flags): reproduces its export exactly")
+    parser.add_argument("--seconds", type=float, metavar="S", help="length of the motion in seconds (required)")
     parser.add_argument("--fps", type=float, default=None, metavar="F",
                         help="frame rate (default: the source clip's, else 120)")
     parser.add_argument("--add", action="append", default=[], metavar="CHARACTERISTIC=WEIGHT",
@@ -54,6 +55,12 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.errors import UserError
     from fourierjax.io.bvh import write_bvh
 
+    if args.config:  # the explorer's parameter set (issue 23)
+        from fourierjax.cli._synth_config import run_config
+
+        return run_config(args)
+    if args.model is None or args.seconds is None:
+        raise UserError("MODEL and --seconds S are required (or --config FILE.toml)")
     out = pathlib.Path(args.out)
     if out.suffix.lower() != ".bvh":
         raise UserError(f"--out: {args.out}: expected a .bvh file")

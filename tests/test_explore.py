@@ -1,0 +1,316 @@
+"""`fourierjax explore` without a browser: parameter set, TOML config, synth --config, no recompiles, bad input."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fourierjax import data, explore, style
+from fourierjax.cli import main
+from fourierjax.errors import UserError
+from fourierjax.explore import Params
+
+pytest.importorskip("viser", reason="explore needs viser: pip install 'fourierjax[explore]'")
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def library():
+    from fourierjax.explore import _engine
+
+    gaits = _engine.fit_clips({n: data.load(n) for n in ("07_01", "02_03")}, {"07_01": "walk", "02_03": "run"})
+    return explore.Library(gaits, {"run": style.characteristic(gaits["02_03"].model, gaits["07_01"].model)})
+
+
+@pytest.fixture(scope="module")
+def explorer(library):
+    from fourierjax.explore._server import Explorer
+
+    ex = Explorer(library, port=free_port(), stance=False, seconds=1.0, fps=60.0)
+    ex.playing = False
+    yield ex
+    ex.close()
+
+
+def test_params_refuse_out_of_range():
+    Params("a", "b", s=-1.0)
+    Params("a", "b", s=2.0)
+    for bad in (dict(s=2.01), dict(s=float("nan")), dict(step=-1.0), dict(gait=1.5), dict(hip_rule="x"),
+                dict(noise_harmonics=0), dict(fps=0.0), dict(weights=(("w", float("inf")),))):
+        with pytest.raises(UserError):
+            Params("a", "b", **bad)
+
+
+def test_edited_model_is_eq3_at_zero_weights(library):
+    a, b = library.gait("07_01").model, library.gait("02_03").model
+    chars = [library.characteristics["run"]]
+    p = Params("07_01", "02_03", s=0.0, weights=(("run", 0.0),))
+    m0 = explore.edited_model(a, b, chars, p)
+    np.testing.assert_allclose(np.asarray(m0.offset), np.asarray(a.offset), atol=1e-5)
+    m1 = explore.edited_model(a, b, chars, dataclasses.replace(p, s=1.0))
+    ref = style.interpolate(a, b, 1.0)
+    np.testing.assert_allclose(np.asarray(m1.amplitude), np.asarray(ref.amplitude), atol=1e-5)
+    # A characteristic weight moves the model (eq. 8).
+    m2 = explore.edited_model(a, b, chars, dataclasses.replace(p, weights=(("run", 1.0),)))
+    assert np.abs(np.asarray(m2.amplitude) - np.asarray(m0.amplitude)).max() > 1e-2
+
+
+def test_sliders_do_not_compile_again(explorer):
+    from jax import monitoring
+
+    explorer.set(s=0.2, noise_deg=1.0)  # warm: the noise path compiles once
+    compiled = []
+
+    def listener(event, duration_secs, **_):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(duration_secs)
+
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        before = explorer.current_positions()
+        for change in (dict(s=0.7), dict(s=-0.5), dict(s=1.8), dict(step=1.3), dict(speed=0.6), dict(gait=0.05),
+                       dict(jump=0.4), dict(weight_run=0.8), dict(noise_deg=2.5), dict(root_motion=False)):
+            assert explorer.set(**change), explorer.messages[-1:]
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    assert compiled == [], f"{len(compiled)} programs compiled on slider moves"
+    assert np.abs(explorer.current_positions() - before).max() > 1e-3
+    explorer.set(noise_deg=0.0, root_motion=True, s=0.0, step=1.0, speed=1.0, gait=1.0, jump=0.0, weight_run=0.0)
+
+
+def test_export_equals_synth_config(explorer, tmp_path):
+    from fourierjax.io.bvh import read_bvh
+
+    assert explorer.set(s=0.6, step=1.1, weight_run=0.5, noise_deg=1.5, hip_rule="continuous")
+    bvh, config = explorer.export(tmp_path)
+    assert main(["synth", "--config", str(config), "--out", str(tmp_path / "again.bvh")]) == 0
+    a, b = read_bvh(bvh), read_bvh(tmp_path / "again.bvh")
+    assert a.channels.shape == (60, 96)
+    np.testing.assert_array_equal(a.channels, b.channels)
+    assert a.frame_time_s == b.frame_time_s
+    # Another parameter set gives other frames: the config carries the values.
+    text = config.read_text().replace("s = 0.6", "s = 0.1")
+    (tmp_path / "other.toml").write_text(text)
+    assert main(["synth", "--config", str(tmp_path / "other.toml"), "--out", str(tmp_path / "other.bvh")]) == 0
+    assert np.abs(read_bvh(tmp_path / "other.bvh").channels - a.channels).max() > 0.1
+    explorer.set(s=0.0, step=1.0, weight_run=0.0, noise_deg=0.0, hip_rule="unuma1995")
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda t: t.replace('format = "fourierjax.explore_config"', 'format = "x"'), "format"),
+    (lambda t: t.replace("version = 1", "version = 9"), "version"),
+    (lambda t: t.replace("[gait]", "[gait]\nbogus = 1"), "gait.bogus"),
+    (lambda t: t.replace("s = 0.0", "s = 5.0"), "s: must be in"),
+    (lambda t: t.replace("root_motion = true", "root_motion = 1"), "root_motion"),
+    (lambda t: t + "\n[[[", "not a TOML file"),
+])
+def test_synth_config_refuses_bad_files(explorer, tmp_path, capsys, edit, message):
+    _, config = explorer.export(tmp_path)
+    config.write_text(edit(config.read_text()))
+    capsys.readouterr()
+    assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+
+
+def test_synth_config_refuses_other_flags(explorer, tmp_path, capsys):
+    _, config = explorer.export(tmp_path)
+    capsys.readouterr()
+    for extra in (["--seconds", "3"], ["--step", "1.2"], ["--add", "x.npz=1"]):
+        assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh"), *extra]) == 2
+        assert f"{extra[0]} cannot be combined with --config" in capsys.readouterr().err
+    assert not (tmp_path / "x.bvh").exists()
+
+
+def test_synth_without_model_or_config_is_one_line(capsys, tmp_path):
+    assert main(["synth", "--out", str(tmp_path / "x.bvh")]) == 2
+    assert "--config" in capsys.readouterr().err
+
+
+def test_bad_input_is_one_message_and_the_server_keeps_running(explorer, library, tmp_path):
+    from fourierjax import fourier
+
+    count = len(explorer.messages)
+    assert not explorer.set(s=3.0)
+    assert explorer.messages[-1].startswith("s: must be in [-1, 2]")
+    assert explorer.params.s == 0.0 and explorer.gui_s.value == 0.0
+    assert "Message" in explorer._status.content
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    assert not explorer.load(str(bad))
+    assert "broken.bvh" in explorer.messages[-1]
+    assert not explorer.load(str(tmp_path / "missing.npz"))
+    assert "missing.npz" in explorer.messages[-1]
+    # A model that does not fit the skeleton of gait A.
+    m = library.gait("02_03").model
+    half = fourier.FourierModel(m.offset[:40], m.amplitude[:40], m.phase[:40], m.omega, m.representation,
+                                m.channel_names[:40])
+    g = library.gait("02_03")
+    library.gaits["half"] = explore.Gait("half", half, g.template, g.body_map, "test")
+    try:
+        assert not explorer.set(b="half")
+        assert "half" in explorer.messages[-1]
+        assert explorer.params.b == "02_03"
+    finally:
+        del library.gaits["half"]
+    assert len(explorer.messages) == count + 4
+    assert explorer.set(s=0.5)  # still serving
+    assert explorer._status.content == "Ready."
+    explorer.set(s=0.0)
+
+
+def test_binds_localhost_by_default(explorer):
+    import argparse
+
+    from fourierjax.cli import explore as cli_explore
+
+    assert explorer.server.get_host() == "127.0.0.1"
+    parser = argparse.ArgumentParser()
+    cli_explore.add_arguments(parser)
+    assert parser.parse_args([]).host == "127.0.0.1"
+
+
+def test_load_sources_reports_each_bad_source(tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("not a bvh")
+    lib, messages = explore.load_sources([str(bad), "no_such_clip"], fallback=False)
+    assert lib.gaits == {} and len(messages) == 2
+    assert "bad.bvh" in messages[0] and "no_such_clip" in messages[1]
+
+
+def test_foot_lock_passed_only_where_supported(library, monkeypatch):
+    from fourierjax import gait
+    from fourierjax.explore import _engine
+
+    seen = {}
+    real = gait.synthesize_gait
+
+    def spy(*args, **kw):
+        seen.update(kw)
+        kw.pop("foot_lock", None)
+        return real(*args, **kw)
+
+    monkeypatch.setattr(gait, "synthesize_gait", spy)
+    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: False)
+    p = Params("07_01", "02_03", foot_lock=True, seconds=0.5)
+    explore.render(library, p)
+    assert "foot_lock" not in seen
+    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: True)
+    explore.render(library, p)
+    assert seen["foot_lock"] is True
+
+
+def test_transition_plays_and_exports_a_bvh_without_config(explorer, tmp_path):
+    gait_pos = explorer.positions.copy()
+    assert not explorer.transition(5.0)  # longer than the preview after its start
+    assert "transition: duration" in explorer.messages[-1]
+    assert explorer.transition(0.5)
+    assert explorer.mode == "transition"
+    assert explorer.positions.shape == gait_pos.shape
+    # It starts as gait a (s = 0) and ends as gait b: the last frames differ from a's walk.
+    assert np.abs(explorer.positions[-1] - gait_pos[-1]).max() > 0.02
+    bvh, config = explorer.export(tmp_path)
+    assert config is None and "no config written" in explorer.messages[-1]
+    assert list(tmp_path.glob("*.toml")) == []
+    from fourierjax.io.bvh import read_bvh
+
+    np.testing.assert_allclose(read_bvh(bvh).channels, explorer.motion.channels, atol=1e-5)  # 6 decimals
+    assert explorer.set(s=0.0) and explorer.mode == "gait"
+
+
+def test_bend_path_puts_the_walk_on_a_circle():
+    from fourierjax.explore._engine import bend_path
+
+    T = 50
+    pos = np.zeros((T, 2, 3))
+    pos[:, 0, 2] = np.linspace(0.0, 3.0, T)  # pelvis walks 3 m along +Z
+    pos[:, 1] = pos[:, 0] + [0.0, 1.0, 0.2]  # a head 1 m up and 0.2 m ahead
+    assert bend_path(pos, 0, None) is pos
+    out = bend_path(pos, 0, 2.0)
+    centre = np.array([2.0, 0.0, 0.0])
+    np.testing.assert_allclose(np.linalg.norm(out[:, 0] - centre, axis=-1), 2.0, atol=1e-12)
+    np.testing.assert_allclose(out[:, 1, 1], 1.0)
+    # The body faces along the circle: the head stays 0.2 m ahead of the pelvis, tangent to it.
+    ahead = out[:, 1] - out[:, 0]
+    tangent = np.stack([np.sin(pos[:, 0, 2] / 2.0), np.zeros(T), np.cos(pos[:, 0, 2] / 2.0)], -1)
+    np.testing.assert_allclose(ahead[:, [0, 2]], 0.2 * tangent[:, [0, 2]], atol=1e-12)
+
+
+def test_crowd_jitters_the_current_style(explorer):
+    crowd = explorer.crowd
+    crowd.gui_num.value, crowd.gui_jitter.value = 16, 0.0
+    crowd.rebuild()
+    same = crowd.frame(0.3).astype(np.float64).reshape(16, -1, 3)
+    same -= same[:, :1] * [1, 0, 1]  # each walker about its spot
+    np.testing.assert_allclose(same, np.broadcast_to(same[:1], same.shape), atol=0.02)
+    crowd.gui_jitter.value = 0.5
+    crowd.rebuild()
+    mixed = crowd.frame(0.3).astype(np.float64).reshape(16, -1, 3)
+    mixed -= mixed[:, :1] * [1, 0, 1]
+    assert np.abs(mixed - mixed[:1]).max() > 0.05
+    crowd.toggle(True)
+    try:
+        import time
+
+        time.sleep(2.5)
+        assert crowd.frames > 2 and crowd.fps > 0 and "frames/s" in crowd.gui_fps.content
+    finally:
+        crowd.toggle(False)
+    assert crowd._thread is None
+
+
+def test_style_space_point_sets_least_squares_weights(explorer, library):
+    panel = explorer.style_space
+    assert panel.pca is None  # two gaits: no plane yet
+    a, b = library.gait("07_01"), library.gait("02_03")
+    library.gaits["mid"] = explore.Gait("mid", style.interpolate(a.model, b.model, 0.5, method="phasor"),
+                                        a.template, a.body_map, "test")
+    try:
+        panel.refresh()
+        assert panel.names == ["07_01", "02_03", "mid"]
+        # Three models span the plane exactly: the point on the run is the run, whose least-squares
+        # weight on the characteristic run - walk, from the walk, is 1.
+        assert panel.apply(panel.coords[1])
+        (name, w), = explorer.params.weights
+        assert name == "run" and abs(w - 1.0) < 0.05, w
+        assert explorer.params.s == 0.0 and explorer.gui_weights["run"].value == w
+        assert panel.apply(panel.coords[0])
+        assert abs(explorer.params.weights[0][1]) < 0.05
+    finally:
+        del library.gaits["mid"]
+        panel.refresh()
+    explorer.set(weight_run=0.0)
+
+
+def test_synth_config_refuses_files_that_are_not_configs(tmp_path, capsys):
+    (tmp_path / "model.npz").write_bytes(b"PK\x03\x04\x00\xff\xfe binary")
+    (tmp_path / "v.toml").write_text('format = "fourierjax.explore_config"\nversion = true\n')
+    (tmp_path / "huge.toml").write_text('format = "fourierjax.explore_config"\nversion = 1\n[models]\na = 1\n')
+    for config, message in ((tmp_path, ""), (tmp_path / "model.npz", "not a text file"),
+                            (tmp_path / "missing.toml", "missing.toml"), (tmp_path / "v.toml", "version"),
+                            (tmp_path / "huge.toml", "models.a")):
+        capsys.readouterr()
+        assert main(["synth", "--config", str(config), "--out", str(tmp_path / "x.bvh")]) == 2, config
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err, err
+
+
+def test_view_is_the_fk_of_the_exported_bvh(explorer):
+    import jax.numpy as jnp
+
+    from fourierjax import kinematics
+
+    assert explorer.set(s=0.7, step=1.2, weight_run=0.3)
+    g = explorer.library.gait(explorer.params.a)
+    pos = np.asarray(kinematics.joint_positions(g.template.skeleton(), jnp.asarray(explorer.motion.channels)))
+    pos = pos * g.body_map.metres_per_unit
+    start = pos[0, g.body_map.pelvis] * [1, 0, 1]
+    np.testing.assert_allclose(explorer.positions, pos - start, atol=2e-4)  # metres
+    explorer.set(s=0.0, step=1.0, weight_run=0.0)
