@@ -218,7 +218,7 @@ def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
     world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
 
     def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D tiled transpose
-        return a.reshape(-1, m).T.reshape(m, a.shape[0], a.shape[1])
+        return a.reshape(a.shape[0] * a.shape[1], m).T.reshape(m, a.shape[0], a.shape[1])
 
     if not all_rotations:
         return None, frames_major(world_p), None
@@ -235,8 +235,8 @@ def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool, name: str):
     topology = skeleton.topology
     channels = _check_batch(skeleton, channels, name)
     batch = channels.shape[:-1]
-    flat = channels.reshape(-1, topology.num_channels)
-    m = flat.shape[0]
+    m = int(np.prod(batch))
+    flat = channels.reshape(m, topology.num_channels)  # not -1: a skeleton may have no channels
     if m <= 2 * _FK_CHUNK:
         out = _fk_chunk(skeleton, flat, all_rotations)
     else:

@@ -119,7 +119,7 @@ def test_under_jit_vmap_vmap_matches_numpy_reference():
     scale = rng.uniform(0.01, 0.02, size=(3, 1, 1))  # CMU inches to about metres, per character
     offsets = np.asarray(motion.offsets)[None] * scale
     ch = np.stack([motion.channels[k * 40:k * 40 + 6] for k in range(3)]).astype(np.float32)
-    ch[..., :3] *= scale[:, :, 0]  # the root's position channels come first in CMU files
+    ch[..., :3] *= scale  # the root's position channels come first in CMU files
 
     def one(off, c):
         return kinematics.fk_from_channels(Skeleton(topo, off, motion.end_site_offsets), c).positions
