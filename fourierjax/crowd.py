@@ -211,7 +211,7 @@ def _positions(crowd: Crowd, t: Array) -> Array:
 
 # `_jit.jit` (the one wrapper's mechanism over `jax.jit`; the crowd is all arrays): called once per
 # frame, where `filter_jit`'s argument filtering cost ~150 us a call. XLA's default CPU fusion
-# emitters (`cpu_compiler_options={}`) run this graph faster (8.5 vs 12 ms per frame at 10,000
-# characters) and compile it faster (5.8 vs 7.2 s) than the classic ones of
-# `CPU_COMPILER_OPTIONS` (measured on the shared 2-core machine).
+# emitters (`cpu_compiler_options={}`) run this graph faster than the classic ones of
+# `CPU_COMPILER_OPTIONS` (5.8 vs 8.1 ms per frame at 10,000 characters) but compile it slower
+# (3.0 vs 1.5 s; shared 2-core machine, load ~5): a crowd is compiled once and posed every frame.
 _positions_jit = _jit.jit(_positions, cpu_compiler_options={})
