@@ -8,8 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from fourierjax import _jit, rotations
-from fourierjax._sincos import sincos as _sincos
+from fourierjax import _fk, _jit, rotations
 from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
 
@@ -115,9 +114,9 @@ def forward_kinematics(
 ) -> FKResult:
     """World rotations and positions of every joint and End Site for one frame.
 
-    Joints are posed level by level (all joints of one depth at once), composing rotations as
-    quaternion products, which stays clear of the XLA CPU bug with batched 3x3 matmuls under
-    nested vmap (see STYLE.md). Batch over frames and characters with `jax.vmap`.
+    The one FK formulation (`fourierjax._fk`): joints posed depth level by depth level,
+    rotations composed as quaternion products (clear of the XLA CPU bug with batched 3x3
+    matmuls under nested vmap, see STYLE.md). Batch over frames and characters with `jax.vmap`.
 
     Arguments:
         skeleton: supplies the topology and the End Site offsets.
@@ -134,23 +133,30 @@ def forward_kinematics(
             f"forward_kinematics: expected translations ({j}, 3) and quats ({j}, 4), got "
             f"{translations.shape} and {quats.shape}"
         )
-    parents = np.array(topology.parents)
-    world_q = quats
-    world_p = translations
-    for level in topology.levels[1:]:
-        idx = np.array(level)
-        par = parents[idx]
-        pq = world_q[par]
-        world_q = world_q.at[idx].set(rotations.quat_multiply(pq, quats[idx]))
-        world_p = world_p.at[idx].set(world_p[par] + rotations.quat_apply(pq, translations[idx]))
-    if topology.num_end_sites:
-        ep = np.array(topology.end_site_parents)
-        end_sites = world_p[ep] + rotations.quat_apply(
-            world_q[ep], skeleton.end_site_offsets.astype(world_p.dtype)
-        )
-    else:
-        end_sites = jnp.zeros((0, 3), world_p.dtype)
-    return FKResult(rotations=world_q, positions=world_p, end_site_positions=end_sites)
+    the_plan = _fk.plan(topology)
+    dtype = jnp.result_type(translations.dtype, quats.dtype)
+    lq, lt = [], []
+    for level in the_plan.levels:
+        idx = np.asarray(level.joints)
+        lq.append(list(jnp.moveaxis(quats[idx].astype(dtype), 1, 0)))
+        lt.append(list(jnp.moveaxis(translations[idx].astype(dtype), 1, 0)))
+    q, p = _fk.world(the_plan, lq, lt)
+    world_q = _fk.gather_levels(the_plan, q, 4, True, (), dtype)
+    world_p = _fk.gather_levels(the_plan, p, 3, False, (), dtype)
+    ends = _end_sites(skeleton, world_q, world_p, (), dtype)
+    return FKResult(rotations=world_q, positions=world_p, end_site_positions=ends)
+
+
+def _end_sites(skeleton: Skeleton, world_q, world_p, shape, dtype):
+    """`[E, 3, *S]` End Site positions from world poses `[J, 4, *S]`, `[J, 3, *S]`."""
+    topology = skeleton.topology
+    if not topology.num_end_sites:
+        return jnp.zeros((0, 3, *shape), dtype)
+    ep = np.asarray(topology.end_site_parents)
+    pq, pp = world_q[ep], world_p[ep]
+    off = skeleton.end_site_offsets.astype(dtype).reshape(-1, 3, *(1,) * len(shape))
+    moved = _fk.qapply([pq[:, k] for k in range(4)], [off[:, k] for k in range(3)])
+    return jnp.stack([pp[:, k] + moved[k] for k in range(3)], axis=1)
 
 
 def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) -> FKResult:
@@ -163,166 +169,104 @@ def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) ->
     Returns:
         The frame's `FKResult`.
     """
-    return forward_kinematics(skeleton, *pose_from_channels(skeleton, channels))
-
-
-# -------------------------------------------------------------------- batched fast path
-#
-# `fk_frames` / `joint_positions` pose many frames at once. Instead of vmapping the one-frame
-# code (whose gathers and scatters run on `[frames, joints, 4]` with the frame axis outermost),
-# they work on a joint-major, frame-minor layout (`[J, 4, M]`, M = all frames): every quaternion
-# component is a contiguous vector over frames, so each step is a plain vectorised loop. The
-# hierarchy is a `lax.scan` over joints (one small compiled body: compile time stays flat in
-# the number of joints; unrolled elementwise graphs took minutes to compile here), and sines
-# and cosines come from one shared range reduction (`_sincos`), because XLA's CPU `sin` is
-# several times slower than the rest of FK put together.
-
-def _qmul_sparse(a: list, b: list) -> list:
-    """Hamilton product of component lists whose entries may be the Python int 0 (skipped)."""
-
-    def term(u, v):
-        return None if isinstance(u, int) or isinstance(v, int) else u * v
-
-    def total(*signed):
-        out = None
-        for sign, t in signed:
-            if t is None:
-                continue
-            out = (t if sign > 0 else -t) if out is None else (out + t if sign > 0 else out - t)
-        return 0 if out is None else out
-
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return [
-        total((1, term(w1, w2)), (-1, term(x1, x2)), (-1, term(y1, y2)), (-1, term(z1, z2))),
-        total((1, term(w1, x2)), (1, term(x1, w2)), (1, term(y1, z2)), (-1, term(z1, y2))),
-        total((1, term(w1, y2)), (-1, term(x1, z2)), (1, term(y1, w2)), (1, term(z1, x2))),
-        total((1, term(w1, z2)), (1, term(x1, y2)), (-1, term(y1, x2)), (1, term(z1, w2))),
-    ]
-
-
-def _qapply_soa(q, v):
-    """Rotate `v` (3 components) by unit quaternion `q` (4 components); components broadcast."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
-    return [vx + w * tx + (y * tz - z * ty), vy + w * ty + (z * tx - x * tz), vz + w * tz + (x * ty - y * tx)]
-
-
-def _local_pose_soa(skeleton: Skeleton, x: Float[Array, "channels M"]):
-    """Local rotations `[J, 4, M]` and translations `[J, 3, M]` of M frames of channels `[C, M]`."""
     topology = skeleton.topology
-    num_joints, m, dtype = topology.num_joints, x.shape[1], x.dtype
-    (pos_joint, pos_axis, pos_chan), groups = _channel_layout(topology)
-    parts, part_joints = [], []
-    for order, (joints, idx) in groups.items():
-        half = x[idx.T] * np.asarray(np.pi / 360, dtype)  # [len(order), J_g, M] half-angles
-        s, c = _sincos(half)
-        q = None
-        for k, axis in enumerate(order):
-            e = [c[k], 0, 0, 0]
-            e[1 + _AXIS_INDEX[axis]] = s[k]
-            q = e if q is None else _qmul_sparse(q, e)
-        zero = jnp.zeros((len(joints), m), dtype)
-        parts.append(jnp.stack([zero if isinstance(t, int) else t for t in q], axis=1))
-        part_joints.extend(joints.tolist())
-    rest = [j for j, o in enumerate(topology.rotation_orders) if o is None]
-    if rest:
-        identity = jnp.asarray([1.0, 0.0, 0.0, 0.0], dtype)[None, :, None]
-        parts.append(jnp.broadcast_to(identity, (len(rest), 4, m)))
-        part_joints.extend(rest)
-    quats = jnp.concatenate(parts, axis=0)
-    perm = np.argsort(np.asarray(part_joints))
-    if not np.array_equal(perm, np.arange(num_joints)):
-        quats = quats[perm]
-    translations = jnp.broadcast_to(skeleton.offsets.astype(dtype)[:, :, None], (num_joints, 3, m))
-    if pos_joint.size:
-        translations = translations.at[pos_joint, pos_axis].set(x[pos_chan])
-    return quats, translations
+    channels = jnp.asarray(channels)
+    if channels.shape != (topology.num_channels,):
+        raise UserError(
+            f"fk_from_channels: `channels` has shape {channels.shape}, expected "
+            f"({topology.num_channels},) for one frame of this skeleton"
+        )
+    if not jnp.issubdtype(channels.dtype, jnp.floating):
+        channels = channels.astype(skeleton.offsets.dtype)
+    the_plan = _fk.plan(topology)
+    dtype = channels.dtype
+    q, p = _fk.pose_rows(the_plan, channels[np.asarray(the_plan.rows, np.int32)], skeleton.offsets)
+    world_q = _fk.gather_levels(the_plan, q, 4, True, (), dtype)
+    world_p = _fk.gather_levels(the_plan, p, 3, False, (), dtype)
+    ends = _end_sites(skeleton, world_q, world_p, (), dtype)
+    return FKResult(rotations=world_q, positions=world_p, end_site_positions=ends)
 
 
-def _fk_batch(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKResult:
-    """`FKResult` with leading dims `...` for channels `[..., C]` (one skeleton for all)."""
+# -------------------------------------------------------------------- batched entry points
+
+
+def _check_batch(skeleton: Skeleton, channels, name: str):
     topology = skeleton.topology
     channels = jnp.asarray(channels)
     if channels.ndim < 1 or channels.shape[-1] != topology.num_channels:
         raise UserError(
-            f"fk_frames: `channels` has shape {channels.shape}, expected (..., "
+            f"{name}: `channels` has shape {channels.shape}, expected (..., "
             f"{topology.num_channels}) for this skeleton"
         )
     if skeleton.offsets.ndim != 2:
         raise UserError(
-            f"fk_frames: the skeleton's offsets have shape {skeleton.offsets.shape}; for a batch "
+            f"{name}: the skeleton's offsets have shape {skeleton.offsets.shape}; for a batch "
             "of skeletons vmap `fk_from_channels` instead"
         )
     if not jnp.issubdtype(channels.dtype, jnp.floating):
         channels = channels.astype(skeleton.offsets.dtype)
-    batch = channels.shape[:-1]
-    flat = channels.reshape(-1, topology.num_channels)
-    m = flat.shape[0]
-    if m <= 2 * _FK_CHUNK:
-        quats, positions, ends = _fk_flat(skeleton, flat)
-    else:
-        # Chunks of frames keep the working set ([J, 7, chunk]) in cache: one pass over a
-        # [J, 7, M] buffer per joint is memory-bound once M is large (4x slower per joint at
-        # 1024 x 240 frames than at 1000).
-        n = -(-m // _FK_CHUNK)
-        pad = n * _FK_CHUNK - m
-        if pad:
-            flat = jnp.concatenate([flat, jnp.zeros((pad, flat.shape[1]), flat.dtype)])
-        out = jax.lax.map(lambda c: _fk_flat(skeleton, c), flat.reshape(n, _FK_CHUNK, -1))
-        quats, positions, ends = (a.reshape(n * _FK_CHUNK, *a.shape[2:])[:m] for a in out)
+    return channels
 
-    def back(a):  # [M, K, D] -> [..., K, D]
-        return a.reshape(*batch, *a.shape[1:])
 
-    return FKResult(rotations=back(quats), positions=back(positions), end_site_positions=back(ends))
+def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
+    """`(rotations [M, J, 4] or None, positions [M, J, 3], end sites [M, E, 3] or None)`."""
+    topology = skeleton.topology
+    the_plan = _fk.plan(topology, all_rotations)
+    m, dtype = flat.shape[0], flat.dtype
+    x = flat[:, np.asarray(the_plan.rows, np.int32)].T  # [R, M]: frames minor, plan row order
+    q, p = _fk.pose_rows(the_plan, x, skeleton.offsets, keep=_fk.store)
+    world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
+
+    def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D tiled transpose
+        return a.reshape(a.shape[0] * a.shape[1], m).T.reshape(m, a.shape[0], a.shape[1])
+
+    if not all_rotations:
+        return None, frames_major(world_p), None
+    world_q = _fk.gather_levels(the_plan, q, 4, True, (m,), dtype)
+    ends = _end_sites(skeleton, world_q, world_p, (m,), dtype)
+    return frames_major(world_q), frames_major(world_p), frames_major(ends)
 
 
 _FK_CHUNK = 4096
 
 
-def _fk_flat(skeleton: Skeleton, flat: Float[Array, "M channels"]):
-    """`(rotations [M, J, 4], positions [M, J, 3], end sites [M, E, 3])` of M frames."""
+def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool, name: str):
+    """`_fk_chunk` of `[..., C]` channels, in chunks of frames when there are many."""
     topology = skeleton.topology
-    x = flat.T  # [C, M]: frames contiguous
-    quats, translations = _local_pose_soa(skeleton, x)
-    parents = np.asarray(topology.parents)
-    children = np.nonzero(parents >= 0)[0]
-
-    def pose_joint(world, jp):
-        # `world` [J, 7, M] (quaternion then position) starts as the local pose: row j still
-        # holds joint j's local transform until it is posed, and its parent (posed earlier:
-        # parents[j] < j) already holds its world transform. One buffer, one in-place update.
-        j, p = jp
-        parent, local = world[p], world[j]
-        pq = list(parent[:4])
-        q = _qmul_sparse(pq, list(local[:4]))
-        pos = _qapply_soa(pq, list(local[4:]))
-        row = jnp.stack(q + [parent[4 + k] + pos[k] for k in range(3)])
-        return jax.lax.dynamic_update_index_in_dim(world, row, j, 0), None
-
-    if children.size:
-        xs = (jnp.asarray(children, jnp.int32), jnp.asarray(parents[children], jnp.int32))
-        world, _ = jax.lax.scan(pose_joint, jnp.concatenate([quats, translations], axis=1), xs)
-        quats, translations = world[:, :4], world[:, 4:]
-    if topology.num_end_sites:
-        ep = np.asarray(topology.end_site_parents)
-        pq = quats[ep]  # [E, 4, M]
-        off = skeleton.end_site_offsets.astype(x.dtype)[:, :, None]  # [E, 3, 1]
-        ends = translations[ep] + jnp.stack(_qapply_soa(list(jnp.moveaxis(pq, 1, 0)),
-                                                        list(jnp.moveaxis(off, 1, 0))), axis=1)
+    channels = _check_batch(skeleton, channels, name)
+    batch = channels.shape[:-1]
+    m = int(np.prod(batch))
+    flat = channels.reshape(m, topology.num_channels)  # not -1: a skeleton may have no channels
+    if m <= 2 * _FK_CHUNK:
+        out = _fk_chunk(skeleton, flat, all_rotations)
     else:
-        ends = jnp.zeros((0, 3, x.shape[1]), x.dtype)
+        # Chunks of frames keep the working set in cache (one pass over [J, 7, M] per level is
+        # memory-bound once M is large). The last chunk is clamped to end at M (it recomputes
+        # a few frames), so nothing is padded and nothing is copied afterwards.
+        n = -(-m // _FK_CHUNK)
+        shapes = jax.eval_shape(lambda f: _fk_chunk(skeleton, f, all_rotations), flat[:_FK_CHUNK])
+        init = jax.tree.map(lambda s: jnp.zeros((m, *s.shape[1:]), s.dtype), shapes)
 
-    return tuple(jnp.transpose(a, (2, 0, 1)) for a in (quats, translations, ends))
+        def body(i, acc):
+            start = jnp.minimum(i * _FK_CHUNK, m - _FK_CHUNK)
+            chunk = jax.lax.dynamic_slice_in_dim(flat, start, _FK_CHUNK)
+            res = _fk_chunk(skeleton, chunk, all_rotations)
+            return jax.tree.map(lambda a, r: jax.lax.dynamic_update_slice_in_dim(a, r, start, 0), acc, res)
 
+        out = jax.lax.fori_loop(0, n, body, init)
+
+    def back(a):  # [M, K, D] -> [..., K, D]
+        return None if a is None else a.reshape(*batch, *a.shape[1:])
+
+    return tuple(back(a) for a in out)
 
 
 # `_jit.jit` (the one wrapper's mechanism over `jax.jit`), not `filter_jit`: equinox's argument
 # filtering cost ~150 us more per call on small batches (2-core machine, jax 0.10.2), which FK
-# is called with per frame. XLA's default CPU emitters (`{}`), as before the wrapper.
-@_jit.jit(cpu_compiler_options={})
+# is called with per frame. The classic CPU emitters (`_jit.CPU_COMPILER_OPTIONS`) compile the
+# unrolled levels 2-2.5x faster than the new fusion emitters (3.2 vs 6.9 s under a load of 12
+# on 2 cores) at a run time equal within the noise of the shared machine.
+@_jit.jit
 def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     """World positions of every joint for every frame (jitted entry point).
 
@@ -334,10 +278,10 @@ def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     Returns:
         `[..., J, 3]` joint positions in file units, joints in file order.
     """
-    return _fk_batch(skeleton, channels).positions
+    return _fk_batch(skeleton, channels, False, "joint_positions")[1]
 
 
-@_jit.jit(cpu_compiler_options={})
+@_jit.jit
 def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKResult:
     """`FKResult` for every frame of `[..., C]` BVH channels (jitted entry point).
 
@@ -351,4 +295,5 @@ def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     Returns:
         An `FKResult` whose leaves get the leading dims `...` of `channels`.
     """
-    return _fk_batch(skeleton, channels)
+    rot, pos, ends = _fk_batch(skeleton, channels, True, "fk_frames")
+    return FKResult(rotations=rot, positions=pos, end_site_positions=ends)

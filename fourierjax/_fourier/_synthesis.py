@@ -123,13 +123,17 @@ def _synthesize_batch(offset, amplitude, phase, omega, t_s, dtype):
     # XLA:GPU runs the vmapped product well and fuses the elementwise form worse (measured on
     # an H100 at 1024 x 57 x 240: 54 G channel-samples/s against 18 G, 0.71 and 0.22 of the
     # output-write bound): the layout above is XLA:CPU's.
-    form = _synthesize_phase_elementwise if jax.default_backend() == "cpu" else synthesize_phase
+    # One character on CPU: the product form runs in 4 small XLA programs' worth of fusions
+    # instead of 9 (46 against 65 us at 57 x 240, N = 3; each fusion costs ~5-10 us on 2 cores).
+    cpu_batch = jax.default_backend() == "cpu" and models.offset.shape[0] > 1
+    form = _synthesize_phase_elementwise if cpu_batch else synthesize_phase
     return jax.vmap(form)(models, theta)
 
 
-# Arrays, not the Module, through jit: filter_jit's pytree handling and a Module rebuild cost
-# ~0.4 ms per call, more than the whole synthesis of a few characters.
-_synthesize_batch_jit = _jit.filter_jit(_synthesize_batch)
+# Arrays, not the Module, through jit, and `_jit.jit` (jax's C++ dispatch) rather than
+# `filter_jit`: equinox's argument filtering and a Module rebuild cost ~0.4 ms per call, more
+# than the whole synthesis of one character (57 channels x 240 frames: NumPy takes ~50 us).
+_synthesize_batch_jit = _jit.jit(_synthesize_batch, static_argnames=("dtype",))
 
 
 def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[Array, "B T C"]:
