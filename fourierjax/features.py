@@ -139,7 +139,7 @@ def _check_static_above(motion, rj) -> None:
 
 def make_euler_continuous(
     angles: Float[ArrayLike, "F *joints 3"], order: str,
-    valid: Bool[ArrayLike, " F"] | Bool[ArrayLike, "F *joints"] | None = None
+    valid: Bool[ArrayLike, " F"] | Bool[ArrayLike, " F *joints"] | None = None
 ) -> Float[np.ndarray, "F *joints 3"]:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
