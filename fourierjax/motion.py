@@ -7,7 +7,7 @@ its names are re-exported here for old imports. The work is done in `fourierjax.
 from __future__ import annotations
 
 from fourierjax._motion._clip import ClipFit
-from fourierjax._motion._pipeline import STREAM_CHUNK, fit_motions
+from fourierjax._motion._pipeline import STREAM_CHUNK, fit_motions, iter_fit_motions
 from fourierjax._motion._poses import (
     foot_contacts_of,
     foot_positions_of,
@@ -48,6 +48,7 @@ __all__ = [
     "feature_mask",
     "steady_segment",
     "fit_motions",
+    "iter_fit_motions",
     "ClipFit",
     "STREAM_CHUNK",
 ]

@@ -7,6 +7,7 @@ import dataclasses
 import itertools
 import os
 import time
+from collections.abc import Iterator
 
 import equinox as eqx
 import jax
@@ -234,7 +235,7 @@ def _clip_fit(c: _Clip, k, res, names, representation, pve, dtype, fr) -> ClipFi
 STREAM_CHUNK = 256
 
 
-def fit_motions(
+def iter_fit_motions(
     motions,
     num_harmonics: int = 3,
     representation: str = "euler",
@@ -242,7 +243,6 @@ def fit_motions(
     segment: bool = True,
     use_contacts: bool = True,
     dtype=None,
-    throw: bool = False,
     body_map=None,
     start_frame: int | None = None,
     stop_frame: int | None = None,
@@ -250,8 +250,12 @@ def fit_motions(
     progress: bool | None = False,
     timings: dict | None = None,
     **fit_kwargs,
-) -> list[ClipFit]:
-    """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
+) -> Iterator[ClipFit]:
+    """:func:`fit_motions` as a generator: each chunk's ClipFits, in order, as soon as the chunk
+    is fitted (so that a caller can write models and let go of them while the next chunk is
+    read). The arguments are :func:`fit_motions`' but ``throw``.
+
+    Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
 
     Per clip: the steady straight stretch (:func:`steady_segment`, unless ``segment=False``),
     capture glitches masked out per joint (:func:`glitch_joints`: a glitchy joint's channels at
@@ -272,8 +276,6 @@ def fit_motions(
         motions: an iterable of Motions (e.g. after dropping a rest frame) or BVH paths (read
             with ``io.bvh.read_bvh``); a generator is consumed lazily.
         num_harmonics: N; representation: "euler" | "expmap".
-        throw: raise a UserError (the first failed clip's message, naming its file) after the
-            fit instead of returning failed clips.
         body_map: a `fourierjax.body.BodyMap` for every clip, an iterable of one per clip (read
             alongside ``motions``), or None to infer each clip's
             (``fourierjax.body.infer_body_map``).
@@ -325,9 +327,9 @@ def fit_motions(
                 size[0] = _stream_chunk(chunk[0], num_harmonics, fit_kwargs.get("max_memory"))
         return chunk
 
-    from tqdm.auto import tqdm
+    from tqdm import tqdm
 
-    results: list[ClipFit] = []
+    yielded = 0
     with (concurrent.futures.ThreadPoolExecutor(1) as pool,
           tqdm(total=total, unit="clip", desc="fit_motions", disable=_no_bar(progress),
                leave=False) as bar):
@@ -338,12 +340,36 @@ def fit_motions(
                 break
             ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
             fits = _fit_clips(chunk, num_harmonics, representation, dtype, fit_kwargs, timings)
-            results += fits
             bar.update(len(chunk))
-    if not results:
+            yielded += len(fits)
+            yield from fits
+    if not yielded:
         raise UserError("fit_motions: no motions given")
     if not isinstance(maps, itertools.repeat) and next(maps, None) is not None:
-        raise UserError(f"fit_motions: more body maps than the {len(results)} motions")
+        raise UserError(f"fit_motions: more body maps than the {yielded} motions")
+
+
+def fit_motions(motions, num_harmonics: int = 3, representation: str = "euler", *,
+                throw: bool = False, **kwargs) -> list[ClipFit]:
+    """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
+
+    The clips are read as a stream and fitted in bucketed chunks (:func:`iter_fit_motions`,
+    which documents every step and argument).
+
+    Arguments:
+        motions: an iterable of Motions or BVH paths; num_harmonics: N;
+        representation: "euler" | "expmap";
+        throw: raise a UserError (the first failed clip's message, naming its file) after the
+            fit instead of returning failed clips;
+        kwargs: the options of :func:`iter_fit_motions` (``segment``, ``use_contacts``,
+            ``dtype``, ``body_map``, ``start_frame``, ``stop_frame``, ``chunk_size``,
+            ``progress``, ``timings``) and of ``fit_batch``.
+
+    Returns:
+        One :class:`ClipFit` per motion, in order. A clip that cannot be fitted (e.g. too short
+        for a cycle) does not stop the others: its ``result`` and ``message`` say why.
+    """
+    results = list(iter_fit_motions(motions, num_harmonics, representation, **kwargs))
     failed = [r for r in results if not r.successful]
     if throw and failed:
         more = f" (and {len(failed) - 1} other clip(s))" if len(failed) > 1 else ""
