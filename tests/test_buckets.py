@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from jax import monitoring
 
 from fourierjax import data
 from fourierjax import motion as M
@@ -77,10 +78,21 @@ def test_batch_size_sweep_compiles_at_most_twice_and_keeps_results(walk):
                 stop_frame=None, timings=None)
     base = [_pipeline._prepare(i, m[10 * i:10 * i + 200], bm, **opts) for i in range(5)]
     before = _fit._fit_batched.num_traces()
+    # One clip first: it compiles the small bucket's program and the eager ops around it.
+    _pipeline._fit_clips(base[:1], 2, "euler", np.float32, {}, None)
     out = {}
-    for size in (8, 13, 50, 120, 500):
-        clips = [dataclasses.replace(base[i % 5], index=i) for i in range(size)]
-        out[size] = _pipeline._fit_clips(clips, 2, "euler", np.float32, {}, None)
+    compiled = []
+    listener = lambda event, duration_secs, **_: compiled.append(event)  # noqa: E731
+    monitoring.register_event_duration_secs_listener(listener)
+    try:
+        for size in (8, 13, 50, 120, 500):
+            clips = [dataclasses.replace(base[i % 5], index=i) for i in range(size)]
+            out[size] = _pipeline._fit_clips(clips, 2, "euler", np.float32, {}, None)
+    finally:
+        monitoring.unregister_event_duration_listener(listener)
+    # Every XLA program of the sweep (fit, synthesis, metrics and any eager op): only the large
+    # bucket's program is new.
+    assert compiled.count("/jax/core/compile/backend_compile_duration") <= 2
     assert _fit._fit_batched.num_traces() - before <= 2
     for size, fits in out.items():
         for i in (0, 3, size - 1):

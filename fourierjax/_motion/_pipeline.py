@@ -133,76 +133,108 @@ def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings)
 
 def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, timings, fr,
                length_bucket):
-    """One bucketed fit_batch call of ``chunk`` (padded to ``size`` clips with copies of the
-    last, and to a length bucket), then alignment and metrics: ``[(index, ClipFit), ...]``."""
+    """One bucketed program for ``chunk`` (padded to ``size`` clips with copies of the last, and
+    to a length bucket): the fit, its synthesis and the position metric; then alignment and the
+    ClipFits: ``[(index, ClipFit), ...]``."""
     clock = _Clock(timings)
     T = length_bucket(max(len(c.features) for c in chunk))
     C = len(names)
+    rows = [chunk[min(k, len(chunk) - 1)] for k in range(size)]
     feats = np.zeros((size, T, C))
     mask = np.zeros((size, T, C), bool)
-    for k in range(size):
-        c = chunk[min(k, len(chunk) - 1)]
+    for k, c in enumerate(rows):
         n = len(c.features)
         feats[k, :n] = c.features
         feats[k, n:] = c.features[-1]
         mask[k, :n] = c.mask
-    dts = np.array([chunk[min(k, len(chunk) - 1)].sub.frame_time_s for k in range(size)])
-    om_steps = np.array([chunk[min(k, len(chunk) - 1)].omega_steps for k in range(size)])
-    res = fr.fit_batch(jnp.asarray(feats, dtype), jnp.asarray(dts, dtype), num_harmonics,
-                       mask=jnp.asarray(mask), omega_steps=jnp.asarray(om_steps, dtype),
-                       representation=representation, channel_names=names, throw=False, **kw)
-    res = jax.tree.map(np.asarray, res)  # one transfer, then host reads per clip
+    dts = np.array([c.sub.frame_time_s for c in rows])
+    om_steps = np.array([c.omega_steps for c in rows])
+    pelvis = {0 if c.body_map is None else c.body_map.pelvis for c in chunk}
+    shared = len({c.sub.topology for c in chunk}) == 1 and len(pelvis) == 1
+    # Host arrays go to the device as they are (device_put, already in the fit's dtype): a
+    # conversion by jnp.asarray would compile a small program for every new chunk shape.
+    put = lambda x, dt=dtype: jax.device_put(np.asarray(x, dt))  # noqa: E731
+    skel = None
+    if shared:  # one skeleton pytree with a leading clip axis (bone lengths differ per clip)
+        skel = eqx.tree_at(lambda s: (s.offsets, s.end_site_offsets), chunk[0].sub.skeleton(),
+                           (put(np.stack([c.sub.offsets for c in rows])),
+                            put(np.stack([c.sub.end_site_offsets for c in rows]))))
+    K = max(32, length_bucket(max(len(c.left) for c in rows)))
+    strikes = np.zeros((size, K))
+    for k, c in enumerate(rows):
+        strikes[k, :len(c.left)] = c.left
+    counts = np.array([len(c.left) for c in rows])
+    res, pve, shifted = _chunk_program(
+        skel, put(feats), put(mask, bool), put(dts), put(om_steps), put(strikes),
+        put(counts, np.int32),
+        num_harmonics=num_harmonics, representation=representation, names=names,
+        pelvis=min(pelvis), kw=kw)
+    # One transfer, then host reads per clip.
+    res, pve, shifted = jax.tree.map(np.asarray, (res, pve, shifted))
     clock("fit")
-    t = np.arange(T) * dts[:, None]
-    xhat = np.asarray(fr.synthesize_batch(jax.tree.map(jnp.asarray, res.model),
-                                          jnp.asarray(t, dtype)))
-    frames = mask.any(axis=2)
-    pve = _position_ves(chunk, representation, feats, xhat, frames, dtype)
-    rows = []
-    for k, c in enumerate(chunk):
-        rows.append((c.index, _clip_fit(c, k, res, names, representation, pve[k], dtype, fr)))
+    if not shared:
+        pve = _position_ves(chunk, representation, feats, res, dts, dtype)
+    out = [(c.index, _clip_fit(c, k, res, shifted, names, pve[k], fr))
+           for k, c in enumerate(chunk)]
     clock("align_metrics")
-    return rows
+    return out
 
 
-def _position_ves(chunk, representation, feats, xhat, frames, dtype) -> np.ndarray:
-    """Position variance explained of each clip of a chunk: one vmapped call when the clips
-    share a topology and pelvis (different bone lengths are fine), else one call per clip."""
-    pelvis = [0 if c.body_map is None else c.body_map.pelvis for c in chunk]
-    n = len(chunk)
-    if len({c.sub.topology for c in chunk}) == 1 and len(set(pelvis)) == 1:
-        skel = chunk[0].sub.skeleton()
-        offsets = np.stack([np.asarray(c.sub.offsets) for c in chunk])
-        ends = np.stack([np.asarray(c.sub.end_site_offsets) for c in chunk])
-        skel = eqx.tree_at(lambda s: (s.offsets, s.end_site_offsets), skel,
-                           (jnp.asarray(offsets, dtype), jnp.asarray(ends, dtype)))
-        return np.asarray(_position_ve_batch_jit(
-            skel, jnp.asarray(feats[:n], dtype), jnp.asarray(xhat[:n], dtype),
-            jnp.asarray(frames[:n]), representation, pelvis[0]))
-    return np.array([float(_position_ve(c.sub.skeleton(), representation,
-                                        jnp.asarray(feats[k], dtype), jnp.asarray(xhat[k], dtype),
-                                        jnp.asarray(frames[k]), pelvis[k]))
-                     for k, c in enumerate(chunk)])
+def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_harmonics,
+                representation, names, pelvis, kw):
+    """The fit of a chunk, the phase shift to the left heel strikes (``strikes [B, K]`` frames,
+    the first ``counts`` of each row; fourier.align_to_events: their circular mean), the models'
+    synthesis and (with a stacked ``skeleton``) the position variance explained, in one
+    compiled program per shape bucket. Returns ``(FitResult, pve [B] or None, (delta [B],
+    shifted model))``."""
+    from fourierjax import fourier as fr
+
+    res = fr.fit_batch(feats, dts, num_harmonics, mask=mask, omega_steps=om_steps,
+                       representation=representation, channel_names=names, throw=False,
+                       **dict(kw))
+    th = res.omega_fit[:, None] * strikes * dts[:, None]
+    used = jnp.arange(strikes.shape[1])[None, :] < counts[:, None]
+    delta = jnp.arctan2(jnp.sum(jnp.where(used, jnp.sin(th), 0.0), axis=1),
+                        jnp.sum(jnp.where(used, jnp.cos(th), 0.0), axis=1))
+    shifted = jax.vmap(fr.shift_phase)(res.model, delta)
+    if skeleton is None:
+        return res, None, (delta, shifted)
+    t = jnp.arange(feats.shape[1], dtype=feats.dtype)[None, :] * dts[:, None]
+    xhat = fr.synthesize_batch(res.model, t)
+    frames = jnp.any(mask, axis=2)
+    pve = jax.vmap(lambda s, a, b, m: _position_ve_impl(s, a, b, m, representation, pelvis))(
+        skeleton, feats, xhat, frames)
+    return res, pve, (delta, shifted)
 
 
-def _position_ve_batch_impl(skeleton, x, xhat, mask, representation, pelvis):
-    return jax.vmap(lambda s, a, b, m: _position_ve_impl(s, a, b, m, representation, pelvis))(
-        skeleton, x, xhat, mask)
+_chunk_program = _jit.filter_jit(_chunk_impl)
 
 
-_position_ve_batch_jit = _jit.filter_jit(_position_ve_batch_impl)
+def _position_ves(chunk, representation, feats, res, dts, dtype) -> np.ndarray:
+    """Position variance explained of each clip of a chunk whose clips do not share a topology
+    and pelvis: one call per clip."""
+    from fourierjax import fourier as fr
+
+    out = []
+    for k, c in enumerate(chunk):
+        model = jax.tree.map(lambda v, k=k: jnp.asarray(v[k]), res.model)
+        xhat = fr.synthesize(model, jnp.arange(feats.shape[1], dtype=dtype) * dts[k])
+        out.append(float(_position_ve(c.sub.skeleton(), representation,
+                                      jnp.asarray(feats[k], dtype), xhat,
+                                      jnp.asarray(c.mask.any(axis=1).tolist()
+                                                  + [False] * (feats.shape[1] - len(c.mask))),
+                                      0 if c.body_map is None else c.body_map.pelvis)))
+    return np.array(out)
 
 
-def _clip_fit(c: _Clip, k, res, names, representation, pve, dtype, fr) -> ClipFit:
-    """The ClipFit of clip ``c`` (row ``k`` of the chunk's host-side FitResult ``res``)."""
-    raw = jax.tree.map(lambda v: jnp.asarray(v[k]), res.model)
+def _clip_fit(c: _Clip, k, res, shifted, names, pve, fr) -> ClipFit:
+    """The ClipFit of clip ``c``: row ``k`` of the chunk's host-side FitResult ``res`` and of
+    its models shifted to the heel strikes (``shifted``: ``(delta, model)``)."""
+    row = lambda tree: jax.tree.map(lambda v: jnp.asarray(v[k]), tree)  # noqa: E731
+    raw = row(res.model)
     dt = c.sub.frame_time_s
     if len(c.left):
-        # Circular mean of the strikes' phases (fourier.align_to_events, in NumPy so that clips
-        # with different strike counts share compiled code).
-        th = float(res.omega_fit[k]) * np.asarray(c.left) * dt
-        delta = float(np.arctan2(np.sin(th).sum(), np.cos(th).sum()))
-        model = fr.shift_phase(raw, delta)
+        delta, model = float(shifted[0][k]), row(shifted[1])
         alignment = "left_heel_strike"
     else:
         hip = None if c.body_map is None else _hip_flexion_channel(raw, names, c.body_map)
