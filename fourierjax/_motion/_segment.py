@@ -135,15 +135,13 @@ def steady_segment(
     if ref <= 0:
         return 0, F
     steady = (speed >= min_speed_fraction * ref) & (np.degrees(turn) <= max_turn_deg_s)
+    # Runs of steady frames (the first of the longest wins).
+    edges = np.diff(np.concatenate([[0], steady.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
     best = (0, 0)
-    start = None
-    for i, s in enumerate(np.append(steady, False)):
-        if s and start is None:
-            start = i
-        elif not s and start is not None:
-            if i - start > best[1] - best[0]:
-                best = (start, i)
-            start = None
+    if starts.size:
+        i = int(np.argmax(stops - starts))
+        best = (int(starts[i]), int(stops[i]))
     if (best[1] - best[0]) * motion.frame_time_s < min_duration_s:
         return 0, F
     a, b = best
