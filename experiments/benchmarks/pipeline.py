@@ -37,9 +37,9 @@ def clips(num: int) -> tuple[list, str]:
     return [motions[k % len(motions)] for k in range(num)], source
 
 
-def _fit_batch_alone(prepared, num_harmonics, dtype) -> float:
-    """Seconds of `fit_batch` on the pipeline's features and masks, in chunks of 128 clips of
-    similar lengths (padded like the pipeline's), warm."""
+def _fit_batch_alone(prepared, num_harmonics, dtype, chunk=128) -> float:
+    """Seconds of `fit_batch` on the pipeline's features and masks, in chunks of ``chunk`` clips
+    of similar lengths (padded like the pipeline's), warm."""
     import jax
     import jax.numpy as jnp
 
@@ -47,12 +47,12 @@ def _fit_batch_alone(prepared, num_harmonics, dtype) -> float:
 
     order = sorted(range(len(prepared)), key=lambda i: len(prepared[i][0]))
     chunks = []
-    for s in range(0, len(order), 128):
-        rows = [prepared[order[min(s + k, len(order) - 1)]] for k in range(128)]
+    for s in range(0, len(order), chunk):
+        rows = [prepared[order[min(s + k, len(order) - 1)]] for k in range(chunk)]
         T = max(64, int(2 ** np.ceil(np.log2(max(len(r[0]) for r in rows)))))
         C = rows[0][0].shape[1]
-        x = np.zeros((128, T, C), np.float32)
-        m = np.zeros((128, T, C), bool)
+        x = np.zeros((chunk, T, C), np.float32)
+        m = np.zeros((chunk, T, C), bool)
         for k, (f, mk, _) in enumerate(rows):
             x[k, :len(f)], x[k, len(f):], m[k, :len(f)] = f, f[-1], mk
         chunks.append((jnp.asarray(x), jnp.asarray(m), jnp.asarray([r[2] for r in rows], dtype)))
@@ -138,7 +138,7 @@ def run(size: str) -> list[Record]:
         glitch = M.glitch_joints(sub)
         x, _ = M.features_from_motion(sub, "euler", valid=~glitch, body_map=bm)
         prepared.append((x, M.feature_mask(glitch, sub.topology, bm.pelvis), sub.frame_time_s))
-    fit_alone = _fit_batch_alone(prepared, N, dtype)
+    fit_alone = _fit_batch_alone(prepared, N, dtype, 128 if size == "full" else 16)
     sizes = (8, 13, 50, 120, 500) if size == "full" else (2,)
     compiles = _sweep_compiles(motions, infer_body_map(motions[0]), sizes)
     print(f"    pipeline: {num} clips in {wall:.2f} s warm ({num / wall:.1f} clips/s; first call "
