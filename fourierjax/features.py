@@ -138,7 +138,8 @@ def _check_static_above(motion, rj) -> None:
 
 
 def make_euler_continuous(
-    angles: Float[ArrayLike, "F *joints 3"], order: str, valid: Bool[ArrayLike, " F"] | None = None
+    angles: Float[ArrayLike, "F *joints 3"], order: str,
+    valid: Bool[ArrayLike, " F"] | Bool[ArrayLike, " F *joints"] | None = None
 ) -> Float[np.ndarray, "F *joints 3"]:
     """Continuous Euler angles over time (radians): unwrap 2 pi jumps AND repair gimbal flips.
 
@@ -154,7 +155,7 @@ def make_euler_continuous(
 
     Arguments:
         angles: ``[F, ..., 3]`` radians; order: the 3-letter order of the angles;
-        valid: optional ``bool [F]``.
+        valid: optional ``bool [F]``, or ``bool [F, ...]`` per joint (a glitch of one joint).
     Returns:
         ``[F, ..., 3]`` the same rotations, continuous over the first axis.
     Raises:
@@ -171,26 +172,23 @@ def make_euler_continuous(
     if a.shape[0] < 2:
         return a
     two_pi = 2 * np.pi
-    ok = np.ones(a.shape[0], bool) if valid is None else np.asarray(valid, bool)
-    ref = 0
-    for t in range(1, a.shape[0]):
-        prev = a[ref] if ok[t] else a[t - 1]
-        cur = a[t]
-        alt = rotations.euler_twin(cur, order)
-        best = None
-        best_d = None
-        for cand in (cur, alt):
-            cand = cand + two_pi * np.round((prev - cand) / two_pi)
-            d = np.sum((cand - prev) ** 2, axis=-1)
-            if best is None:
-                best, best_d = cand, d
-            else:
-                take = d < best_d - 1e-12
-                best = np.where(take[..., None], cand, best)
-                best_d = np.minimum(d, best_d)
-        a[t] = best
-        if ok[t] or not ok[ref]:
-            ref = t
+    F = a.shape[0]
+    flat = a.reshape(F, -1, 3)  # a view: writes go to `a`
+    K = flat.shape[1]
+    ok = np.ones((F, K), bool) if valid is None else np.broadcast_to(
+        np.asarray(valid, bool).reshape(F, -1), (F, K))
+    ref = np.zeros(K, int)  # per joint: the last valid frame
+    cols = np.arange(K)
+    twins = rotations.euler_twin(flat.copy(), order)  # of the raw frames: one call, not F
+    for t in range(1, F):
+        prev = np.where(ok[t][:, None], flat[ref, cols], flat[t - 1])
+        cur, alt = flat[t], twins[t]
+        c0 = cur + two_pi * np.round((prev - cur) / two_pi)
+        c1 = alt + two_pi * np.round((prev - alt) / two_pi)
+        d0 = np.sum((c0 - prev) ** 2, axis=-1)
+        d1 = np.sum((c1 - prev) ** 2, axis=-1)
+        flat[t] = np.where((d1 < d0 - 1e-12)[:, None], c1, c0)
+        ref = np.where(ok[t] | ~ok[ref, cols], t, ref)
     return a
 
 
@@ -210,7 +208,8 @@ def features_from_motion(
             :func:`make_euler_continuous`) or ``"expmap"`` (exponential maps made continuous,
             Tilmanne & Dutoit §2.1).
         heading_rad: yaw of the heading frame; default :func:`heading_of` the clip.
-        valid: optional ``bool [F]``, False at capture glitches (Euler continuity skips them).
+        valid: optional ``bool [F]``, or ``bool [F, J]`` per joint (file order), False at
+            capture glitches (Euler continuity skips them).
         body_map: the clip's `fourierjax.body.BodyMap`; None infers it.
     Returns:
         ``(features [F, C] float64, channel_names)``: ``root.vx, root.vz`` (file units/s, by
@@ -256,7 +255,10 @@ def _joint_rotations(motion, joints, representation: str, *, root_quat=None, roo
         if root:  # the pelvis: e.g. its orientation relative to the heading frame
             e[:, r] = _rot("euler_from_quat", root_quat, order=order)
         if representation == "euler":
-            ang = make_euler_continuous(e, order, valid)
+            v = valid
+            if v is not None and np.ndim(v) == 2:  # per joint
+                v = np.asarray(v, bool)[:, members]
+            ang = make_euler_continuous(e, order, v)
         else:
             q = _rot("quat_from_euler", e, order=order)
             if root:

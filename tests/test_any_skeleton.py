@@ -171,7 +171,7 @@ def test_bandai_steady_segment_is_steady(bandai_fits):
 def test_winding_joints_leave_the_omega_search():
     """A joint whose Euler angles wind round the pole near gimbal lock (hundreds of degrees: a
     Bandai `Spine` spanned 1,680) is left out of the ω search; the others keep their weights."""
-    from fourierjax.motion import _search_weights
+    from fourierjax._motion._clip import _search_weights
 
     names = ("root.vx", "root.vz", "root.y", "Hips.Zrotation", "Hips.Xrotation", "Hips.Yrotation",
              "Spine.Zrotation", "Spine.Xrotation", "Spine.Yrotation")

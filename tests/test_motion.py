@@ -7,6 +7,8 @@ from scipy.spatial.transform import Rotation
 
 from fourierjax import data, fourier
 from fourierjax import motion as M
+from fourierjax._fourier._buckets import length_bucket
+from fourierjax._motion._clip import _search_weights
 from fourierjax.errors import UserError
 from fourierjax.kinematics import fk_frames
 
@@ -152,16 +154,18 @@ def test_batched_fit_equals_single_fits(fits, motions):
     for n in ALL:
         f = fits[3][n]
         sub = motions[n][f.frame_start:f.frame_stop]
-        keep = ~M.glitch_frames(sub)
-        rows.append((M.features_from_motion(sub, "euler", valid=keep), sub.frame_time_s,
+        # fit_motions masks a glitchy joint's channels only (a per-channel mask).
+        glitch = M.glitch_joints(sub)
+        keep = M.feature_mask(glitch, sub.topology, f.body_map.pelvis)
+        rows.append((M.features_from_motion(sub, "euler", valid=~glitch), sub.frame_time_s,
                      f.omega_steps, keep))
-    T = M._bucket(max(len(x) for (x, _), _, _, _ in rows))
+    T = length_bucket(max(len(x) for (x, _), _, _, _ in rows))
     names = rows[0][0][1]
     for n, ((x, _), dt, om_steps, keep) in zip(ALL, rows, strict=True):
         pad = np.concatenate([x, np.zeros((T - len(x), x.shape[1]))])
-        mask = np.concatenate([keep, np.zeros(T - len(x), bool)])
+        mask = np.concatenate([keep, np.zeros((T - len(x), x.shape[1]), bool)])
         # fit_motions leaves joints whose Euler angles wind near gimbal lock out of the ω search.
-        weights = M._search_weights(x, names, keep)
+        weights = _search_weights(x, names, keep.any(axis=1))
         single = fourier.fit(jnp.asarray(pad, jnp.float32), dt, 3, mask=mask,
                              omega_steps=om_steps if np.isfinite(om_steps) else None,
                              channel_names=names,

@@ -12,7 +12,9 @@ from jaxtyping import Array, Bool, Float, Int
 
 from fourierjax import _jit
 from fourierjax._checks import integer
+from fourierjax._fourier._buckets import fill_masked
 from fourierjax._fourier._core import _fit_arrays
+from fourierjax._fourier._linear import _masked_mean, _solve_coefficients
 from fourierjax._fourier._model import FourierModel
 from fourierjax._fourier._omega import _FLOOR_TOLERANCE, MIN_CYCLES, _used_range
 from fourierjax._fourier._status import MESSAGES, FitStatus, describe
@@ -28,6 +30,7 @@ from fourierjax._fourier._validate import (
     _is_traced,
     _used_frames,
 )
+from fourierjax._linalg import matmul as _mm
 from fourierjax._memory import chunk_sizes, fit_bytes_per_clip, resolve_limit
 from fourierjax.errors import UserError
 from fourierjax.features import angle_channel_mask
@@ -66,20 +69,31 @@ class FitResult(eqx.Module):
         return describe(self.result)
 
 
+#: Fixed-ω refills of the per-channel masked fit (`_fit_channel_masked`): each fills the
+#: masked entries with the least-squares model of the filled data and solves again (EM for
+#: missing data: at a fixed ω its fixed point is the fit of the used entries alone). A 1-s gap
+#: in one channel of a 1 Hz sine: amplitude 2e-3 off after 2 refills, 1e-5 after 12.
+CHANNEL_MASK_ITERATIONS = 12
+
+
 def _fit_batched_impl(features, mask, frame_time_s, omega_steps, channel_weights, chunk=None,
                       **static):
     # Defaults, broadcasts and dtype casts happen here, inside the one compiled program: done
     # eagerly, each would compile a small XLA program of its own on the first call.
     Bn, T, C = features.shape
     dtype = features.dtype
+    per_channel = mask is not None and jnp.ndim(mask) == 3
     mask = jnp.ones((Bn, T), dtype) if mask is None else jnp.asarray(mask, dtype)
     frame_time_s = jnp.broadcast_to(jnp.asarray(frame_time_s, dtype), (Bn,))
     omega_steps = (jnp.full((Bn,), jnp.nan, dtype) if omega_steps is None
                    else jnp.broadcast_to(jnp.asarray(omega_steps, dtype), (Bn,)))
     cw = jnp.asarray(channel_weights, dtype)
     fn = lambda f, m, dt, os: _fit_arrays(f, m, dt, os, cw, **static)  # noqa: E731
+    run = jax.vmap(fn)
+    if per_channel:
+        run = lambda f, m, dt, os: _fit_channel_masked(fn, f, m, dt, os, static["num_harmonics"])  # noqa: E731
     if chunk is None or chunk >= Bn:
-        return jax.vmap(fn)(features, mask, frame_time_s, omega_steps)
+        return run(features, mask, frame_time_s, omega_steps)
     # Traced features (under a caller's jit) cannot be cut on the host: chunks of `chunk` clips
     # run one after the other in a `lax.map`, the batch padded with copies of its last clip so
     # that every chunk is the same program (no second copy of the body for a remainder).
@@ -87,8 +101,44 @@ def _fit_batched_impl(features, mask, frame_time_s, omega_steps, channel_weights
     pad = -Bn % chunk
     if pad:
         xs = jax.tree.map(lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]), xs)
-    out = jax.lax.map(lambda a: fn(*a), xs, batch_size=chunk)
+    if per_channel:  # whole chunks mapped, so that each chunk's refinement is a real branch
+        xs = jax.tree.map(lambda x: x.reshape(-1, chunk, *x.shape[1:]), xs)
+        out = jax.lax.map(lambda a: run(*a), xs)
+        out = jax.tree.map(lambda v: v.reshape(-1, *v.shape[2:]), out)
+    else:
+        out = jax.lax.map(lambda a: fn(*a), xs, batch_size=chunk)
     return jax.tree.map(lambda v: v[:Bn], out)
+
+
+def _fit_channel_masked(fn, features, mask, frame_time_s, omega_steps, num_harmonics):
+    """The batched fit with a per-channel mask ``[B, T, C]``: a frame is used where any of its
+    channels is, and an entry left out is first filled by interpolation (`fill_masked`) and
+    fitted; then, at that fit's ω, `CHANNEL_MASK_ITERATIONS` times filled by the linear model of
+    the filled data, and fitted again (ω search included). A batch with no partly masked frame
+    skips the refinement (a real branch: it costs nothing there). The metrics count the filled
+    entries as fitted (their residual is the change of the last refill, near 0)."""
+    used = mask > 0
+    frame = jnp.max(mask, axis=-1)
+    x0 = jax.vmap(fill_masked)(features, used)
+    out = jax.vmap(fn)(x0, frame, frame_time_s, omega_steps)
+    partial = jnp.any(~used & (frame[..., None] > 0))
+    t = jnp.arange(features.shape[1], dtype=features.dtype)
+
+    def refill(x, u, w, dt, om, xf):
+        theta = om * t * dt
+
+        def step(_, xf):
+            mean = _masked_mean(xf, w)
+            basis, coef, _ = _solve_coefficients(xf - mean[None, :], w, theta, num_harmonics)
+            return jnp.where(u, x, mean[None, :] + _mm(basis.T, coef))
+
+        return jax.lax.fori_loop(0, CHANNEL_MASK_ITERATIONS, step, xf)
+
+    def refine(out):
+        x = jax.vmap(refill)(features, used, frame, frame_time_s, out["omega"], x0)
+        return jax.vmap(fn)(x, frame, frame_time_s, omega_steps)
+
+    return jax.lax.cond(partial, refine, lambda o: o, out)
 
 
 def _fit_single_impl(features, mask, frame_time_s, omega_steps, channel_weights, **static):
@@ -116,7 +166,7 @@ def fit_batch(
     frame_time_s: Float[Array, " B"],
     num_harmonics: int,
     *,
-    mask: Bool[Array, "B T"] | None = None,
+    mask: Bool[Array, "B T"] | Bool[Array, "B T C"] | None = None,
     omega_steps: Float[Array, " B"] | None = None,
     channel_weights: Float[Array, " C"] | None = None,
     representation: str = "euler",
@@ -133,6 +183,9 @@ def fit_batch(
     """Fit many clips in one jit/vmap call: ω three ways and the coefficients.
 
     Clips of different lengths are padded at the end to a common ``T`` and flagged by ``mask``.
+    A per-channel ``mask [B, T, C]`` leaves out single entries (one glitchy joint's channels,
+    not the whole frame): the entries are filled by interpolation, then by the model, and fitted
+    again (one more fit, only for batches that hold such entries).
     Per clip: (a) spectral ω (:func:`spectral_omega`), (b) ω from step events if given
     (``omega_steps`` rad/s, NaN where unknown; Tilmanne §2.2: cycle = two steps), the
     subharmonic guard, then (c) the nonlinear least-squares ω by variable projection (grid,
@@ -243,9 +296,12 @@ def _check_fit_args(name, shape, num_harmonics, channel_names, mask, frame_time_
                                          ("channel_weights", channel_weights, (C,), True)):
         if value is not None:
             value = _as_array(value)
-        if value is not None and (np.shape(value) != expected if exact else
-                                  not _broadcasts_to(np.shape(value), expected)):
-            raise UserError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}")
+        if arg == "mask" and value is not None and np.shape(value) == (*batch, T, C):
+            pass  # a per-channel mask
+        elif value is not None and (np.shape(value) != expected if exact else
+                                    not _broadcasts_to(np.shape(value), expected)):
+            more = f" or {(*batch, T, C)} (per channel)" if arg == "mask" else ""
+            raise UserError(f"{name}: {arg} shape {np.shape(value)}, expected {expected}{more}")
         out.append(value)
     return tuple(out)
 
@@ -267,6 +323,11 @@ def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmo
     if mask is not None and not _is_traced(mask):
         mask = np.asarray(mask)  # read back once (JAX arrays: zero-copy on CPU)
         _check_mask_values(name, mask)
+        if mask.ndim == np.ndim(features):  # per channel: checked per used entry
+            if per_clip and not _is_traced(features):
+                features, mask = _frame_view(features, mask)
+            else:
+                mask = mask.max(axis=-1)
         used = np.atleast_1d(_used_frames(mask))
         need = _min_fit_frames(num_harmonics)
         few = np.flatnonzero(used < need)
@@ -292,6 +353,18 @@ def _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmo
         _check_finite_used(name, features, mask)
         if not _is_traced(channel_weights):
             _check_varies(name, features, mask, channel_weights)
+
+
+def _frame_view(features, mask):
+    """A per-channel mask's features and frame mask as the frame-mask checks see them: a frame
+    is used where any channel is, and each entry left out holds its channel's mean over the used
+    ones (0 where none is), so that only used entries are checked for NaN and for variation."""
+    x = np.asarray(features)
+    used = mask != 0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(used, x, 0.0).sum(axis=-2, keepdims=True) / used.sum(axis=-2, keepdims=True)
+    fill = np.where(np.isfinite(mean), mean, 0.0)
+    return np.where(used, x, fill), mask.max(axis=-1)
 
 
 def _check_channel_weights(name, channel_weights, defaulted: bool) -> None:
@@ -336,7 +409,7 @@ def fit(
     frame_time_s: float,
     num_harmonics: int,
     *,
-    mask: Bool[Array, " T"] | None = None,
+    mask: Bool[Array, " T"] | Bool[Array, "T C"] | None = None,
     omega_steps: float | None = None,
     **kwargs,
 ) -> FitResult:
@@ -407,7 +480,8 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
         # Every leaf is guarded: a caller that keeps only `model` still gets the check.
         return eqx.branched_error_if(result, jnp.any(bad), first,
                                      tuple(f"{name}: {m}" for m in MESSAGES))
-    _check_cycles(name, features.shape[-2], mask, frame_time_s, result.omega_fit)
+    frames = mask if mask is None or np.ndim(mask) < features.ndim else np.asarray(mask).max(axis=-1)
+    _check_cycles(name, features.shape[-2], frames, frame_time_s, result.omega_fit)
     _check_status(name, result.result)
     return result
 

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import collections
+import itertools
 import json
 import os
 import pathlib
@@ -105,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax import __version__, model_io
     from fourierjax.cli._paths import resolve_input
     from fourierjax.errors import UserError
-    from fourierjax.motion import fit_motions
+    from fourierjax.motion import iter_fit_motions
 
     if args.harmonics < 1 or args.harmonics > 32:
         raise UserError(f"--harmonics: must be between 1 and 32, got {args.harmonics}")
@@ -131,41 +133,40 @@ def run(args: argparse.Namespace) -> int:
                                 f"{out / (path.stem + '.npz')}; fit them into separate folders")
             seen[path.stem] = text
     # One clip that cannot be read or fitted does not stop the others (reported at the end).
+    # The files are read as a stream (`iter_fit_motions`: chunk k + 1 is read while chunk k is
+    # fitted) and each model is written as soon as its chunk is fitted.
     failed: list[str] = []
-    loaded = []
-    for text, p in zip(files, paths, strict=True):
-        try:
-            loaded.append((text, p, *_load(p, args.start_frame, args.stop_frame, args.up,
-                                           args.body_map)))
-        except UserError as err:
-            if len(files) == 1:
-                raise
-            failed.append(f"{text}: {err}")
-    fits = fit_motions([m for _, _, m, _, _ in loaded], args.harmonics, args.representation,
-                       segment=not args.all_frames,
-                       body_map=[bm for *_, bm in loaded]) if loaded else []
+    loaded: collections.deque = collections.deque()
+
+    def clips():
+        for text, p in zip(files, paths, strict=True):
+            try:
+                motion, skip, bm = _load(p, args.start_frame, args.stop_frame, args.up,
+                                         args.body_map)
+            except UserError as err:
+                if len(files) == 1:
+                    raise
+                failed.append(f"{text}: {err}")
+                continue
+            loaded.append((text, p, motion, skip))
+            yield motion, bm
+
+    pairs_m, pairs_b = itertools.tee(clips())
+    fits = iter_fit_motions((m for m, _ in pairs_m), args.harmonics, args.representation,
+                            segment=not args.all_frames, body_map=(b for _, b in pairs_b),
+                            progress=None if len(files) > 1 else False)
     rows = []
-    for (text, path, motion, skip, _), fit in zip(loaded, fits, strict=True):
-        if not fit.successful:
-            failed.append(f"{text}: {fit.message}")
-            continue
-        row = {"file": text, "path": str(path)}
-        row.update(fit.summary())
-        row.pop("source", None)
-        row["frame_start"] = skip + fit.frame_start  # file frame numbers
-        row["frame_stop"] = skip + fit.frame_stop
-        row["frames_used"] = [row["frame_start"], row["frame_stop"]]
-        row["rest_frames_dropped"] = skip if args.start_frame is None else 0
-        _warn_if_poor(text, row)
-        rows.append(row)
-        if out is not None:
-            target = out / f"{path.stem}.npz" if to_folder else out
-            if to_folder:
-                out.mkdir(parents=True, exist_ok=True)
-            prov = dict(row, fourierjax_version=__version__, command="fit")
-            model_io.save_model(target, fit.model, motion=motion, provenance=prov,
-                                alignment=fit.alignment, body_map=fit.body_map)
-            row["model"] = str(target)
+    try:
+        for fit in fits:
+            text, path, motion, skip = loaded.popleft()
+            if not fit.successful:
+                failed.append(f"{text}: {fit.message}")
+                continue
+            rows.append(_row(args, text, path, motion, skip, fit, out, to_folder, __version__,
+                             model_io))
+    except UserError as err:
+        if "fit_motions: no motions given" not in str(err) or not failed:
+            raise  # (every file failed to load: reported below)
     if args.json:
         print(json.dumps(rows))
         return _report_failures(failed, len(files))
@@ -182,6 +183,27 @@ def run(args: argparse.Namespace) -> int:
         if "model" in r:
             print(f"  wrote {r['model']}")
     return _report_failures(failed, len(files))
+
+
+def _row(args, text, path, motion, skip, fit, out, to_folder, version, model_io) -> dict:
+    """The report row of one fitted clip; its model file written when ``--out`` is given."""
+    row = {"file": text, "path": str(path)}
+    row.update(fit.summary())
+    row.pop("source", None)
+    row["frame_start"] = skip + fit.frame_start  # file frame numbers
+    row["frame_stop"] = skip + fit.frame_stop
+    row["frames_used"] = [row["frame_start"], row["frame_stop"]]
+    row["rest_frames_dropped"] = skip if args.start_frame is None else 0
+    _warn_if_poor(text, row)
+    if out is not None:
+        target = out / f"{path.stem}.npz" if to_folder else out
+        if to_folder:
+            out.mkdir(parents=True, exist_ok=True)
+        prov = dict(row, fourierjax_version=version, command="fit")
+        model_io.save_model(target, fit.model, motion=motion, provenance=prov,
+                            alignment=fit.alignment, body_map=fit.body_map)
+        row["model"] = str(target)
+    return row
 
 
 def _expand_folders(files: list[str]) -> list[str]:

@@ -1,0 +1,1 @@
+"""The clip-fitting pipeline behind `fourierjax.motion` (private modules)."""

@@ -1,0 +1,432 @@
+"""`fit_motions`: clips prepared in a background thread, fitted in bucketed chunks, streamed."""
+
+from __future__ import annotations
+
+import concurrent.futures
+import dataclasses
+import itertools
+import os
+import time
+from collections.abc import Iterator
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from fourierjax import _jit
+from fourierjax._motion._clip import (
+    ClipFit,
+    _frame_range,
+    _hip_flexion_channel,
+    _hip_flexion_phase,
+    _search_weights,
+    _steps,
+)
+from fourierjax._motion._poses import _position_ve, _position_ve_impl, foot_contacts_of
+from fourierjax._motion._segment import feature_mask, glitch_joints, steady_segment
+from fourierjax.errors import UserError
+from fourierjax.features import features_from_motion
+
+
+@dataclasses.dataclass
+class _Clip:
+    """A clip ready for the batched fit: frames ``[start, stop)`` of ``motion`` (``sub``), its
+    features ``[F, C]`` and per-channel fit mask ``[F, C]`` (True: used), heel strikes and ω from
+    steps. A mode that fits part of a clip (e.g. the straight passes of a turning walk) ANDs its
+    frame mask ``[F]`` into ``mask`` here; per-pass time offsets would need the fit's sample
+    times (``fit_batch`` assumes ``t = k * frame_time_s``)."""
+
+    index: int
+    motion: object
+    start: int
+    stop: int
+    sub: object
+    features: np.ndarray
+    names: tuple[str, ...]
+    mask: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    omega_steps: float
+    body_map: object
+
+
+def _prepare(index, m, bm, *, representation, segment, use_contacts, start_frame, stop_frame,
+             timings) -> _Clip:
+    """Everything before the fit for one clip: body map, steady segment, glitch masks,
+    features, contacts and steps (``timings``: seconds added per stage)."""
+    from fourierjax.body import BodyMapError, infer_body_map
+    from fourierjax.io.bvh import read_bvh
+
+    clock = _Clock(timings)
+    if isinstance(m, (str, os.PathLike)):
+        m = read_bvh(m)
+        clock("read")
+    lo, hi = _frame_range(m, start_frame, stop_frame)
+    clip = m[lo:hi]
+    if bm is None:
+        try:
+            bm = infer_body_map(clip)
+        except BodyMapError:
+            bm = None  # no legs: joint 0 carries the root, no contacts, no alignment
+    clock("body_map")
+    a, b = steady_segment(clip, body_map=bm) if segment else (0, clip.num_frames)
+    a, b = a + lo, b + lo
+    sub = m[a:b]
+    clock("segment")
+    glitch = glitch_joints(sub)
+    clock("glitch")
+    x, names = features_from_motion(sub, representation, valid=~glitch, body_map=bm)
+    mask = feature_mask(glitch, sub.topology, 0 if bm is None else bm.pelvis)
+    clock("features")
+    c = foot_contacts_of(sub, body_map=bm) if use_contacts and bm is not None else None
+    left, right, om = _steps(c, sub.frame_time_s)
+    clock("contacts")
+    return _Clip(index, m, a, b, sub, x, names, mask, left, right, om, bm)
+
+
+class _Clock:
+    """Adds the seconds since the last call to ``timings[stage]`` (no-op without timings)."""
+
+    def __init__(self, timings):
+        self.timings, self.t = timings, time.perf_counter()
+
+    def __call__(self, stage):
+        if self.timings is not None:
+            now = time.perf_counter()
+            self.timings[stage] = self.timings.get(stage, 0.0) + now - self.t
+            self.t = now
+
+
+def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings) -> list[ClipFit]:
+    """The batched fit of prepared clips: grouped by channel layout, sorted by length, cut into
+    bucketed chunks (`_fourier._buckets`), then aligned and scored; one ClipFit per clip, in
+    order."""
+    from fourierjax import fourier as fr
+    from fourierjax._fourier._buckets import batch_plan, length_bucket
+    from fourierjax._memory import fit_bytes_per_clip, resolve_limit
+
+    limit = resolve_limit("fit_motions: max_memory", fit_kwargs.get("max_memory"))
+    groups: dict[tuple, list[_Clip]] = {}
+    for c in clips:
+        w = None if "channel_weights" in fit_kwargs else _search_weights(c.features, c.names,
+                                                                         c.mask.any(axis=1))
+        groups.setdefault((c.names, w), []).append(c)
+    out: dict[int, ClipFit] = {}
+    itemsize = jnp.zeros((), dtype).dtype.itemsize
+    for (names, weights), group in groups.items():
+        kw = dict(fit_kwargs)
+        if weights is not None:
+            kw["channel_weights"] = jnp.asarray(weights, dtype)
+        group = sorted(group, key=lambda c: len(c.features))
+        C = len(names)
+        per_clip = fit_bytes_per_clip(length_bucket(len(group[-1].features)), C, num_harmonics,
+                                      itemsize)
+        for start, size in batch_plan(len(group), per_clip, limit, name=(
+                f"fit_motions: a clip of {len(group[-1].features)} frames x {C} channels")):
+            chunk = group[start:start + size]
+            for r in _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw,
+                                timings, fr, length_bucket):
+                out[r[0]] = r[1]
+    return [out[c.index] for c in clips]
+
+
+def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, timings, fr,
+               length_bucket):
+    """One bucketed program for ``chunk`` (padded to ``size`` clips with copies of the last, and
+    to a length bucket): the fit, its synthesis and the position metric; then alignment and the
+    ClipFits: ``[(index, ClipFit), ...]``."""
+    clock = _Clock(timings)
+    T = length_bucket(max(len(c.features) for c in chunk))
+    C = len(names)
+    rows = [chunk[min(k, len(chunk) - 1)] for k in range(size)]
+    feats = np.zeros((size, T, C))
+    mask = np.zeros((size, T, C), bool)
+    for k, c in enumerate(rows):
+        n = len(c.features)
+        feats[k, :n] = c.features
+        feats[k, n:] = c.features[-1]
+        mask[k, :n] = c.mask
+    dts = np.array([c.sub.frame_time_s for c in rows])
+    om_steps = np.array([c.omega_steps for c in rows])
+    pelvis = {0 if c.body_map is None else c.body_map.pelvis for c in chunk}
+    shared = len({c.sub.topology for c in chunk}) == 1 and len(pelvis) == 1
+    # Host arrays go to the device as they are (device_put, already in the fit's dtype): a
+    # conversion by jnp.asarray would compile a small program for every new chunk shape.
+    put = lambda x, dt=dtype: jax.device_put(np.asarray(x, dt))  # noqa: E731
+    skel = None
+    if shared:  # one skeleton pytree with a leading clip axis (bone lengths differ per clip)
+        skel = eqx.tree_at(lambda s: (s.offsets, s.end_site_offsets), chunk[0].sub.skeleton(),
+                           (put(np.stack([c.sub.offsets for c in rows])),
+                            put(np.stack([c.sub.end_site_offsets for c in rows]))))
+    K = max(32, length_bucket(max(len(c.left) for c in rows)))
+    strikes = np.zeros((size, K))
+    for k, c in enumerate(rows):
+        strikes[k, :len(c.left)] = c.left
+    counts = np.array([len(c.left) for c in rows])
+    res, pve, shifted = _chunk_program(
+        skel, put(feats), put(mask, bool), put(dts), put(om_steps), put(strikes),
+        put(counts, np.int32),
+        num_harmonics=num_harmonics, representation=representation, names=names,
+        pelvis=min(pelvis), kw=kw)
+    # One transfer, then host reads per clip.
+    res, pve, shifted = jax.tree.map(np.asarray, (res, pve, shifted))
+    clock("fit")
+    if not shared:
+        pve = _position_ves(chunk, representation, feats, res, dts, dtype)
+    out = [(c.index, _clip_fit(c, k, res, shifted, names, pve[k], fr))
+           for k, c in enumerate(chunk)]
+    clock("align_metrics")
+    return out
+
+
+def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_harmonics,
+                representation, names, pelvis, kw):
+    """The fit of a chunk, the phase shift to the left heel strikes (``strikes [B, K]`` frames,
+    the first ``counts`` of each row; fourier.align_to_events: their circular mean), the models'
+    synthesis and (with a stacked ``skeleton``) the position variance explained, in one
+    compiled program per shape bucket. Returns ``(FitResult, pve [B] or None, (delta [B],
+    shifted model))``."""
+    from fourierjax import fourier as fr
+
+    res = fr.fit_batch(feats, dts, num_harmonics, mask=mask, omega_steps=om_steps,
+                       representation=representation, channel_names=names, throw=False,
+                       **dict(kw))
+    th = res.omega_fit[:, None] * strikes * dts[:, None]
+    used = jnp.arange(strikes.shape[1])[None, :] < counts[:, None]
+    delta = jnp.arctan2(jnp.sum(jnp.where(used, jnp.sin(th), 0.0), axis=1),
+                        jnp.sum(jnp.where(used, jnp.cos(th), 0.0), axis=1))
+    shifted = jax.vmap(fr.shift_phase)(res.model, delta)
+    if skeleton is None:
+        return res, None, (delta, shifted)
+    t = jnp.arange(feats.shape[1], dtype=feats.dtype)[None, :] * dts[:, None]
+    xhat = fr.synthesize_batch(res.model, t)
+    frames = jnp.any(mask, axis=2)
+    pve = jax.vmap(lambda s, a, b, m: _position_ve_impl(s, a, b, m, representation, pelvis))(
+        skeleton, feats, xhat, frames)
+    return res, pve, (delta, shifted)
+
+
+_chunk_program = _jit.filter_jit(_chunk_impl)
+
+
+def _position_ves(chunk, representation, feats, res, dts, dtype) -> np.ndarray:
+    """Position variance explained of each clip of a chunk whose clips do not share a topology
+    and pelvis: one call per clip."""
+    from fourierjax import fourier as fr
+
+    out = []
+    for k, c in enumerate(chunk):
+        model = jax.tree.map(lambda v, k=k: jnp.asarray(v[k]), res.model)
+        xhat = fr.synthesize(model, jnp.arange(feats.shape[1], dtype=dtype) * dts[k])
+        out.append(float(_position_ve(c.sub.skeleton(), representation,
+                                      jnp.asarray(feats[k], dtype), xhat,
+                                      jnp.asarray(c.mask.any(axis=1).tolist()
+                                                  + [False] * (feats.shape[1] - len(c.mask))),
+                                      0 if c.body_map is None else c.body_map.pelvis)))
+    return np.array(out)
+
+
+def _clip_fit(c: _Clip, k, res, shifted, names, pve, fr) -> ClipFit:
+    """The ClipFit of clip ``c``: row ``k`` of the chunk's host-side FitResult ``res`` and of
+    its models shifted to the heel strikes (``shifted``: ``(delta, model)``)."""
+    row = lambda tree: jax.tree.map(lambda v: jnp.asarray(v[k]), tree)  # noqa: E731
+    raw = row(res.model)
+    dt = c.sub.frame_time_s
+    if len(c.left):
+        delta, model = float(shifted[0][k]), row(shifted[1])
+        alignment = "left_heel_strike"
+    else:
+        hip = None if c.body_map is None else _hip_flexion_channel(raw, names, c.body_map)
+        if hip is not None:
+            delta = _hip_flexion_phase(raw, c.sub, hip, c.body_map)
+            model = fr.shift_phase(raw, delta)
+            alignment = "left_hip_flexion"
+        else:
+            model, delta, alignment = raw, 0.0, "none"
+    status = fr.FitStatus(int(res.result[k]))
+    message = "" if status == fr.FitStatus.SUCCESSFUL else (
+        f"fit_motions: clip {c.index} ({c.motion.source or 'no file'}): {status.message} (fitted "
+        f"fundamental {float(res.omega_fit[k]) / (2 * np.pi):.3f} Hz)")
+    return ClipFit(
+        source=c.motion.source, frame_start=int(c.start), frame_stop=int(c.stop),
+        frame_time_s=float(dt), model=model, raw_model=raw, alignment=alignment,
+        phase_shift=float(delta), omega_spectral=float(res.omega_spectral[k]),
+        omega_steps=float(c.omega_steps), omega_fit=float(res.omega_fit[k]),
+        rms=np.asarray(res.rms[k]), rms_deg=float(res.rms_deg[k]),
+        variance_explained_angles=float(res.variance_explained_angles[k]),
+        variance_explained_positions=float(pve),
+        left_heel_strikes=tuple(int(v) for v in c.left),
+        right_heel_strikes=tuple(int(v) for v in c.right),
+        masked_frames=int(np.sum(~c.mask.all(axis=1))), masked_entries=int(np.sum(~c.mask)),
+        result=status.name.lower(), message=message, body_map=c.body_map,
+    )
+
+
+#: Clips per streamed chunk of `fit_motions` (fewer when the memory budget asks for it).
+STREAM_CHUNK = 256
+
+
+def iter_fit_motions(
+    motions,
+    num_harmonics: int = 3,
+    representation: str = "euler",
+    *,
+    segment: bool = True,
+    use_contacts: bool = True,
+    dtype=None,
+    body_map=None,
+    start_frame: int | None = None,
+    stop_frame: int | None = None,
+    chunk_size: int | None = None,
+    progress: bool | None = False,
+    timings: dict | None = None,
+    **fit_kwargs,
+) -> Iterator[ClipFit]:
+    """:func:`fit_motions` as a generator: each chunk's ClipFits, in order, as soon as the chunk
+    is fitted (so that a caller can write models and let go of them while the next chunk is
+    read). The arguments are :func:`fit_motions`' but ``throw``.
+
+    Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
+
+    Per clip: the steady straight stretch (:func:`steady_segment`, unless ``segment=False``),
+    capture glitches masked out per joint (:func:`glitch_joints`: a glitchy joint's channels at
+    those frames, :func:`feature_mask`), its features (:func:`features_from_motion`), heel
+    strikes from FK foot contacts (``fourierjax.contacts``; ω from steps, Tilmanne §2.2). Then
+    batched :func:`fourierjax.fourier.fit_batch` calls for the clips that share a channel layout,
+    padded to shape buckets (clip lengths to powers of two, batches to chunks of 16 or 128
+    clips: `fourierjax._fourier._buckets`) so that new lengths and batch sizes reuse compiled
+    code; phase alignment to the left heel strike (fallback: the peak of the left hip flexion
+    fundamental: the body map's left hip channel with the largest fundamental), and the metrics.
+    Feet, legs, pelvis and trajectory come from each clip's body map.
+
+    ``motions`` is read as a stream, ``chunk_size`` clips at a time: the next chunk is read and
+    prepared in a background thread while the current one is fitted, so a generator that reads
+    the files of a large folder (or the paths themselves) never holds more than two chunks.
+
+    Arguments:
+        motions: an iterable of Motions (e.g. after dropping a rest frame) or BVH paths (read
+            with ``io.bvh.read_bvh``); a generator is consumed lazily.
+        num_harmonics: N; representation: "euler" | "expmap".
+        body_map: a `fourierjax.body.BodyMap` for every clip, an iterable of one per clip (read
+            alongside ``motions``), or None to infer each clip's
+            (``fourierjax.body.infer_body_map``).
+        start_frame, stop_frame: only frames ``[start_frame, stop_frame)`` of each clip are
+            used (the steady segment is looked for inside them); None: the clip's ends.
+        chunk_size: clips per streamed chunk (default `STREAM_CHUNK`, fewer when two chunks'
+            features would not fit the memory budget, ``max_memory``).
+        progress: show a tqdm progress bar on stderr (None: only when stderr is a terminal).
+        timings: a dict that receives the seconds spent per stage (``read``, ``body_map``,
+            ``segment``, ``glitch``, ``features``, ``contacts``, ``fit``, ``align_metrics``;
+            the stages before ``fit`` run in the background thread, overlapping the fit).
+        fit_kwargs: passed on to ``fit_batch`` (search band, grid, ``max_memory``...).
+
+    Returns:
+        One :class:`ClipFit` per motion, in order. A clip that cannot be fitted (e.g. too short
+        for a cycle) does not stop the others: its ``result`` and ``message`` say why.
+    """
+    from fourierjax.body import BodyMap
+
+    dtype = dtype or jnp.zeros(()).dtype
+    if body_map is None or isinstance(body_map, BodyMap):
+        maps = itertools.repeat(body_map)
+    else:
+        if hasattr(body_map, "__len__") and hasattr(motions, "__len__") and (
+                len(body_map) != len(motions)):
+            raise UserError(f"fit_motions: {len(body_map)} body maps for {len(motions)} motions")
+        maps = iter(body_map)
+    total = len(motions) if hasattr(motions, "__len__") else None
+    items = iter(motions)
+    opts = dict(representation=representation, segment=segment, use_contacts=use_contacts,
+                start_frame=start_frame, stop_frame=stop_frame, timings=timings)
+    count = [0]
+    size = [chunk_size]
+
+    def read_chunk() -> list[_Clip]:
+        chunk = []
+        while size[0] is None or len(chunk) < size[0]:
+            try:
+                m = next(items)
+            except StopIteration:
+                break
+            try:
+                bm = next(maps)
+            except StopIteration:
+                raise UserError(f"fit_motions: fewer body maps than motions ({count[0]})") from None
+            chunk.append(_prepare(count[0], m, bm, **opts))
+            count[0] += 1
+            if size[0] is None:
+                size[0] = _stream_chunk(chunk[0], num_harmonics, fit_kwargs.get("max_memory"))
+        return chunk
+
+    from tqdm import tqdm
+
+    yielded = 0
+    with (concurrent.futures.ThreadPoolExecutor(1) as pool,
+          tqdm(total=total, unit="clip", desc="fit_motions", disable=_no_bar(progress),
+               leave=False) as bar):
+        ahead = pool.submit(read_chunk)
+        while True:
+            chunk = ahead.result()
+            if not chunk:
+                break
+            ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
+            fits = _fit_clips(chunk, num_harmonics, representation, dtype, fit_kwargs, timings)
+            bar.update(len(chunk))
+            yielded += len(fits)
+            yield from fits
+    if not yielded:
+        raise UserError("fit_motions: no motions given")
+    if not isinstance(maps, itertools.repeat) and next(maps, None) is not None:
+        raise UserError(f"fit_motions: more body maps than the {yielded} motions")
+
+
+def fit_motions(motions, num_harmonics: int = 3, representation: str = "euler", *,
+                throw: bool = False, **kwargs) -> list[ClipFit]:
+    """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
+
+    The clips are read as a stream and fitted in bucketed chunks (:func:`iter_fit_motions`,
+    which documents every step and argument).
+
+    Arguments:
+        motions: an iterable of Motions or BVH paths; num_harmonics: N;
+        representation: "euler" | "expmap";
+        throw: raise a UserError (the first failed clip's message, naming its file) after the
+            fit instead of returning failed clips;
+        kwargs: the options of :func:`iter_fit_motions` (``segment``, ``use_contacts``,
+            ``dtype``, ``body_map``, ``start_frame``, ``stop_frame``, ``chunk_size``,
+            ``progress``, ``timings``) and of ``fit_batch``.
+
+    Returns:
+        One :class:`ClipFit` per motion, in order. A clip that cannot be fitted (e.g. too short
+        for a cycle) does not stop the others: its ``result`` and ``message`` say why.
+    """
+    results = list(iter_fit_motions(motions, num_harmonics, representation, **kwargs))
+    failed = [r for r in results if not r.successful]
+    if throw and failed:
+        more = f" (and {len(failed) - 1} other clip(s))" if len(failed) > 1 else ""
+        raise UserError(failed[0].message + more)
+    return results
+
+
+def _no_bar(progress) -> bool | None:
+    """tqdm's ``disable``: None (its rule: no bar unless stderr is a terminal) or a bool."""
+    return None if progress is None else not progress
+
+
+def _stream_chunk(first: _Clip, num_harmonics: int, max_memory) -> int:
+    """Clips per streamed chunk: `STREAM_CHUNK`, fewer when two chunks of clips like ``first``
+    (features and masks on the host, in float64, and the fit's working memory) exceed the
+    budget; a multiple of the fit's batch buckets where it can be."""
+    from fourierjax._fourier._buckets import LARGE_BATCH, SMALL_BATCH, length_bucket
+    from fourierjax._memory import fit_bytes_per_clip, resolve_limit
+
+    limit = resolve_limit("fit_motions: max_memory", max_memory)
+    T, C = length_bucket(len(first.features)), first.features.shape[1]
+    per_clip = 2 * (9 * T * C + first.motion.channels.nbytes) + fit_bytes_per_clip(
+        T, C, num_harmonics, 8)
+    n = max(1, min(STREAM_CHUNK, int(limit // max(per_clip, 1))))
+    for step in (LARGE_BATCH, SMALL_BATCH):
+        if n >= step:
+            return n - n % step
+    return n
