@@ -13,7 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Bool, Float, Int
 
-from fourierjax import _jit
+from fourierjax import _jit, _passes
 from fourierjax._fourier._layout import bucket as _bucket
 from fourierjax._fourier._layout import root_joints as _root_joints
 from fourierjax._fourier._layout import rot as _rot
@@ -430,6 +430,7 @@ def fit_motions(
     body_map=None,
     start_frame: int | None = None,
     stop_frame: int | None = None,
+    passes: str = "longest",
     **fit_kwargs,
 ) -> list[ClipFit]:
     """Fit Fourier models to clips: segment, convert, find ω three ways, fit, align, score.
@@ -452,6 +453,10 @@ def fit_motions(
             None to infer each clip's (``fourierjax.body.infer_body_map``).
         start_frame, stop_frame: only frames ``[start_frame, stop_frame)`` of each clip are
             used (the steady segment is looked for inside them); None: the clip's ends.
+        passes: ``"longest"`` fits the steady segment; ``"auto"`` fits a clip that walks back
+            and forth over every straight pass, each in its own heading frame with the passes'
+            heel strikes phase-aligned (``fourierjax._passes.prepare_passes``; its frames are
+            then rows of that layout, the turns masked).
         fit_kwargs: passed on to ``fit_batch`` (search band, grid...).
 
     Returns:
@@ -472,6 +477,7 @@ def fit_motions(
         maps = list(body_map)
         if len(maps) != len(motions):
             raise UserError(f"fit_motions: {len(maps)} body maps for {len(motions)} motions")
+    _passes.check_mode(passes)
     prepared = []
     for m, bm in zip(motions, maps):
         lo, hi = _frame_range(m, start_frame, stop_frame)
@@ -481,6 +487,13 @@ def fit_motions(
                 bm = infer_body_map(clip)
             except BodyMapError:
                 bm = None  # no legs: joint 0 carries the root, no contacts, no alignment
+        # --- hook (issue 21 item 4, fourierjax._passes): every straight pass of a walk that turns
+        got = _passes.prepare_passes(clip, lo, representation, bm, use_contacts) if segment and passes == "auto" \
+            else None
+        if got is not None:
+            prepared.append((m, *got[1:], bm))
+            continue
+        # --- end of hook
         a, b = steady_segment(clip, body_map=bm) if segment else (0, clip.num_frames)
         a, b = a + lo, b + lo
         sub = m[a:b]
