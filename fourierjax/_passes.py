@@ -253,7 +253,7 @@ def layout_passes(passes, left_strikes, period_frames: float, headings=None) -> 
 
 
 def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: bool = True,
-                   follow: bool = True, **pass_kwargs):
+                   **pass_kwargs):
     """The fitting input of a clip that walks back and forth, for `motion.fit_motions`.
 
     Every straight pass (`straight_passes`) in its own heading frame (the pass's circular mean
@@ -314,9 +314,6 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
         sub = clip[a:b]
         ok = ~M.glitch_frames(sub)
         xk, names = features_from_motion(sub, representation, heading_rad=h, valid=ok, body_map=body_map)
-        if follow:
-            psi_t = facing_over_time(sub, body_map=body_map, window_frames=int(round(T)))
-            xk = rebase_heading(sub, xk, names, representation, psi_t, body_map=body_map, valid=ok)
         if x is None:
             x = np.zeros((rows, xk.shape[1]))
             keep = np.zeros(rows, bool)
@@ -351,77 +348,3 @@ def check_mode(passes) -> None:
     if passes not in PASS_MODES:
         raise UserError(f"fit_motions: passes={passes!r} is not one of {PASS_MODES}")
 
-
-def facing_over_time(motion, *, body_map=None, window_frames: int = 1) -> Float[np.ndarray, " F"]:
-    """Where the body faces (yaw, radians) at every frame, averaged over ``window_frames``.
-
-    The body map's pelvis-frame facing (as in `features.heading_of`) in world axes, projected on
-    the floor; its unit vectors are averaged over a centred box of ``window_frames`` frames (one
-    gait cycle removes the in-step yaw sway and keeps the walker's slow turns), unwrapped.
-
-    Arguments:
-        motion: a Motion (Y up).
-        body_map: its `fourierjax.body.BodyMap`; None infers it.
-        window_frames: the box's length, frames.
-
-    Returns:
-        ``[F]`` radians, continuous.
-    """
-    rj = root_joints(motion, body_map)
-    _, q = world_pose(motion, rj.pelvis)
-    f = rot("quat_apply", q, np.tile(np.asarray(rj.facing_local), (len(q), 1)))[:, [0, 2]]
-    n = np.linalg.norm(f, axis=1, keepdims=True)
-    f = np.where(n > 1e-9, f / np.maximum(n, 1e-12), 0.0)  # facing straight up: no vote
-    F = len(f)
-    half = max(0, int(window_frames) // 2)
-    c = np.concatenate([np.zeros((1, 2)), np.cumsum(f, axis=0)])
-    idx = np.arange(F)
-    s = c[np.minimum(idx + half + 1, F)] - c[np.maximum(idx - half, 0)]
-    ok = np.hypot(s[:, 0], s[:, 1]) > 1e-9
-    if not ok.any():
-        return np.zeros(F)
-    good = np.nonzero(ok)[0]
-    return np.interp(idx, good, np.unwrap(np.arctan2(s[good, 0], s[good, 1])))
-
-
-def rebase_heading(motion, x, names, representation: str, heading_rad, *, body_map=None,
-                   valid=None) -> np.ndarray:
-    """Features of a clip re-expressed in a heading frame that turns with the walker.
-
-    ``x`` are `features.features_from_motion` features of ``motion``; the root velocity and the
-    pelvis's orientation are replaced by those relative to ``heading_rad[t]`` (rotation by
-    ``-heading_rad[t]`` about +Y). Joint rotations below the pelvis are unchanged.
-
-    Arguments:
-        motion: the Motion of the features; x: ``[F, C]`` its features; names: their names;
-        representation: ``"euler"`` or ``"expmap"``; heading_rad: ``[F]`` radians;
-        body_map: its `fourierjax.body.BodyMap`; valid: ``bool [F]`` (Euler continuity).
-
-    Returns:
-        ``[F, C]`` features.
-    """
-    from fourierjax.features import ROOT_CHANNELS
-
-    rj = root_joints(motion, body_map)
-    pos, q = world_pose(motion, rj.pelvis)
-    psi = np.asarray(heading_rad, float)
-    dt = motion.frame_time_s
-    vx, vz = np.gradient(pos[:, 0], dt), np.gradient(pos[:, 2], dt)
-    c, s = np.cos(psi), np.sin(psi)
-    out = np.array(x, float, copy=True)
-    out[:, ROOT_CHANNELS.index("root.vx")] = c * vx - s * vz
-    out[:, ROOT_CHANNELS.index("root.vz")] = s * vx + c * vz
-    z = np.zeros_like(psi)
-    yaw_inv = np.stack([np.cos(psi / 2), z, -np.sin(psi / 2), z], axis=-1)
-    q_rel = rot("quat_multiply", yaw_inv, q)
-    for k, (j, order, _) in enumerate(rotation_joints(motion.topology)):
-        if j != rj.pelvis:
-            continue
-        cols = slice(len(ROOT_CHANNELS) + 3 * k, len(ROOT_CHANNELS) + 3 * k + 3)
-        if representation == "euler":
-            e = rot("euler_from_quat", q_rel, order=order)
-            ok = np.ones(len(e), bool) if valid is None else np.asarray(valid, bool)
-            out[:, cols] = _euler_continuous(e[:, None], order, ok)[:, 0]
-        else:
-            out[:, cols] = rot("make_expmap_continuous", rot("expmap_from_quat", q_rel))
-    return out

@@ -122,8 +122,7 @@ def make_euler_continuous(
     rotation's topology, not drift; fit such joints in another order or as exponential maps.
 
     Frames with ``valid`` False (capture glitches) are repaired too but never serve as the
-    reference: the next valid frame follows the last valid one. The first frame is kept on its
-    own triple (the input's, up to rounding).
+    reference: the next valid frame follows the last valid one. The first frame is kept.
 
     Arguments:
         angles: ``[F, ..., 3]`` radians, time first.
@@ -148,12 +147,7 @@ def make_euler_continuous(
     proper = order[0] == order[2]
     lock_tol = _LOCK.get(str(angles.dtype), 1e-4)
     principal = euler_from_quat(quat_from_euler(angles, order), order)
-    # The first frame: the input's own triple (principal or twin, shifted by whole turns).
-    f1 = principal[0] + _TWO_PI * jnp.round((angles[0] - principal[0]) / _TWO_PI)
-    twin0 = euler_twin(principal[0], order)
-    f2 = twin0 + _TWO_PI * jnp.round((angles[0] - twin0) / _TWO_PI)
-    closer = jnp.sum((f2 - angles[0]) ** 2, -1) < jnp.sum((f1 - angles[0]) ** 2, -1)
-    first = jax.lax.stop_gradient(jnp.where(closer[..., None], f2 - f1, 0.0)) + f1
+    first = angles[0]  # kept as given
     if F < 2:
         return first[None]
     sign = _lock_sign(order, principal[..., 1])
