@@ -220,7 +220,7 @@ class PassLayout:
     period_frames: float
 
 
-def layout_passes(passes, left_strikes, period_frames: float, headings=None) -> PassLayout:
+def layout_passes(passes, left_strikes, period_frames: float, headings=None, lengths=None) -> PassLayout:
     """Place passes on one time axis so that their left heel strikes share a phase.
 
     Arguments:
@@ -228,6 +228,7 @@ def layout_passes(passes, left_strikes, period_frames: float, headings=None) -> 
         left_strikes: per pass, left heel-strike frames relative to the pass's start.
         period_frames: the gait cycle in frames.
         headings: per pass, its heading (radians), stored in the layout.
+        lengths: per pass, its rows on the time axis (default ``stop - start``).
 
     Returns:
         A `PassLayout`.
@@ -237,17 +238,18 @@ def layout_passes(passes, left_strikes, period_frames: float, headings=None) -> 
         raise UserError(f"layout_passes: period_frames must be a positive number, got {period_frames!r}")
     if len(passes) != len(left_strikes):
         raise UserError(f"layout_passes: {len(passes)} passes but {len(left_strikes)} strike lists")
+    lengths = [b - a for a, b in passes] if lengths is None else [int(n) for n in lengths]
     phi0 = _pass_phase(left_strikes[0], T)
     offsets = [0]
-    end = passes[0][1] - passes[0][0]
-    for (a, b), left in zip(passes[1:], left_strikes[1:]):
+    end = lengths[0]
+    for n, left in zip(lengths[1:], left_strikes[1:]):
         # Offset o with 2 pi o / T + phi_k = phi_0 (mod 2 pi), o >= end.
         o0 = (phi0 - _pass_phase(left, T)) / (2 * np.pi) * T
         o = int(round(o0 + np.ceil((end - o0) / T) * T))
         if o < end:
             o += int(round(T))
         offsets.append(o)
-        end = o + (b - a)
+        end = o + n
     heads = tuple(float(h) for h in headings) if headings is not None else (0.0,) * len(passes)
     return PassLayout(tuple((int(a), int(b)) for a, b in passes), tuple(offsets), heads, T)
 
@@ -305,26 +307,26 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
     # straight clip), so that the root channels keep their sign convention (walking backwards
     # has root.vz < 0).
     heads = [heading_of(clip[a:b], body_map=body_map) for a, b in passes]
-    layout = layout_passes(passes, [lft for lft, _ in strikes], T, heads)
-    rows = layout.offsets[-1] + passes[-1][1] - passes[-1][0]
+    blocks = []
     names = None
-    x = keep = None
-    left, right = [], []
-    for (a, b), o, h, (lft, rgt) in zip(passes, layout.offsets, heads, strikes):
+    for (a, b), h, (lft, rgt) in zip(passes, heads, strikes):
         sub = clip[a:b]
         ok = ~M.glitch_frames(sub)
         xk, names = features_from_motion(sub, representation, heading_rad=h, valid=ok, body_map=body_map)
-        if x is None:
-            x = np.zeros((rows, xk.shape[1]))
-            keep = np.zeros(rows, bool)
+        blocks.append((xk, ok, np.asarray(lft, int), np.asarray(rgt, int)))
+    layout = layout_passes(passes, [bl[2] for bl in blocks], T, heads, lengths=[len(bl[0]) for bl in blocks])
+    rows = layout.offsets[-1] + len(blocks[-1][0])
+    x = np.zeros((rows, blocks[0][0].shape[1]))
+    keep = np.zeros(rows, bool)
+    filled = np.zeros(rows, bool)
+    left, right = [], []
+    for (xk, ok, lft, rgt), o in zip(blocks, layout.offsets):
         x[o:o + len(xk)] = xk
         keep[o:o + len(xk)] = ok
+        filled[o:o + len(xk)] = True
         left += list(o + lft)
         right += list(o + rgt)
     # Masked rows between passes hold the previous pass's last frame.
-    filled = np.zeros(rows, bool)
-    for (a, b), o in zip(passes, layout.offsets):
-        filled[o:o + b - a] = True
     last = np.maximum.accumulate(np.where(filled, np.arange(rows), 0))
     x = x[last]
     x = _join_branches(x, names, clip.topology, representation, keep)
