@@ -255,7 +255,7 @@ def layout_passes(passes, left_strikes, period_frames: float, headings=None, len
 
 
 def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: bool = True,
-                   **pass_kwargs):
+                   min_turn_deg: float = 45.0, **pass_kwargs):
     """The fitting input of a clip that walks back and forth, for `motion.fit_motions`.
 
     Every straight pass (`straight_passes`) in its own heading frame (the pass's circular mean
@@ -269,10 +269,12 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
         representation: ``"euler"`` or ``"expmap"``.
         body_map: the clip's `fourierjax.body.BodyMap` (None: no passes).
         use_contacts: False fits the longest pass only (no heel strikes to align passes by).
+        min_turn_deg: passes whose directions all lie within this angle are one straight walk
+            (interrupted by a wobble of the heading or a pause), fitted as before.
         pass_kwargs: passed on to `straight_passes`.
 
     Returns:
-        None when the clip has fewer than two passes, or no cycle can be measured from heel
+        None when the clip has fewer than two passes, they do not turn, or no cycle can be measured from heel
         strikes (``fit_motions`` then fits its steady segment); else ``(layout, a, b, sub, x,
         names, left, right, omega_steps, keep)``: frames ``[a, b)`` of the given Motion span the
         passes (``sub`` is that slice), ``x [T, C]`` the features, ``left`` / ``right`` heel
@@ -285,6 +287,11 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
         return None
     passes = straight_passes(clip, body_map=body_map, **pass_kwargs)
     if len(passes) < 2:
+        return None
+    psi = heading_over_time(clip, body_map=body_map)
+    ways = [np.arctan2(np.sin(psi[a:b]).sum(), np.cos(psi[a:b]).sum()) for a, b in passes]
+    turn = max(abs(float(np.angle(np.exp(1j * (u - v))))) for u in ways for v in ways)
+    if np.degrees(turn) < min_turn_deg:  # one straight walk with a wobble or a pause in it
         return None
     contacts = M.foot_contacts_of(clip, body_map=body_map)
     if contacts is None:

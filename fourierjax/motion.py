@@ -20,6 +20,7 @@ from fourierjax._fourier._layout import rot as _rot
 from fourierjax._fourier._layout import rotation_joints as _rotation_joints
 from fourierjax._fourier._layout import world_pose as _world_pose
 from fourierjax._fourier._model import FourierModel
+from fourierjax._passes import heading_over_time, straight_passes  # noqa: F401  (public here: issue 21)
 from fourierjax.errors import UserError
 from fourierjax.features import (  # noqa: F401  (re-exported: their old home)
     REPRESENTATIONS,

@@ -1,6 +1,7 @@
 """Walks that turn (issue 21 item 4): heading over time, straight passes, one fit of every pass."""
 
 import dataclasses
+import pathlib
 
 import numpy as np
 import pytest
@@ -23,8 +24,9 @@ def _facing_deg(a, b):
 
 def test_heading_over_time_follows_each_pass(clips):
     m = clips["142_08"]
-    psi = P.heading_over_time(m)
-    passes = P.straight_passes(m)
+    assert M.heading_over_time is P.heading_over_time and M.straight_passes is P.straight_passes
+    psi = M.heading_over_time(m)
+    passes = M.straight_passes(m)
     assert len(passes) == 4
     means = []
     for a, b in passes:
@@ -154,3 +156,25 @@ def test_straight_walks_fit_as_before(clips):
     assert auto.variance_explained_positions == longest.variance_explained_positions
     with pytest.raises(UserError, match="passes"):
         M.fit_motions([m], 3, passes="every")
+
+
+BANDAI = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+
+
+@pytest.mark.skipif(not BANDAI.is_dir(), reason=f"Bandai-Namco data not found at {BANDAI}")
+def test_bandai_straight_walks_are_not_split():
+    """Bandai locomotion walks one way: a heading wobble or a slow step can cut one into 2-4
+    straight runs (8 of 120 clips), which are not passes of a walk that turns: fit_motions(passes=
+    "auto") fits them as before."""
+    from fourierjax.io.bvh import read_bvh
+
+    kinds = ("walk", "run", "dash", "walk-back", "walk-left", "walk-right")
+    split = 0
+    for path in sorted(BANDAI.glob("dataset-1_*.bvh")):
+        if path.stem.split("_")[1] not in kinds:
+            continue
+        m = read_bvh(path)
+        bm = infer_body_map(m)
+        split += len(P.straight_passes(m, body_map=bm)) > 1
+        assert P.prepare_passes(m, 0, "euler", bm) is None, path.name
+    assert split >= 1  # the rule above is exercised
