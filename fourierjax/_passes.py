@@ -162,8 +162,8 @@ def cycle_period_frames(
                 keep_groups.append(g)
                 num += float(np.sum((j - j.mean()) * (t - t.mean())))
                 den += float(np.sum((j - j.mean()) ** 2))
-        if den <= 0:
-            return float("nan") if not np.isfinite(T) else T
+        if den <= 0:  # no foot kept two strikes on its line: keep the median
+            return T
         T = num / den
         groups = keep_groups
     return float(T)
@@ -175,7 +175,7 @@ def _pass_phase(left: np.ndarray, T: float) -> float:
     return float(np.arctan2(np.sin(th).sum(), np.cos(th).sum()))
 
 
-def _join_branches(x: np.ndarray, names, topology, representation: str, keep) -> np.ndarray:
+def _join_branches(x: np.ndarray, topology, representation: str, keep) -> np.ndarray:
     """Rotation channels of passes laid end to end put on one branch: each pass's Euler triples
     (or expmaps) continue the previous pass's, across the turn that was cut out."""
     joints = rotation_joints(topology)
@@ -274,8 +274,8 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
         pass_kwargs: passed on to `straight_passes`.
 
     Returns:
-        None when the clip has fewer than two passes, they do not turn, or no cycle can be measured from heel
-        strikes (``fit_motions`` then fits its steady segment); else ``(layout, a, b, sub, x,
+        None when the clip has fewer than two passes, they do not turn, or no cycle can be
+        measured from heel strikes (``fit_motions`` then fits its steady segment); else ``(layout, a, b, sub, x,
         names, left, right, omega_steps, keep)``: frames ``[a, b)`` of the given Motion span the
         passes (``sub`` is that slice), ``x [T, C]`` the features, ``left`` / ``right`` heel
         strikes as rows of ``x``, ``omega_steps`` rad/s, ``keep [T]`` the rows fitted.
@@ -336,7 +336,7 @@ def prepare_passes(clip, lo: int, representation: str, body_map, use_contacts: b
     # Masked rows between passes hold the previous pass's last frame.
     last = np.maximum.accumulate(np.where(filled, np.arange(rows), 0))
     x = x[last]
-    x = _join_branches(x, names, clip.topology, representation, keep)
+    x = _join_branches(x, clip.topology, representation, keep)
     a0, b0 = lo + passes[0][0], lo + passes[-1][1]
     omega = 2 * np.pi / (T * clip.frame_time_s)
     return (layout, a0, b0, clip[passes[0][0]:passes[-1][1]], x, names, np.asarray(left, int),
