@@ -15,6 +15,7 @@ from fourierjax._motion._poses import (
     motion_joint_positions,
 )
 from fourierjax._motion._segment import feature_mask, glitch_frames, glitch_joints, steady_segment
+from fourierjax._passes import heading_over_time, straight_passes  # noqa: F401  (public here: issue 21)
 from fourierjax.features import (  # noqa: F401  (re-exported: their old home)
     REPRESENTATIONS,
     ROOT_CHANNELS,

@@ -11,6 +11,7 @@ from fourierjax._rotations._common import (
     zero_norm_threshold,
 )
 from fourierjax._rotations._continuity import (
+    make_euler_continuous,
     make_expmap_continuous,
     make_quat_continuous,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "euler_twin",
     "expmap_from_matrix",
     "expmap_from_quat",
+    "make_euler_continuous",
     "make_expmap_continuous",
     "make_quat_continuous",
     "matrix_from_euler",

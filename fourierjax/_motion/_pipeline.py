@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fourierjax import _jit
+from fourierjax import _jit, _passes
 from fourierjax._motion._clip import (
     ClipFit,
     _frame_range,
@@ -52,7 +52,7 @@ class _Clip:
 
 
 def _prepare(index, m, bm, *, representation, segment, use_contacts, start_frame, stop_frame,
-             timings) -> _Clip:
+             timings, passes="longest") -> _Clip:
     """Everything before the fit for one clip: body map, steady segment, glitch masks,
     features, contacts and steps (``timings``: seconds added per stage)."""
     from fourierjax.body import BodyMapError, infer_body_map
@@ -70,6 +70,15 @@ def _prepare(index, m, bm, *, representation, segment, use_contacts, start_frame
         except BodyMapError:
             bm = None  # no legs: joint 0 carries the root, no contacts, no alignment
     clock("body_map")
+    # --- hook (issue 21 item 4, fourierjax._passes): every straight pass of a walk that turns
+    got = _passes.prepare_passes(clip, lo, representation, bm, use_contacts) if segment and passes == "auto" \
+        else None
+    if got is not None:
+        _, a, b, sub, x, names, left, right, om, keep = got
+        clock("segment")
+        mask = np.broadcast_to(keep[:, None], x.shape).copy()
+        return _Clip(index, m, a, b, sub, x, names, mask, left, right, om, bm)
+    # --- end of hook
     a, b = steady_segment(clip, body_map=bm) if segment else (0, clip.num_frames)
     a, b = a + lo, b + lo
     sub = m[a:b]
@@ -281,6 +290,7 @@ def iter_fit_motions(
     chunk_size: int | None = None,
     progress: bool | None = False,
     timings: dict | None = None,
+    passes: str = "longest",
     **fit_kwargs,
 ) -> Iterator[ClipFit]:
     """:func:`fit_motions` as a generator: each chunk's ClipFits, in order, as soon as the chunk
@@ -319,6 +329,10 @@ def iter_fit_motions(
         timings: a dict that receives the seconds spent per stage (``read``, ``body_map``,
             ``segment``, ``glitch``, ``features``, ``contacts``, ``fit``, ``align_metrics``;
             the stages before ``fit`` run in the background thread, overlapping the fit).
+        passes: ``"longest"`` fits the steady segment; ``"auto"`` fits a clip that walks back
+            and forth over every straight pass, each in its own heading frame with the passes'
+            heel strikes phase-aligned (``fourierjax._passes.prepare_passes``; its frames are
+            then rows of that layout, the turns masked).
         fit_kwargs: passed on to ``fit_batch`` (search band, grid, ``max_memory``...).
 
     Returns:
@@ -326,6 +340,8 @@ def iter_fit_motions(
         for a cycle) does not stop the others: its ``result`` and ``message`` say why.
     """
     from fourierjax.body import BodyMap
+
+    _passes.check_mode(passes)
 
     dtype = dtype or jnp.zeros(()).dtype
     if body_map is None or isinstance(body_map, BodyMap):
@@ -338,7 +354,7 @@ def iter_fit_motions(
     total = len(motions) if hasattr(motions, "__len__") else None
     items = iter(motions)
     opts = dict(representation=representation, segment=segment, use_contacts=use_contacts,
-                start_frame=start_frame, stop_frame=stop_frame, timings=timings)
+                start_frame=start_frame, stop_frame=stop_frame, timings=timings, passes=passes)
     count = [0]
     size = [chunk_size]
 
