@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from fourierjax._math import safe_sqrt
+
 if TYPE_CHECKING:
     from fourierjax.fourier import FourierModel
 
@@ -53,6 +55,22 @@ def integrate_phase(
     speed = jnp.broadcast_to(jnp.asarray(speed, dtype=jnp.result_type(float)), (num_frames,))
     ticks = jnp.concatenate([jnp.zeros((1,), speed.dtype), jnp.cumsum(speed)[:-1]])
     return phase0 + omega * (ticks * frame_time_s)
+
+
+#: `root_trajectory` with the model's root velocity: a foot point whose move in the capture's
+#: world is below this fraction of the mean captured root move is still (planted).
+_SLIP_FRACTION = 0.15
+#: ... and its slip at that fraction weighs as much as `_SLIP_PER_TAU` temperatures of height.
+_SLIP_PER_TAU = 0.1
+
+
+def _norm(v: Array) -> Array:
+    return safe_sqrt(jnp.sum(v * v, axis=-1), floor=1e-24)
+
+
+def _slip(xz: Array, flight_step: Array) -> Array:
+    """`[T-1, K]` horizontal move of each point in the model's own world per frame."""
+    return _norm(xz[1:] - xz[:-1] + flight_step[:, None, :])
 
 
 #: `root_trajectory` with the model's root velocity: the least fraction of the model's own move
@@ -139,6 +157,21 @@ def root_trajectory(
     dphase = phase[1:] - phase[:-1]
 
     if flight_step is not None:
+        # The carrying point is the one *planted* in the model's own world (low and still), not
+        # merely the lowest: `flight_step` is the captured root move, so `flight_step + Δxz_p`
+        # is point p's move in the capture. The lowest point alone carried the body on a landing
+        # heel still swinging forward and on a run's trailing foot in flight (the walk rule puts
+        # a foot on the ground every frame), and the root advanced at 0.72-0.90 of the captured
+        # speed (bundled walks and runs, from the capture's own poses as from the models).
+        slip = _slip(xz, flight_step)  # [T-1, 2P], file units per frame
+        ref = _SLIP_FRACTION * jnp.mean(_norm(flight_step)) + 1e-3 * tau
+        cost = h_mid / tau + slip / (ref * _SLIP_PER_TAU)
+        w = jax.nn.softmax(-cost, axis=-1)
+        stance_step = -jnp.sum(w[..., None] * (xz[1:] - xz[:-1]), axis=1)
+        # Flight also where no point is still (a run's flight under the walk rule): soft min
+        # of the slip over the low points, against `_SLIP_FRACTION` of the captured move.
+        low_slip = jnp.sum(w * slip, axis=-1)
+        ground = ground * jax.nn.sigmoid((ref - low_slip) / (0.2 * ref))
         # A foot may not carry the root backwards against the model's own travel: a run's
         # landing foot, lowest while still swinging forward, dragged the pelvis back (09_01
         # defaults: -45 units/s, 64 of 480 frames). Each stance move keeps at least
