@@ -212,3 +212,28 @@ def test_bandai_walk_run_transitions_are_grounded():
         pytest.skip(f"Bandai-Namco data set not present at {BANDAI}")
     res = _check_transition(str(BANDAI / "dataset-1_walk_normal_001.bvh"), str(BANDAI / "dataset-1_run_normal_001.bvh"))
     _assert_grounded(res)
+
+
+def test_transition_command_writes_the_grounded_motion(tmp_path):
+    from fourierjax.cli import main
+
+    a, b = str(data.path("02_01")), str(data.path("02_03"))
+    out = tmp_path / "t.bvh"
+    assert main(["transition", a, b, "--seconds", "4", "--start", "1.5", "--duration", "1.5", "--out", str(out)]) == 0
+    mot = read_bvh(out)
+    from fourierjax import body
+
+    bm = body.infer_body_map(mot)
+    feet, P = _foot_points(mot, bm)
+    walk = slice(0, int(1.5 / mot.frame_time_s))
+    local = feet - P[:, bm.pelvis, None, None, :] * np.eye(3)[[0, 2]].sum(0)  # ground-plane relative
+    # Sole clearances as the grounding estimates them: from all the frames.
+    clearance = np.asarray(gait.estimate_sole_clearance(jnp.asarray(local), up_axis=bm.up_axis))
+    low = (feet[..., bm.up_axis] - clearance[None]).min(axis=(1, 2))
+    floor = low[walk].min()
+    assert np.mean(np.abs(low[walk] - floor) <= 0.02 * bm.height) >= 0.95  # standing on one floor
+    assert low.min() >= floor - 1.0 / (100 * bm.metres_per_unit)  # never 1 cm below it
+    travel = P[-1, bm.pelvis] - P[0, bm.pelvis]
+    assert np.linalg.norm(travel[[0, 2]]) > 50  # walks, then runs: ~4 s at 20-46 units/s
+    assert main(["transition", a, b, "--seconds", "4", "--start", "1.5", "--duration", "1.5", "--no-root-motion",
+                 "--out", str(tmp_path / "n.bvh")]) == 0

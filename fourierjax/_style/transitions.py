@@ -304,8 +304,8 @@ def grounded_transition(
     The frames of `transition` (at `t = k Δt`) get their root from the stance feet
     (`gait.ground_features`: the planted foot point carries the body, in flight the blend's
     own root velocity does) and their height from the floor: the lowest foot point stands on
-    the captured floor (the blend of `a`'s and `b`'s, `_captured_floor`), and where the
-    blend's own root height puts both feet above it (a run's flight) that height is kept, so
+    a's captured floor (`_captured_floor`), and where the blend's own root height puts both
+    feet above its own floor (the blend of a's and b's; a run's flight) that lift is kept, so
     there is flight only where the run has it.
 
     Arguments:
@@ -335,10 +335,13 @@ def grounded_transition(
     feats, root, feet, clearance = gait.ground_features(x, skeleton, rep, frame_time_s, body_map=body_map,
                                                         clearance=clearance)
     a, b = common_harmonics(*check_models_omega("grounded_transition", a=a, b=b))
-    floor = ((1 - s) * _captured_floor(a, skeleton, rep, frame_time_s, body_map, clearance)
-             + s * _captured_floor(on_branch_of(a, b), skeleton, rep, frame_time_s, body_map, clearance))
-    # The lowest point on the floor, or the blend's own height where that is higher (flight).
-    height = jnp.maximum(feats[:, 2] + floor, x[:, 2])
+    floor_a = _captured_floor(a, skeleton, rep, frame_time_s, body_map, clearance)
+    floor_b = _captured_floor(on_branch_of(a, b), skeleton, rep, frame_time_s, body_map, clearance)
+    # The lowest point on a's floor, or the blend's own height above its own (blended) floor
+    # where that is higher (flight). Two captures need not share a floor level (02_01 and
+    # 02_03 differ by 0.25 units, 1.4 cm): the motion keeps one, a's.
+    height = jnp.maximum(feats[:, 2], x[:, 2] - s * (floor_b - floor_a) - floor_a) + floor_a
+    floor = jnp.broadcast_to(floor_a, height.shape)
     lift = height - feats[:, 2]
     feats = feats.at[:, 2].set(height)
     root = root.at[:, up].set(height)
