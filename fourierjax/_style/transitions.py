@@ -325,6 +325,8 @@ def grounded_transition(
     from fourierjax._checks import integer
 
     num_frames = integer(num_frames, "grounded_transition: `num_frames`", 2)
+    # NumPy float64 leaves (a model file) as JAX holds them (float32 without x64).
+    a, b = (jax.tree_util.tree_map(jnp.asarray, m) for m in (a, b))
     if body_map is None:
         body_map = gait.model_body_map(a, skeleton)
     dt = jnp.asarray(frame_time_s, dtype_of(a))
