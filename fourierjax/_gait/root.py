@@ -164,7 +164,12 @@ def root_trajectory(
         # Flight also where no point is still (a run's flight under the walk rule): soft min
         # of the slip over the low points, against `_SLIP_FRACTION` of the captured move.
         low_slip = jnp.sum(w * slip, axis=-1)
-        ground = ground * jax.nn.sigmoid((ref - low_slip) / (0.2 * ref))
+        # Against the stance baseline: the slip of the stillest 5% of the frames, 0 for a
+        # model as fitted, |step - 1| of the root move for stepped amplitudes (`apply_step`:
+        # the feet sweep `step` times as far as the root channels move the pelvis; without it
+        # a step of 1.3 read as flight and the root kept the model's own speed).
+        base = jax.lax.stop_gradient(jnp.quantile(low_slip, 0.05))
+        ground = ground * jax.nn.sigmoid((ref + base - low_slip) / (0.2 * ref))
         # A foot may not carry the root backwards against the model's own travel: a run's
         # landing foot, lowest while still swinging forward, dragged the pelvis back (09_01
         # defaults: -45 units/s, 64 of 480 frames). Each stance move keeps at least
