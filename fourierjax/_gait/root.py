@@ -105,7 +105,7 @@ def root_trajectory(
       rule's height hides) the root moves with `flight_step`. The lowest point alone carried
       the body on a landing heel still swinging forward and on a run's trailing foot in
       flight: root speeds were 0.72-0.90 of the captured on the bundled walks and runs (02_03
-      0.72, 09_01 0.74, 07_01 0.85), 0.96-0.99 with the planted point (measured from the
+      0.72, 09_01 0.74, 07_01 0.85), 0.96-1.00 with the planted point (measured from the
       models and from the captures' own poses alike).
     - Without it, the carrying point is the lowest, and where even that is above
       `contact_threshold` (flight) the root keeps its last velocity per radian of phase, so it
