@@ -28,6 +28,7 @@ from fourierjax._gait.metrics import (
     foot_skating,
     ground_penetration,
 )
+from fourierjax._gait.path import GroundPath, circle_path, follow_path, polyline_path
 from fourierjax._gait.root import apply_step, integrate_phase, root_trajectory
 from fourierjax._gait.synthesis import GaitResult, ground_features, model_hip_curves, synthesize_gait
 
@@ -38,15 +39,18 @@ __all__ = [
     "CMU_GROINS",
     "RULES",
     "GaitResult",
+    "GroundPath",
     "HipFit",
     "HipRule",
     "SkatingStats",
     "apply_step",
+    "circle_path",
     "contact_height",
     "estimate_sole_clearance",
     "feet_of",
     "fit_hip_rule",
     "flight_fraction",
+    "follow_path",
     "foot_skating",
     "gait_motion",
     "ground_features",
@@ -59,6 +63,7 @@ __all__ = [
     "lowest_points",
     "model_body_map",
     "model_hip_curves",
+    "polyline_path",
     "root_height",
     "root_trajectory",
     "synthesize_gait",

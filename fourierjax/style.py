@@ -45,10 +45,12 @@ from fourierjax._style import (
     transition,
     transition_schedule,
 )
+from fourierjax._style.transitions import GroundedTransition, grounded_transition
 
 __all__ = [
     "Characteristic",
     "Ease",
+    "GroundedTransition",
     "Method",
     "OmegaMode",
     "StylePCA",
@@ -65,6 +67,7 @@ __all__ = [
     "cycle_positions",
     "ease",
     "fit_style_weights",
+    "grounded_transition",
     "interpolate",
     "interpolate_omega",
     "model_from_style_vector",

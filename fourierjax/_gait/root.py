@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from fourierjax._math import safe_sqrt
+
 if TYPE_CHECKING:
     from fourierjax.fourier import FourierModel
 
@@ -55,6 +57,22 @@ def integrate_phase(
     return phase0 + omega * (ticks * frame_time_s)
 
 
+#: `root_trajectory` with the model's root velocity: a foot point whose move in the capture's
+#: world is below this fraction of the mean captured root move is still (planted).
+_SLIP_FRACTION = 0.15
+#: ... and its slip at that fraction weighs as much as `_SLIP_PER_TAU` temperatures of height.
+_SLIP_PER_TAU = 0.1
+
+
+def _norm(v: Array) -> Array:
+    return safe_sqrt(jnp.sum(v * v, axis=-1), floor=1e-24)
+
+
+def _slip(xz: Array, flight_step: Array) -> Array:
+    """`[T-1, K]` horizontal move of each point in the model's own world per frame."""
+    return _norm(xz[1:] - xz[:-1] + flight_step[:, None, :])
+
+
 #: `root_trajectory` with the model's root velocity: the least fraction of the model's own move
 #: (along its direction) that a stance move keeps.
 _MIN_ALONG = 0.1
@@ -75,17 +93,23 @@ def root_trajectory(
     """Root positions over time from the feet on the ground (the carrying foot point stays put).
 
     Between two frames the root moves horizontally by minus the displacement of the foot point
-    that carries the body: a soft argmin (temperature τ) of the points' heights above the
-    ground, taken over both feet. A planted point therefore stays put, and a rolling foot hands
-    over from heel to toe tip without a jump (each move compares the *same* point at both
-    frames). When even the lowest point is above `contact_threshold` (flight) the root keeps
-    its last horizontal velocity per radian of phase, so it comes to rest with the phase.
+    that carries the body: a soft argmin (temperature τ) over both feet's points. A planted
+    point therefore stays put, and a rolling foot hands over from heel to toe tip without a
+    jump (each move compares the *same* point at both frames).
 
-    In flight the root moves with the model's own root velocity at the current pace
-    (`synthesize_gait`) or keeps its last velocity per radian of phase (alone); either way
-    slowing the phase (speed → 0) brings the root to rest. Unuma's N(t) does not tell a run's
-    flight from its mid-stance knee bend (both N ≈ 0.06-0.08 on CMU 09_01), so runs synthesized
-    with the rule advance slower than captured (09_01: ~55 vs 63 units/s).
+    - With `flight_step` (the model's own root move, `synthesize_gait`, `ground_features`) the
+      carrying point is the one planted in the model's own world, low *and* still: its cost is
+      its height over τ plus its move in that world (`flight_step + Δxz_p`) over
+      `_SLIP_PER_TAU · _SLIP_FRACTION` of the mean root move. Where no point is still (its
+      move is above `_SLIP_FRACTION` of the mean root move: a run's flight, which the walk
+      rule's height hides) the root moves with `flight_step`. The lowest point alone carried
+      the body on a landing heel still swinging forward and on a run's trailing foot in
+      flight: root speeds were 0.72-0.90 of the captured on the bundled walks and runs (02_03
+      0.72, 09_01 0.74, 07_01 0.85), 0.96-1.00 with the planted point (measured from the
+      models and from the captures' own poses alike).
+    - Without it, the carrying point is the lowest, and where even that is above
+      `contact_threshold` (flight) the root keeps its last velocity per radian of phase, so it
+      comes to rest with the phase.
 
     Arguments:
         foot_local: `[T, 2, P, 3]` foot points with the pelvis at the origin (root rotation
@@ -99,14 +123,10 @@ def root_trajectory(
             ~0.5 units ≈ 3 cm).
         temperature: τ in file units; default `0.003 · s` (CMU: ~0.05 units).
         flight_step: optional `[T - 1, 2]` horizontal root moves to use in flight instead of
-            the carried velocity (`synthesize_gait` passes the model's own root velocity).
-            With it, every stance move keeps at least 10% of `flight_step` along its
-            direction (the deficit is added). A fitted run's landing foot is lowest while
-            still swinging forward, and carrying the root it dragged the pelvis backwards
-            (09_01, default hip rule: down to -45 units/s in 64 of 480 frames; now never:
-            min +6, mean 47 units/s against 43 before and 63.5 captured), at the price of
-            that foot sliding by the deficit for a few frames (skating metric 6.6 -> 10.5
-            units/s on that run; walks unchanged: 07_01 7.7).
+            the carried velocity (`synthesize_gait` passes the model's own root velocity);
+            it also chooses the carrying point (above). Every stance move keeps at least 10%
+            of `flight_step` along its direction (the deficit is added), so the root never
+            reverses (a run's landing foot dragged the pelvis back: 09_01, -45 units/s).
         pelvis_height: `[T]` the pelvis's height above the ground, the length scale `s` of
             the defaults; default `height` (the root is the pelvis, as on CMU rigs). The root
             is not always the pelvis: Bandai's `joint_Root` sits below the feet of a model, and
@@ -115,12 +135,8 @@ def root_trajectory(
 
     Returns:
         `[T, 3]` root positions; horizontal components start at 0, the up component is
-        `height`. Validated on real clips: from their own poses it recovers 93% (07_01) of the
-        captured root advance; the rest is skating in the capture. On a fitted 07_01 model
-        (`synthesize_gait`, 4 s) the lowest point (after sole clearance) moves at a median
-        0.1-0.4 units/s; where the support hands over (heel to toe, foot to foot) the soft
-        argmin mixes points that move differently, and the carrying point slides for a few
-        frames (90th percentile 8-16 units/s).
+        `height`. Where the support hands over (heel to toe, foot to foot) the soft argmin
+        mixes points that move differently, and the carrying point slides for a few frames.
     """
     T = foot_local.shape[0]
     # Scale-relative defaults; differentiated like everything else (true derivatives).
@@ -139,6 +155,21 @@ def root_trajectory(
     dphase = phase[1:] - phase[:-1]
 
     if flight_step is not None:
+        # The carrying point: low and still in the model's own world (see the docstring).
+        slip = _slip(xz, flight_step)  # [T-1, 2P], file units per frame
+        ref = _SLIP_FRACTION * jnp.mean(_norm(flight_step)) + 1e-3 * tau
+        cost = h_mid / tau + slip / (ref * _SLIP_PER_TAU)
+        w = jax.nn.softmax(-cost, axis=-1)
+        stance_step = -jnp.sum(w[..., None] * (xz[1:] - xz[:-1]), axis=1)
+        # Flight also where no point is still (a run's flight under the walk rule): soft min
+        # of the slip over the low points, against `_SLIP_FRACTION` of the captured move.
+        low_slip = jnp.sum(w * slip, axis=-1)
+        # Against the stance baseline: the slip of the stillest 5% of the frames, 0 for a
+        # model as fitted, |step - 1| of the root move for stepped amplitudes (`apply_step`:
+        # the feet sweep `step` times as far as the root channels move the pelvis; without it
+        # a step of 1.3 read as flight and the root kept the model's own speed).
+        base = jax.lax.stop_gradient(jnp.quantile(low_slip, 0.05))
+        ground = ground * jax.nn.sigmoid((ref + base - low_slip) / (0.2 * ref))
         # A foot may not carry the root backwards against the model's own travel: a run's
         # landing foot, lowest while still swinging forward, dragged the pelvis back (09_01
         # defaults: -45 units/s, 64 of 480 frames). Each stance move keeps at least

@@ -234,3 +234,129 @@ def transition(
         omega_mode,
     )
     return (values, s, theta) if return_schedule else values
+
+
+# ------------------------------------------------------------------------- grounded transition
+
+#: The captured floor of a model: this quantile of its lowest foot point's height over one
+#: cycle (a run's stance frames, a walk's every frame; a run is in flight at most ~40% of it).
+_FLOOR_QUANTILE = 0.2
+
+
+class GroundedTransition(eqx.Module):
+    """A transition with the hip rule and root motion (one character).
+
+    - `features`: `[T, C]` channels; `root.vx, root.vz, root.y` from the grounding.
+    - `root_position`: `[T, 3]` world pelvis position, file units.
+    - `foot_positions`: `[T, 2, P, 3]` world foot points (left, right).
+    - `lowest`: `[T, 2]` height of each foot's lowest point above the floor (clearance off).
+    - `s`, `theta`: `[T]` blend weight and integrated phase (`transition_schedule`).
+    - `clearance`: `[2, P]` sole clearances.
+    """
+
+    features: Array
+    root_position: Array
+    foot_positions: Array
+    lowest: Array
+    s: Array
+    theta: Array
+    clearance: Array
+
+
+def _lowest_local(feet, root, clearance, up):
+    """`[T, 2]` each foot's lowest point (clearance off) relative to the pelvis, up axis."""
+    y = feet[..., up] - root[:, None, None, up]
+    return jnp.min(y - clearance[None], axis=-1)
+
+
+def _captured_floor(model, skeleton, representation, frame_time_s, bmap, clearance):
+    """The floor under a model's own root height: the `_FLOOR_QUANTILE` of its lowest foot
+    point over one cycle (file units, up axis)."""
+    from fourierjax import gait
+    from fourierjax.fourier import synthesize_phase
+
+    grid = jnp.linspace(0.0, 2 * jnp.pi, 64, endpoint=False, dtype=dtype_of(model))
+    x = synthesize_phase(model, grid)
+    _, root, feet, _ = gait.ground_features(x, skeleton, representation, frame_time_s, body_map=bmap,
+                                            clearance=clearance)
+    own = x[:, 2, None] + _lowest_local(feet, root, clearance, bmap.up_axis)
+    return jnp.quantile(jnp.min(own, axis=-1), _FLOOR_QUANTILE)
+
+
+def grounded_transition(
+    a: FourierModel,
+    b: FourierModel,
+    skeleton,
+    num_frames: int,
+    frame_time_s: float,
+    start_s: ArrayLike,
+    duration_s: ArrayLike,
+    *,
+    body_map=None,
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    ease: Ease = "smoothstep",
+    method: Method = "polar",
+    omega_mode: OmegaMode = "geometric",
+    foot_lock: bool = False,
+) -> GroundedTransition:
+    """A walk ↔ run transition that stands on the floor: `transition`, grounded.
+
+    The frames of `transition` (at `t = k Δt`) get their root from the stance feet
+    (`gait.ground_features`: the planted foot point carries the body, in flight the blend's
+    own root velocity does) and their height from the floor: the lowest foot point stands on
+    a's captured floor (`_captured_floor`), and where the blend's own root height puts both
+    feet above its own floor (the blend of a's and b's; a run's flight) that lift is kept, so
+    there is flight only where the run has it.
+
+    Arguments:
+        a, b: compatible models (start and end gait), aligned to the same gait event.
+        skeleton: the `Skeleton` both animate.
+        num_frames: T (≥ 2); frame_time_s: Δt in seconds.
+        start_s, duration_s, ease, method, omega_mode: as `transition`.
+        body_map: the `body.BodyMap` of the skeleton; default the map of `a`'s own cycle
+            (`gait.model_body_map`, a concrete model).
+        clearance: `[2, P]` sole clearances; default estimated from the frames.
+        foot_lock: plant the feet with leg IK (`gait.lock_feet`).
+
+    Returns:
+        A `GroundedTransition`. Raises `UserError` as `transition` does.
+    """
+    from fourierjax import gait
+    from fourierjax._checks import integer
+
+    num_frames = integer(num_frames, "grounded_transition: `num_frames`", 2)
+    # NumPy float64 leaves (a model file) as JAX holds them (float32 without x64).
+    a, b = (jax.tree_util.tree_map(jnp.asarray, m) for m in (a, b))
+    if body_map is None:
+        body_map = gait.model_body_map(a, skeleton)
+    dt = jnp.asarray(frame_time_s, dtype_of(a))
+    t = jnp.arange(num_frames, dtype=dt.dtype) * dt
+    x, s, theta = transition(a, b, t, start_s, duration_s, ease=ease, method=method, omega_mode=omega_mode,
+                             return_schedule=True)
+    rep, up = a.representation, int(body_map.up_axis)
+    feats, root, feet, clearance = gait.ground_features(x, skeleton, rep, frame_time_s, body_map=body_map,
+                                                        clearance=clearance)
+    a, b = common_harmonics(*check_models_omega("grounded_transition", a=a, b=b))
+    floor_a = _captured_floor(a, skeleton, rep, frame_time_s, body_map, clearance)
+    floor_b = _captured_floor(on_branch_of(a, b), skeleton, rep, frame_time_s, body_map, clearance)
+    # The lowest point on a's floor, or the blend's own height above its own (blended) floor
+    # where that is higher (flight). Two captures need not share a floor level (02_01 and
+    # 02_03 differ by 0.25 units, 1.4 cm): the motion keeps one, a's.
+    height = jnp.maximum(feats[:, 2], x[:, 2] - s * (floor_b - floor_a) - floor_a) + floor_a
+    floor = jnp.broadcast_to(floor_a, height.shape)
+    lift = height - feats[:, 2]
+    feats = feats.at[:, 2].set(height)
+    root = root.at[:, up].set(height)
+    feet = feet.at[..., up].add(lift[:, None, None])
+    if foot_lock:
+        # FOOT LOCK (issue #21 item 1): engineer footlock's `gait.lock_feet` plants each
+        # contact with leg IK; contacts here are the grounded frames' own (a foot within 2% of
+        # the body height of the floor). Turned on at the merge.
+        lock_feet = getattr(gait, "lock_feet", None)
+        if lock_feet is None:
+            raise UserError("grounded_transition: foot_lock=True needs `gait.lock_feet` (not in this build)")
+        lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
+        contact = (lowest <= 0.02 * float(body_map.height)).astype(feats.dtype)
+        feats = lock_feet(feats, skeleton, contact, body_map=body_map, representation=rep)
+    lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
+    return GroundedTransition(feats, root, feet, lowest, s, theta, clearance)

@@ -44,6 +44,80 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
                    help="root height from the hip rule and root path from the stance feet "
                    "(default on); --no-root-motion keeps the model's own root channels")
+    add_path_argument(g)
+
+
+def add_path_argument(group) -> None:
+    """`--path`: walk along a ground-plane path (issue #21)."""
+    group.add_argument("--path", default=None, metavar="PATH",
+                       help="walk along a path in the ground plane at the model's speed: circle:R "
+                       "(R in metres, turning left; circle:-R turns right), or a .toml/.json file with "
+                       "points = [[x, z], ...] in metres (closed = true to go round), or "
+                       "arc = {radius = R, angle_deg = A} (then straight on)")
+
+
+def parse_path(text: str, metres_per_unit: float):
+    """A `gait.GroundPath` in file units from `--path` (metres: `circle:R`, or a TOML/JSON file)."""
+    import json
+    import pathlib
+    import tomllib
+
+    import numpy as np
+
+    from fourierjax import gait
+    from fourierjax.errors import UserError
+
+    scale = 1.0 / float(metres_per_unit)
+    if text.startswith("circle:"):
+        try:
+            r = float(text.partition(":")[2])
+        except ValueError:
+            raise UserError(f"--path: {text!r}: expected circle:R with R in metres, e.g. circle:3") from None
+        if not (math.isfinite(r) and r != 0):
+            raise UserError(f"--path: {text!r}: the radius must be a finite non-zero number of metres")
+        return gait.circle_path(abs(r) * scale, left=r > 0)
+    path = pathlib.Path(text)
+    if not path.is_file():
+        raise UserError(f"--path: {text}: not circle:R and no such file")
+    try:
+        raw = path.read_text()
+        spec = json.loads(raw) if path.suffix.lower() == ".json" else tomllib.loads(raw)
+    except (OSError, ValueError) as err:
+        raise UserError(f"--path: {text}: cannot read it ({err})") from None
+    if "arc" in spec:
+        arc = spec["arc"]
+        try:
+            r, a = float(arc["radius"]), np.radians(float(arc["angle_deg"]))
+        except (KeyError, TypeError, ValueError):
+            raise UserError(f"--path: {text}: arc needs radius (metres) and angle_deg") from None
+        if not (math.isfinite(r) and r > 0 and math.isfinite(a)):
+            raise UserError(f"--path: {text}: arc radius must be > 0 and angle_deg finite")
+        th = np.linspace(0.0, abs(a), max(8, int(abs(a) / (np.pi / 128)) + 1))
+        side = 1.0 if a > 0 else -1.0
+        return gait.polyline_path(np.stack([side * r * (1 - np.cos(th)), r * np.sin(th)], 1) * scale)
+    if "points" not in spec:
+        raise UserError(f"--path: {text}: expected `points = [[x, z], ...]` (metres) or `arc = {{...}}`")
+    try:
+        pts = np.asarray(spec["points"], np.float64)
+    except (TypeError, ValueError):
+        raise UserError(f"--path: {text}: `points` must be a list of [x, z] pairs (metres)") from None
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise UserError(f"--path: {text}: `points` must be a list of [x, z] pairs, got shape {pts.shape}")
+    return gait.polyline_path(pts * scale, closed=bool(spec.get("closed", False)))
+
+
+def path_motion(args, template, result, channel_names, frame_time_s, bmap):
+    """The synthesized gait bent onto `--path` as a `Motion`, or None without `--path`."""
+    if getattr(args, "path", None) is None:
+        return None
+    from fourierjax import gait
+    from fourierjax.io.gait_bvh import grounded_motion
+
+    path = parse_path(args.path, bmap.metres_per_unit)
+    feats, root, _ = gait.follow_path(result.features, result.root_position, path, channel_names,
+                                      bmap.name(bmap.pelvis), frame_time_s, up_axis=int(bmap.up_axis),
+                                      smoothing=0.25 * float(bmap.leg_length))
+    return grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
 
 
 def _check(args) -> None:
@@ -102,6 +176,8 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model).
     motion = gait_motion(template, result, model.channel_names, frame_time_s, body_map=bmap)
+    bent = path_motion(args, template, result, model.channel_names, frame_time_s, bmap)
+    motion = motion if bent is None else bent
     skate = gait.foot_skating(result.foot_positions, frame_time_s, result.clearance[None])
     advance = np.array(result.root_position[-1] - result.root_position[0])
     advance[bmap.up_axis] = 0.0

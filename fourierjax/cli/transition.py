@@ -34,6 +34,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=("polar", "phasor"),
         help="interpolation of the harmonics (default polar, Unuma eq. 3)",
     )
+    add_grounding_arguments(parser)
+
+
+def add_grounding_arguments(parser: argparse.ArgumentParser) -> None:
+    """`--root-motion/--no-root-motion` (issue #21: grounded transitions)."""
+    parser.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
+                        help="root path from the stance feet and the lowest foot on the captured floor, "
+                        "flying only where the run does (default on); --no-root-motion keeps the "
+                        "blended models' own root channels")
+
+
+def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: float, duration: float):
+    """The grounded transition as a writeable `Motion` (`style.grounded_transition`)."""
+    from fourierjax import gait, style
+    from fourierjax.io.gait_bvh import grounded_motion
+
+    bmap = gait.model_body_map(a.model, template.skeleton())
+    r = style.grounded_transition(a.model, b.model, template.skeleton(), num_frames, dt, start, duration,
+                                  body_map=bmap, ease=args.ease, method=args.method)
+    return grounded_motion(template, r.features, r.root_position, a.model.channel_names, dt, body_map=bmap)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,7 +79,12 @@ def run(args: argparse.Namespace) -> int:
     template, frame_time_s = template_of(a, b, "transition")
     dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
     t = jnp.arange(frame_count(seconds, dt)) * dt
-    values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
-    write_motion(out, values, a.model.channel_names, dt, template, a.model)
+    if getattr(args, "root_motion", False):
+        from fourierjax.io.bvh import write_bvh
+
+        write_bvh(grounded_motion_of(args, a, b, template, t.shape[0], dt, start, duration), out)
+    else:
+        values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
+        write_motion(out, values, a.model.channel_names, dt, template, a.model)
     print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
     return 0

@@ -1,0 +1,242 @@
+"""Grounded locomotion (issue #21 item 2, issue #20's root speeds): the captured speed, and
+walk <-> run transitions that keep the hip rule and root motion."""
+
+import functools
+import pathlib
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import data, gait, style
+from fourierjax import motion as fmotion
+from fourierjax.data import detect_rest_frames
+from fourierjax.errors import UserError
+from fourierjax.features import motion_from_features, place_root
+from fourierjax.io.bvh import read_bvh
+from fourierjax.kinematics import fk_frames
+from fourierjax.motion import motion_joint_positions
+
+BANDAI = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+WALKS_AND_RUNS = ("02_01", "02_03", "07_01", "07_04", "07_12", "09_01", "09_02")
+
+
+def _load(name):
+    m = read_bvh(name) if str(name).endswith(".bvh") else data.load(name)
+    return m[detect_rest_frames(m):]
+
+
+@functools.cache
+def _fits(names, harmonics=3):
+    motions = [_load(n) for n in names]
+    return motions, fmotion.fit_motions(motions, harmonics, "euler", throw=True)
+
+
+def _speeds(motion, fit, cycles=4):
+    """(captured, synthesized) root speeds: the trajectory joint over the fitted segment, and
+    `synthesize_gait` with root motion over whole cycles (file units/s, ground plane)."""
+    bm = fit.body_map
+    P = motion_joint_positions(motion)[fit.frame_start:fit.frame_stop, bm.trajectory]
+    d = P[-1] - P[0]
+    d[bm.up_axis] = 0
+    captured = np.linalg.norm(d) / ((fit.frame_stop - fit.frame_start - 1) * fit.frame_time_s)
+    dt = fit.frame_time_s
+    n = int(round(cycles * 2 * np.pi / float(fit.model.omega) / dt)) + 1
+    r = gait.synthesize_gait(fit.model, motion.skeleton(), n, dt, body_map=gait.model_body_map(
+        fit.model, motion.skeleton()))
+    dd = np.array(r.root_position[-1] - r.root_position[0])
+    dd[bm.up_axis] = 0
+    return captured, np.linalg.norm(dd) / ((n - 1) * dt)
+
+
+# ------------------------------------------------------------------------------ the right speed
+def test_the_planted_point_carries_the_root_not_the_lowest():
+    """A landing heel, lower than the planted foot but still swinging forward, carried the root
+    backwards (0.72-0.90 of the captured speed on the bundled clips); the planted one is still
+    in the model's own world (`flight_step + its move`) and carries it at the model's speed."""
+    T, v = 40, 1.0
+    k = np.arange(T, dtype=np.float32)
+    feet = np.zeros((T, 2, 1, 3), np.float32)
+    feet[:, 0, 0, 2] = -v * k  # planted: moves back under the pelvis at the root's speed
+    feet[:, 1, 0, 2] = 0.5 * v * k  # swinging forward (world speed 1.5 v), and the lowest point
+    feet[:, 0, 0, 1] = -10.0
+    feet[:, 1, 0, 1] = -10.05
+    height = np.full(T, 10.0, np.float32)
+    flight = np.tile([[0.0, v]], (T - 1, 1)).astype(np.float32)
+    root = np.asarray(gait.root_trajectory(jnp.asarray(feet), jnp.asarray(height), jnp.zeros(T), jnp.zeros((2, 1)),
+                                           flight_step=jnp.asarray(flight)))
+    np.testing.assert_allclose(root[-1, 2], v * (T - 1), rtol=1e-3)
+    # Without the model's move (no flight step) the lowest point still carries it: backwards.
+    alone = np.asarray(gait.root_trajectory(jnp.asarray(feet), jnp.asarray(height), jnp.linspace(0, 6, T),
+                                            jnp.zeros((2, 1))))
+    assert alone[-1, 2] < 0
+    # In flight (frames 15-25: no point still in the model's world, both swing forward) the
+    # model's own move carries it; the lowest point alone would carry it backwards there.
+    sweep = np.where((k >= 15) & (k < 25), 0.5 * v, -v).astype(np.float32)
+    feet[:, 0, 0, 2] = np.concatenate([[0.0], np.cumsum(sweep[1:])])
+    root = np.asarray(gait.root_trajectory(jnp.asarray(feet), jnp.asarray(height), jnp.zeros(T), jnp.zeros((2, 1)),
+                                           flight_step=jnp.asarray(flight)))
+    np.testing.assert_allclose(root[-1, 2], v * (T - 1), rtol=0.05)
+
+
+def test_root_speed_is_the_captured_on_every_bundled_walk_and_run():
+    """Issue #21: within +-5% (was 0.72-0.96: 02_03 0.72, 09_02 0.72, 09_01 0.74, 07_01 0.85)."""
+    motions, fits = _fits(WALKS_AND_RUNS)
+    ratios = {}
+    for name, m, f in zip(WALKS_AND_RUNS, motions, fits):
+        captured, synthesized = _speeds(m, f)
+        ratios[name] = synthesized / captured
+    assert all(abs(r - 1) <= 0.05 for r in ratios.values()), ratios
+
+
+BANDAI_KINDS = ("walk", "run", "dash", "walk-back")
+STYLES = ("active", "angry", "childish", "chimpira", "feminine", "giant", "happy", "masculinity", "musical",
+          "normal", "not-confident", "old", "proud", "sad", "tired")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", BANDAI_KINDS)
+def test_bandai_root_speed_within_10_percent(kind):
+    """Issue #20: every Bandai-1 walk, run, dash and walk-back within +-10% of the captured speed
+    (measured 0.952-1.023 over the 60 clips; before, walks happy 0.81, not-confident 0.78, old
+    0.88, tired 0.73)."""
+    if not BANDAI.is_dir():
+        pytest.skip(f"Bandai-Namco data set not present at {BANDAI}")
+    names = tuple(str(BANDAI / f"dataset-1_{kind}_{s}_001.bvh") for s in STYLES)
+    motions, fits = _fits(names)
+    ratios = {}
+    for name, m, f in zip(names, motions, fits):
+        captured, synthesized = _speeds(m, f, cycles=3)
+        ratios[pathlib.Path(name).stem] = synthesized / captured
+    assert all(abs(r - 1) <= 0.10 for r in ratios.values()), ratios
+
+
+# ------------------------------------------------------------------------ grounded transitions
+def _foot_points(motion, bm):
+    fk = fk_frames(motion.skeleton(), motion.channels)
+    allp = np.concatenate([np.asarray(fk.positions), np.asarray(fk.end_site_positions)], axis=1)
+    feet = allp[:, [*bm.left.foot_points, *bm.right.foot_points]].reshape(len(allp), 2, -1, 3)
+    return feet, np.asarray(fk.positions)
+
+
+def _flight_and_pop(motion, bm, clearance):
+    """(flight fraction: no foot within 2% of the body height of the floor, the floor the 20%
+    quantile of the lowest point; largest per-frame joint position change) of a motion."""
+    feet, P = _foot_points(motion, bm)
+    low = (feet[..., bm.up_axis] - np.asarray(clearance)[None]).min(-1)
+    floor = np.quantile(low.min(-1), 0.2)
+    flight = float(np.mean((low - floor).min(-1) > 0.02 * bm.height))
+    return flight, float(np.linalg.norm(np.diff(P, axis=0), axis=-1).max())
+
+
+def _check_transition(walk_name, run_name, harmonics=5, seconds=6.0, start=2.0, duration=1.5):
+    """The issue's acceptance figures for walk -> run and run -> walk, as a dict per direction."""
+    motions, fits = _fits((walk_name, run_name), harmonics)
+    bm, dt = fits[0].body_map, fits[0].frame_time_s
+    sk = motions[0].skeleton()
+    walk, run = fits[0].model, fits[1].model
+    out = {}
+    for direction, (a, b) in (("walk->run", (walk, run)), ("run->walk", (run, walk))):
+        T = int(round(seconds / dt))
+        r = style.grounded_transition(a, b, sk, T, dt, start, duration, body_map=bm)
+        low, s = np.asarray(r.lowest), np.asarray(r.s)
+        walk_part = (s <= 0.0) if direction == "walk->run" else (s >= 1.0)
+        run_part = ~walk_part & ((s >= 1.0) | (s <= 0.0))
+        tol = 0.02 * bm.height
+        mot = place_root(motion_from_features(motions[0], np.asarray(r.features), a.channel_names, dt, body_map=bm),
+                         np.asarray(r.root_position, np.float64), body_map=bm)
+        _, P = _foot_points(mot, bm)
+        jumps = np.linalg.norm(np.diff(P, axis=0), axis=-1).max()
+        fl_run, pop_run = _flight_and_pop(motions[1][fits[1].frame_start:fits[1].frame_stop], bm, r.clearance)
+        _, pop_walk = _flight_and_pop(motions[0][fits[0].frame_start:fits[0].frame_stop], bm, r.clearance)
+        own = style.grounded_transition(run, run, sk, T, dt, start, duration, body_map=bm)
+        out[direction] = dict(
+            on_floor=float(np.mean(low[walk_part].min(-1) <= tol)),
+            flight=float(np.mean(low[run_part].min(-1) > tol)),
+            flight_captured=fl_run,
+            flight_model=float(np.mean(np.asarray(own.lowest).min(-1) > tol)),
+            below_cm=float(-low.min() * bm.metres_per_unit * 100),
+            pop=float(jumps), pop_sources=max(pop_run, pop_walk),
+            speed=float(np.linalg.norm(np.diff(np.asarray(r.root_position)[:, [0, 2]], axis=0), axis=1).max()),
+        )
+    return out
+
+
+def _assert_grounded(res):
+    for direction, m in res.items():
+        assert m["on_floor"] >= 0.95, (direction, m)
+        assert m["below_cm"] <= 1.0, (direction, m)
+        assert m["pop"] <= m["pop_sources"], (direction, m)
+        # Flight only where the run has it: as much as the run model's own.
+        assert abs(m["flight"] - m["flight_model"]) <= 0.10, (direction, m)
+        assert m["flight"] > 0.05, (direction, m)
+
+
+@pytest.fixture(scope="module")
+def cmu_transition():
+    return _check_transition("02_01", "02_03")
+
+
+def test_cmu_walk_run_transitions_are_grounded(cmu_transition):
+    _assert_grounded(cmu_transition)
+
+
+@pytest.mark.xfail(strict=True, reason="the fitted 02_03 model flies less than the capture: 28% of the "
+                   "grounded run's frames against 46% captured (the model's own synthesis: 26% at N = 5, "
+                   "25% at N = 8; its lowest foot rises 1.1 units in flight against 1.7)")
+def test_cmu_run_flight_matches_the_capture(cmu_transition):
+    for direction, m in cmu_transition.items():
+        assert abs(m["flight"] - m["flight_captured"]) <= 0.10, (direction, m)
+
+
+def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
+    """Only the root channels change; the root travels as fast as the blend's own root velocity;
+    `foot_lock` is the one place where the transition calls `gait.lock_feet`."""
+    motions, fits = _fits(("02_01", "02_03"), 5)
+    bm, dt = fits[0].body_map, fits[0].frame_time_s
+    T = int(round(4.0 / dt))
+    g = style.grounded_transition(fits[0].model, fits[1].model, motions[0].skeleton(), T, dt, 1.0, 1.5, body_map=bm)
+    x = style.transition(fits[0].model, fits[1].model, jnp.arange(T) * dt, 1.0, 1.5)
+    np.testing.assert_allclose(np.asarray(g.features[:, 3:]), np.asarray(x[:, 3:]), atol=1e-5)  # same pose
+    # Grounded: the root travels at the blend's own speed.
+    travel = np.linalg.norm(np.asarray(g.root_position[-1] - g.root_position[0])[[0, 2]])
+    own = np.linalg.norm(np.asarray(x[:, :2]).sum(0) * dt)
+    assert abs(travel / own - 1) < 0.05
+    if hasattr(gait, "lock_feet"):
+        pytest.skip("gait.lock_feet exists: the foot-lock tests cover foot_lock=True")
+    with pytest.raises(UserError, match="lock_feet"):
+        style.grounded_transition(fits[0].model, fits[1].model, motions[0].skeleton(), 8, dt, 0.0, 0.1,
+                                  body_map=bm, foot_lock=True)
+
+
+@pytest.mark.slow
+def test_bandai_walk_run_transitions_are_grounded():
+    if not BANDAI.is_dir():
+        pytest.skip(f"Bandai-Namco data set not present at {BANDAI}")
+    res = _check_transition(str(BANDAI / "dataset-1_walk_normal_001.bvh"), str(BANDAI / "dataset-1_run_normal_001.bvh"))
+    _assert_grounded(res)
+
+
+def test_transition_command_writes_the_grounded_motion(tmp_path):
+    from fourierjax.cli import main
+
+    a, b = str(data.path("02_01")), str(data.path("02_03"))
+    out = tmp_path / "t.bvh"
+    assert main(["transition", a, b, "--seconds", "4", "--start", "1.5", "--duration", "1.5", "--out", str(out)]) == 0
+    mot = read_bvh(out)
+    from fourierjax import body
+
+    bm = body.infer_body_map(mot)
+    feet, P = _foot_points(mot, bm)
+    walk = slice(0, int(1.5 / mot.frame_time_s))
+    local = feet - P[:, bm.pelvis, None, None, :] * np.eye(3)[[0, 2]].sum(0)  # ground-plane relative
+    # Sole clearances as the grounding estimates them: from all the frames.
+    clearance = np.asarray(gait.estimate_sole_clearance(jnp.asarray(local), up_axis=bm.up_axis))
+    low = (feet[..., bm.up_axis] - clearance[None]).min(axis=(1, 2))
+    floor = low[walk].min()
+    assert np.mean(np.abs(low[walk] - floor) <= 0.02 * bm.height) >= 0.95  # standing on one floor
+    assert low.min() >= floor - 1.0 / (100 * bm.metres_per_unit)  # never 1 cm below it
+    travel = P[-1, bm.pelvis] - P[0, bm.pelvis]
+    assert np.linalg.norm(travel[[0, 2]]) > 50  # walks, then runs: ~4 s at 20-46 units/s
+    assert main(["transition", a, b, "--seconds", "4", "--start", "1.5", "--duration", "1.5", "--no-root-motion",
+                 "--out", str(tmp_path / "n.bvh")]) == 0

@@ -1,0 +1,158 @@
+"""Walking along a path (issue #21 item 3): `gait.follow_path`, `synth --path`."""
+
+import functools
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from fourierjax import gait, model_io
+from fourierjax.errors import UserError
+from fourierjax.io.bvh import read_bvh
+from fourierjax.motion import motion_joint_positions
+
+CLIP = "07_01"
+
+
+@functools.cache
+def _model(tmp: str):
+    from fourierjax.cli import main
+
+    assert main(["fit", CLIP, "--harmonics", "3", "--out", tmp + "/"]) == 0
+    return model_io.load_model(f"{tmp}/{CLIP}.npz")
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    mf = _model(str(tmp_path_factory.mktemp("path")))
+    t = mf.template_motion()
+    bmap = gait.model_body_map(mf.model, t.skeleton())
+    r = gait.synthesize_gait(mf.model, t.skeleton(), 480, mf.frame_time_s, body_map=bmap)
+    return mf, t, bmap, r
+
+
+def _bend(walk, path, **kw):
+    mf, _, bmap, r = walk
+    return gait.follow_path(r.features, r.root_position, path, mf.model.channel_names, bmap.name(bmap.pelvis),
+                            mf.frame_time_s, **kw)
+
+
+def test_circle_keeps_the_root_on_it_at_the_gait_speed(walk):
+    mf, _, bmap, r = walk
+    R = 3.0 / bmap.metres_per_unit
+    _, root, yaw = _bend(walk, gait.circle_path(R))
+    root, start = np.asarray(root), np.asarray(r.root_position[0])
+    centre = start[[0, 2]] + [R, 0.0]  # a left turn from +Z: the centre on +X
+    off = np.abs(np.linalg.norm(root[:, [0, 2]] - centre, axis=1) - R) * bmap.metres_per_unit
+    assert off.max() <= 0.02  # metres
+    np.testing.assert_allclose(root[:, 1], np.asarray(r.root_position[:, 1]))  # height untouched
+    straight = np.asarray(r.root_position)
+    length = lambda p: np.linalg.norm(np.diff(p[:, [0, 2]], axis=0), axis=1).sum()  # noqa: E731
+    assert abs(length(root) / length(straight) - 1) <= 0.01  # the model's speed
+    # The heading turns with the tangent: yaw = arc length / R.
+    s = np.linalg.norm(root[-1, [0, 2]] - root[0, [0, 2]])
+    assert np.all(np.diff(np.asarray(yaw)) > -1e-4)  # left turn: the yaw only grows
+    assert np.abs(np.diff(np.asarray(yaw), 2)).max() < 1e-3  # smoothly: no steps at the vertices
+    turn = np.asarray(yaw) - float(yaw[0])  # yaw[0] turns the gait's own travel onto +Z
+    assert float(turn[-1]) == pytest.approx(length(root) / R, rel=0.02) and s < 2 * R
+    # A right turn mirrors it; the gait's own sway keeps the root off the line by up to ~4 cm.
+    _, right, yaw_r = _bend(walk, gait.circle_path(R, left=False))
+    assert float(yaw_r[-1] - yaw_r[0]) == pytest.approx(-float(turn[-1]), rel=1e-3)
+    _, swaying, _ = _bend(walk, gait.circle_path(R), sway=1.0)
+    dev = np.abs(np.linalg.norm(np.asarray(swaying)[:, [0, 2]] - centre, axis=1) - R) * bmap.metres_per_unit
+    assert 0.02 < dev.max() < 0.06
+
+
+def test_the_body_turns_with_the_path(walk):
+    """World feet of the bent walk: the forward direction of the body follows the tangent."""
+    mf, t, bmap, r = walk
+    from fourierjax.io.gait_bvh import grounded_motion
+
+    R = 3.0 / bmap.metres_per_unit
+    feats, root, yaw = _bend(walk, gait.circle_path(R))
+    mot = grounded_motion(t, feats, root, mf.model.channel_names, mf.frame_time_s, body_map=bmap)
+    P = motion_joint_positions(mot)
+    np.testing.assert_allclose(P[:, bmap.pelvis], np.asarray(root), atol=1e-3)
+    left = P[:, bmap.left.hip] - P[:, bmap.right.hip]
+    facing = np.arctan2(-left[:, 2], left[:, 0])  # forward = left × up, heading atan2(x, z)
+    turn = np.unwrap(facing - facing[0])
+    # Pelvis yaw sways a few degrees within the cycle; over the walk it turns as the path does.
+    assert abs(turn[-60:].mean() - float(np.asarray(yaw)[-60:].mean())) < np.radians(10)
+
+
+def test_polyline_follows_segments_and_extends_past_the_end(walk):
+    _, _, bmap, r = walk
+    L = 1.0 / bmap.metres_per_unit  # a 1 m stretch, then a right angle to the left, 1 m
+    path = gait.polyline_path([[0.0, 0.0], [0.0, L], [L, L]])
+    _, root, yaw = _bend(walk, path, smoothing=0.05 * L)
+    g = np.asarray(root)[:, [0, 2]] - np.asarray(root)[0, [0, 2]]
+    travelled = np.concatenate([[0], np.cumsum(np.linalg.norm(np.diff(g, axis=0), axis=1))])
+    first = travelled < 0.9 * L
+    np.testing.assert_allclose(g[first, 0], 0.0, atol=1e-3 * L)
+    beyond = travelled > 2.2 * L  # past the last point: straight on along +X
+    assert beyond.any()
+    np.testing.assert_allclose(g[beyond, 1], L, atol=1e-2 * L)
+    assert float(np.asarray(yaw)[beyond].mean() - yaw[0]) == pytest.approx(np.pi / 2, abs=0.05)
+
+
+def test_many_characters_each_with_its_own_path_vmap(walk):
+    mf, _, bmap, r = walk
+    radii = jnp.asarray([2.0, 3.0, 5.0]) / bmap.metres_per_unit
+    paths = jax.vmap(lambda p: gait.GroundPath(p, closed=True))(
+        jnp.stack([gait.circle_path(float(R)).points for R in radii]))
+    F = jnp.stack([r.features] * 3)
+    Rt = jnp.stack([r.root_position] * 3)
+    names, pelvis, dt = mf.model.channel_names, bmap.name(bmap.pelvis), mf.frame_time_s
+    feats, root, yaw = jax.vmap(lambda f, x, p: gait.follow_path(f, x, p, names, pelvis, dt))(F, Rt, paths)
+    for i, R in enumerate(radii):
+        one = _bend(walk, gait.circle_path(float(R)))
+        np.testing.assert_allclose(np.asarray(root[i]), np.asarray(one[1]), atol=1e-3)
+        np.testing.assert_allclose(np.asarray(yaw[i]), np.asarray(one[2]), atol=1e-4)
+    assert float(yaw[0, -1] - yaw[0, 0]) > float(yaw[2, -1] - yaw[2, 0])  # a tighter circle turns more
+
+
+def test_bad_paths_are_refused(walk):
+    with pytest.raises(UserError, match="radius"):
+        gait.circle_path(0.0)
+    with pytest.raises(UserError, match="two distinct points"):
+        gait.polyline_path([[1.0, 2.0], [1.0, 2.0]])
+    with pytest.raises(UserError, match=r"\[K >= 2, 2\]"):
+        gait.GroundPath(jnp.zeros((3, 3)))
+    mf, _, bmap, r = walk
+    with pytest.raises(UserError, match="pelvis"):
+        gait.follow_path(r.features, r.root_position, gait.circle_path(10.0), mf.model.channel_names, "nope",
+                         mf.frame_time_s)
+
+
+def test_synth_path_circle_3(walk, tmp_path, capsys):
+    """Issue #21: `synth --path circle:3` keeps the root within 2 cm of the circle (metres,
+    with the body map's scale); a TOML polyline and a JSON arc work too."""
+    from fourierjax.cli import main
+
+    mf, _, bmap, _ = walk
+    src = tmp_path / "m.npz"
+    model_io.save_model(src, mf.model, motion=mf.template_motion())
+    out = tmp_path / "c.bvh"
+    assert main(["synth", str(src), "--seconds", "6", "--path", "circle:3", "--out", str(out)]) == 0
+    mot = read_bvh(out)
+    from fourierjax import body
+
+    bm = body.infer_body_map(mot)
+    root = motion_joint_positions(mot)[:, bm.pelvis]
+    R = 3.0 / bmap.metres_per_unit
+    # Fit the circle's centre: the file's root starts where the synthesis put it.
+    centre = root[0, [0, 2]] + [R, 0.0]
+    off = np.abs(np.linalg.norm(root[:, [0, 2]] - centre, axis=1) - R) * bmap.metres_per_unit
+    assert off.max() <= 0.02, off.max()
+    (tmp_path / "p.toml").write_text("points = [[0, 0], [0, 1.5], [1.5, 1.5]]\n")
+    assert main(["synth", str(src), "--seconds", "2", "--path", str(tmp_path / "p.toml"),
+                 "--out", str(tmp_path / "p.bvh")]) == 0
+    (tmp_path / "a.json").write_text(json.dumps({"arc": {"radius": 2.0, "angle_deg": -90}}))
+    assert main(["synth", str(src), "--seconds", "2", "--path", str(tmp_path / "a.json"),
+                 "--out", str(tmp_path / "a.bvh")]) == 0
+    capsys.readouterr()
+    for bad, msg in (("circle:x", "circle:R"), ("circle:0", "non-zero"), (str(tmp_path / "none.toml"), "no such")):
+        assert main(["synth", str(src), "--seconds", "1", "--path", bad, "--out", str(tmp_path / "b.bvh")]) == 2
+        assert msg in capsys.readouterr().err
