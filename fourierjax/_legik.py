@@ -123,18 +123,21 @@ def quat_between(a: Float[Array, "... 3"], b: Float[Array, "... 3"]) -> Float[Ar
     return _select(small, one, q * _rsqrt_where(sq, small))
 
 
-def soft_reach(d: Float[Array, "..."], reach: Float[Array, "..."], knee: float = 0.97) -> Float[Array, "..."]:
+def soft_reach(
+    d: Float[Array, "..."], reach: Float[Array, "..."], knee: float = 0.97, limit: float = 0.999
+) -> Float[Array, "..."]:
     """Distances `d` eased below `reach` (smooth, monotone, identity below `knee * reach`).
 
     A goal beyond the straight leg would snap the knee straight (a pop) and could not be met:
-    the eased distance approaches `0.999 reach` (the knee never reaches full extension).
+    the eased distance approaches `limit * reach` (the knee never reaches full extension).
 
     Arguments:
-        d: hip-to-goal distances; reach: thigh + shin; knee: where easing starts (fraction).
+        d: hip-to-goal distances; reach: thigh + shin; knee: where easing starts and limit
+            what it approaches (fractions of the reach).
 
     Returns:
         Eased distances, same shape.
     """
-    d0, d1 = knee * reach, 0.999 * reach
+    d0, d1 = knee * reach, limit * reach
     x = jnp.maximum(d - d0, 0.0) / (d1 - d0)
     return jnp.where(d > d0, d0 + (d1 - d0) * jnp.tanh(x), d)
