@@ -15,6 +15,7 @@ from fourierjax._gait.fit import HipFit, fit_hip_rule
 from fourierjax._gait.footlock import (
     contact_intervals,
     contact_weights,
+    fit_contact_intervals,
     hold_step,
     hold_weights,
     init_hold_state,
@@ -60,6 +61,7 @@ __all__ = [
     "contact_weights",
     "estimate_sole_clearance",
     "feet_of",
+    "fit_contact_intervals",
     "fit_hip_rule",
     "flight_fraction",
     "foot_skating",

@@ -538,3 +538,24 @@ def integrate_root(features: Float[ArrayLike, "T C"], frame_time_s: float, up_ax
     return root.at[:, up_axis].set(x[:, 2])
 
 
+
+
+def fit_contact_intervals(fit, motion) -> Float[np.ndarray, "2 2"] | None:
+    """The contact intervals of a fitted clip, to store with its model (`io.model_io.save_model`).
+
+    Arguments:
+        fit: a successful `motion.ClipFit`; motion: the `Motion` given to `motion.fit_motions`.
+
+    Returns:
+        `[2, 2]` phases (`contact_intervals` from the fitted frames' contacts, else from the
+        model's cycle), or None without a body map.
+    """
+    from fourierjax.motion import foot_contacts_of
+
+    if fit.body_map is None or not fit.successful:
+        return None
+    sub = motion[fit.frame_start:fit.frame_stop]
+    iv = contact_intervals(fit.model, motion.skeleton(), body_map=fit.body_map,
+                           contacts=foot_contacts_of(sub, body_map=fit.body_map),
+                           frame_time_s=fit.frame_time_s, phase_shift=fit.phase_shift)
+    return np.asarray(iv, np.float64)

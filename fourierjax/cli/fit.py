@@ -102,7 +102,7 @@ def _warn_if_poor(text: str, row: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fourierjax import __version__, model_io
+    from fourierjax import __version__, gait, model_io
     from fourierjax.cli._paths import resolve_input
     from fourierjax.errors import UserError
     from fourierjax.motion import fit_motions
@@ -164,7 +164,8 @@ def run(args: argparse.Namespace) -> int:
                 out.mkdir(parents=True, exist_ok=True)
             prov = dict(row, fourierjax_version=__version__, command="fit")
             model_io.save_model(target, fit.model, motion=motion, provenance=prov,
-                                alignment=fit.alignment, body_map=fit.body_map)
+                                alignment=fit.alignment, body_map=fit.body_map,
+                                contact_intervals=gait.fit_contact_intervals(fit, motion))
             row["model"] = str(target)
     if args.json:
         print(json.dumps(rows))
