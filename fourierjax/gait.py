@@ -22,6 +22,7 @@ from fourierjax._gait.footlock import (
     integrate_root,
     intervals_from_contacts,
     intervals_from_model,
+    lock_crowd,
     lock_feet,
 )
 from fourierjax._gait.hip import (
@@ -79,6 +80,7 @@ __all__ = [
     "intervals_from_contacts",
     "intervals_from_model",
     "leg_heights",
+    "lock_crowd",
     "lock_feet",
     "lowest_points",
     "model_body_map",
