@@ -151,6 +151,7 @@ def intervals_from_model(
     Returns:
         `[2, 2]` (start, end) phases in [0, 2π) (left, right).
     """
+    model = jax.tree_util.tree_map(jnp.asarray, model)  # NumPy float64 leaves as JAX holds them
     grid, pts, root_v = _cycle_feet(model, skeleton, body_map, num_samples)
     up = int(body_map.up_axis)
     horiz = [k for k in range(3) if k != up]

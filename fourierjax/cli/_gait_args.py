@@ -142,9 +142,9 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         flight_text = "flight not measured (the model's own root height)"
     summary = (
         f"step constraints: hip rule {args.hip_rule}, root motion "
-        f"{'on' if args.root_motion else 'off'}, foot lock "
-        f"{'on' if getattr(args, 'foot_lock', True) else 'off'}; {flight_text}, "
+        f"{'on' if args.root_motion else 'off'}; {flight_text}, "
         f"{skating_summary(result, frame_time_s, bmap, source)}, root advance "
-        f"{float(np.linalg.norm(advance)):.1f} units"
+        f"{float(np.linalg.norm(advance)):.1f} units, foot lock "
+        f"{'on' if getattr(args, 'foot_lock', True) else 'off'}"
     )
     return motion, summary
