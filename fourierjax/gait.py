@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from fourierjax._gait.common import CMU_GROINS, RULES, feet_of, groin_joints, model_body_map
+from fourierjax._gait.crowdlock import lock_crowd
 from fourierjax._gait.fit import HipFit, fit_hip_rule
 from fourierjax._gait.footlock import (
     contact_intervals,
@@ -22,7 +23,6 @@ from fourierjax._gait.footlock import (
     integrate_root,
     intervals_from_contacts,
     intervals_from_model,
-    lock_crowd,
     lock_feet,
 )
 from fourierjax._gait.hip import (
