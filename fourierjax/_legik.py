@@ -124,7 +124,8 @@ def quat_between(a: Float[Array, "... 3"], b: Float[Array, "... 3"]) -> Float[Ar
 
 
 def soft_reach(
-    d: Float[Array, "..."], reach: Float[Array, "..."], knee: float = 0.97, limit: float = 0.999
+    d: Float[Array, "..."], reach: Float[Array, "..."], knee: float = 0.97, limit: float = 0.999,
+    start: Float[Array, "..."] | None = None,
 ) -> Float[Array, "..."]:
     """Distances `d` eased below `reach` (smooth, monotone, identity below `knee * reach`).
 
@@ -133,11 +134,14 @@ def soft_reach(
 
     Arguments:
         d: hip-to-goal distances; reach: thigh + shin; knee: where easing starts and limit
-            what it approaches (fractions of the reach).
+            what it approaches (fractions of the reach); start: distances that stay as they are
+            (e.g. the pose's own hip-to-ankle distance: only what a goal adds is eased).
 
     Returns:
         Eased distances, same shape.
     """
     d0, d1 = knee * reach, limit * reach
+    if start is not None:
+        d0 = jnp.minimum(jnp.maximum(d0, start), d0 + 0.9 * (d1 - d0))
     x = jnp.maximum(d - d0, 0.0) / (d1 - d0)
     return jnp.where(d > d0, d0 + (d1 - d0) * jnp.tanh(x), d)

@@ -44,7 +44,8 @@ def _crowd_lock(positions, phase, intervals, state, floor, clearance, band, *, b
         G = A + shift[:, f]
         l1, l2 = safe_norm(K - H), safe_norm(A - K)
         d = safe_norm(G - H)
-        G = H + (G - H) * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT) / jnp.maximum(d, 1e-9))[:, None]
+        eased = soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H))
+        G = H + (G - H) * (eased / jnp.maximum(d, 1e-9))[:, None]
         K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, K - H)
         below = _subtree(body_map, leg.ankle)
         out = out.at[:, leg.knee].set(K2)

@@ -418,7 +418,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         l1, l2 = safe_norm(K - H), safe_norm(A - K)
         HG = G - H
         d = safe_norm(HG)
-        G = H + HG * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT) / jnp.maximum(d, 1e-9))[:, None]
+        G = H + HG * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H)) / jnp.maximum(d, 1e-9))[:, None]
         K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, K - H)
         R1 = quat_between(K - H, K2 - H)
         R2 = quat_between(rotations.quat_apply(R1, A - K), G - K2)

@@ -135,7 +135,9 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))
         # Both feet off the ground (the hip rule puts the ground at height 0).
-        flight = float(gait.flight_fraction(result.lowest))
+        # The hip rule's flight frames (N(t) > gait): the foot lock may lift a foot a leg
+        # cannot reach, which is not flight.
+        flight = float(np.mean(np.asarray(result.hip.flight) > 0.5))
         flight_text = (f"flight {100 * flight:.1f}% of frames (N(t) peaks at {n_peak:.3f}: "
                        "--gait below that gives flight)")
     else:  # the model's own root height: no ground is enforced, so no flight to count
