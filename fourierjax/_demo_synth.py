@@ -167,6 +167,9 @@ def _synth_walks(st: _State) -> None:
     # Unuma Fig. 3: s < 0 on the normal -> tired axis is "brisk"; s > 1 "more tired than tired".
     _gait_bvh(st, "walk_brisk_extrapolated", "07_01", style.interpolate(normal, tired, -0.6))
     _gait_bvh(st, "walk_tired", "07_01", style.interpolate(normal, tired, 1.3))
+    from fourierjax._demo_footprints import footprints  # before/after foot locking (issue 21)
+
+    footprints(st)
 
 
 def _synth_run(st: _State) -> None:

@@ -11,7 +11,20 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from fourierjax._gait.common import CMU_GROINS, RULES, feet_of, groin_joints, model_body_map
+from fourierjax._gait.crowdlock import lock_crowd
 from fourierjax._gait.fit import HipFit, fit_hip_rule
+from fourierjax._gait.footlock import (
+    contact_intervals,
+    contact_weights,
+    fit_contact_intervals,
+    hold_step,
+    hold_weights,
+    init_hold_state,
+    integrate_root,
+    intervals_from_contacts,
+    intervals_from_model,
+    lock_feet,
+)
 from fourierjax._gait.hip import (
     HipRule,
     contact_height,
@@ -23,6 +36,7 @@ from fourierjax._gait.hip import (
 )
 from fourierjax._gait.metrics import (
     SkatingStats,
+    contact_skating,
     estimate_sole_clearance,
     flight_fraction,
     foot_skating,
@@ -46,8 +60,12 @@ __all__ = [
     "apply_step",
     "circle_path",
     "contact_height",
+    "contact_intervals",
+    "contact_skating",
+    "contact_weights",
     "estimate_sole_clearance",
     "feet_of",
+    "fit_contact_intervals",
     "fit_hip_rule",
     "flight_fraction",
     "follow_path",
@@ -58,8 +76,16 @@ __all__ = [
     "ground_penetration",
     "hip_rule",
     "hip_rule_curves",
+    "hold_step",
+    "hold_weights",
+    "init_hold_state",
     "integrate_phase",
+    "integrate_root",
+    "intervals_from_contacts",
+    "intervals_from_model",
     "leg_heights",
+    "lock_crowd",
+    "lock_feet",
     "lowest_points",
     "model_body_map",
     "model_hip_curves",

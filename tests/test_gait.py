@@ -355,7 +355,9 @@ def fitted(name: str):
 def synth(name, **kw):
     model, mot, fp, groins, clear, _, _ = fitted(name)
     T = int(round(SECONDS / mot.frame_time_s))
-    # One static configuration for every call below: one compilation.
+    # One static configuration for every call below: one compilation. These tests are about the
+    # step constraints: foot locking (on by default, tests/test_footlock.py) is off.
+    kw.setdefault("foot_lock", False)
     return G.synthesize_gait(model, mot.skeleton(), T, mot.frame_time_s, feet=fp, groins=groins,
                              clearance=clear, **kw)
 
@@ -561,7 +563,7 @@ def toy_model(seed, scale=0.3):
 def _toy_loss(model, gait, jump, rule="smooth"):
     sk, fp, groins, _ = toy()
     r = G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins, gait=gait, jump=jump,
-                          rule=rule, num_cycle_samples=8)
+                          rule=rule, num_cycle_samples=8, foot_lock=False)
     return jnp.sum(r.root_position) + jnp.sum(r.hip.lift) + jnp.sum(r.lowest)
 
 
@@ -613,7 +615,7 @@ def test_vmap_over_characters_equals_one_by_one():
 
     def one(m, g):
         return G.synthesize_gait(m, sk, 12, 1 / 30, feet=fp, groins=groins, gait=g, jump=1.0,
-                                 num_cycle_samples=8)
+                                 num_cycle_samples=8, foot_lock=False)
 
     batched = jax.vmap(one)(stacked, gaits)
     # XLA:GPU orders the batched float32 sums differently: measured on an H100, 1.7e-5 relative

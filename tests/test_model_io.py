@@ -551,7 +551,7 @@ def test_body_map_travels_with_the_model(tmp_path):
     model_io.save_model(path, fit.model, motion=m, body_map=fit.body_map)
     with np.load(path) as z:
         header = json.loads(str(z["header"]))
-    assert header["version"] == model_io.FORMAT_VERSION == 2
+    assert header["version"] == 2 and model_io.FORMAT_VERSION == 3  # 3: with contact intervals
     assert header["body_map"] == fit.body_map.to_dict()
     mf = model_io.load_model(path)
     assert mf.stored_body_map is not None and fields(mf.body_map) == fields(fit.body_map)
@@ -574,3 +574,28 @@ def test_body_map_travels_with_the_model(tmp_path):
     with pytest.raises(model_io.ModelFileError, match="bad body_map record"):
         model_io.load_model(bad)
     assert issubclass(BodyMapError, UserError)
+
+
+def test_contact_intervals_travel_with_the_model(tmp_path):
+    from fourierjax.errors import UserError
+    from fourierjax.motion import fit_motions
+
+    m = data.load("07_01")[1:160]
+    fit = fit_motions([m], 2)[0]
+    iv = np.array([[0.1, 3.9], [3.2, 7.0]])  # 7.0 rad is stored on [0, 2 pi)
+    path = tmp_path / "m.npz"
+    model_io.save_model(path, fit.model, motion=m, body_map=fit.body_map, contact_intervals=iv)
+    with np.load(path) as z:
+        header = json.loads(str(z["header"]))
+    assert header["version"] == model_io.FORMAT_VERSION == 3
+    mf = model_io.load_model(path)
+    np.testing.assert_allclose(mf.contact_intervals, np.mod(iv, 2 * np.pi))
+    # Older files (no intervals) still load, without them.
+    model_io.save_model(tmp_path / "v2.npz", fit.model, motion=m, body_map=fit.body_map)
+    assert model_io.load_model(tmp_path / "v2.npz").contact_intervals is None
+    with pytest.raises(UserError, match="contact_intervals"):
+        model_io.save_model(tmp_path / "x.npz", fit.model, motion=m, contact_intervals=[1.0, 2.0])
+    arrays = {k: v for k, v in np.load(path).items() if k != "header"}
+    _write(tmp_path / "bad.npz", dict(header, contact_intervals=[[0.0, "a"], [1.0, 2.0]]), **arrays)
+    with pytest.raises(model_io.ModelFileError, match="contact_intervals"):
+        model_io.load_model(tmp_path / "bad.npz")

@@ -121,3 +121,52 @@ def estimate_sole_clearance(foot_local: Float[ArrayLike, "K 2 P 3"], *, up_axis:
     c = jnp.nanmedian(vals, axis=0)
     c = jnp.where(jnp.isnan(c), 0.0, c)
     return c - jnp.min(c, axis=-1, keepdims=True)
+
+
+def contact_skating(
+    positions: Float[ArrayLike, "T 2 P 3"],
+    frame_time_s: float,
+    *,
+    body_map,
+    floor: Float[ArrayLike, "*#T #2 #P"] | None = None,
+    height_fraction: float = 0.02,
+) -> SkatingStats:
+    """Foot skating as issue 21 defines it: horizontal speed of foot points in contact.
+
+    A foot point (both feet, every point) is in contact on a frame when it is within
+    `height_fraction` of the body height (`body_map.height`) of its floor; its skating there is
+    its horizontal speed (central differences). Lift-off and landing above that band do not
+    count, so a planted foot reads ~0 and a sliding one its speed. The same rule measures a
+    capture and a synthesis, so the two can be set side by side.
+
+    Arguments:
+        positions: `[T, 2, P, 3]` world foot points (left, right; the body map's feet), or
+            `[T, J + E, 3]` joint then End-Site positions (the body map's foot points are taken).
+        frame_time_s: seconds per frame.
+        body_map: the skeleton's `body.BodyMap` (feet, up axis, height).
+        floor: floor height under each point, broadcastable to `[T, 2, P]`; default each point's
+            own 5th-percentile height over the frames (its resting height).
+        height_fraction: the contact band, a fraction of the body height.
+
+    Returns:
+        `SkatingStats` (file units / s; `contact_fraction` of point-frames in contact).
+    """
+    from fourierjax.contacts import point_speeds
+
+    p = jnp.asarray(positions)
+    if p.ndim == 3:
+        p = p[:, jnp.asarray([body_map.left.foot_points, body_map.right.foot_points])]
+    if p.ndim != 4 or p.shape[1] != 2 or p.shape[-1] != 3 or p.shape[0] < 2:
+        from fourierjax.errors import UserError
+
+        raise UserError(f"contact_skating: `positions` must be [T >= 2, 2, P, 3] or [T, J + E, 3], got {p.shape}")
+    up = int(body_map.up_axis)
+    y = p[..., up] * body_map.up_sign
+    base = jnp.percentile(y, 5.0, axis=0)[None] if floor is None else jnp.asarray(floor, y.dtype)
+    base = jnp.broadcast_to(base, y.shape)
+    on = (y - base) < height_fraction * float(body_map.height)
+    v = point_speeds(p, frame_time_s, up_axis=up)
+    n = jnp.maximum(jnp.sum(on), 1)
+    mean = jnp.sum(jnp.where(on, v, 0.0)) / n
+    return SkatingStats(mean_speed=mean, mean_per_frame=mean * frame_time_s,
+                        max_speed=jnp.max(jnp.where(on, v, 0.0)), contact_fraction=jnp.mean(on))

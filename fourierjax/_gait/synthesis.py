@@ -149,6 +149,8 @@ def synthesize_gait(
     temperature: Float[ArrayLike, ""] | None = None,
     num_cycle_samples: int = 64,
     up_axis: int | None = None,
+    foot_lock: bool = True,
+    contact_intervals: Float[ArrayLike, "2 2"] | None = None,
 ) -> GaitResult:
     """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
 
@@ -185,6 +187,11 @@ def synthesize_gait(
         num_cycle_samples: phases of the cycle over which `Lmax` is taken.
         up_axis: index of the up axis; default the body map's (Y, 1, when `feet` and
             `groins` are given without a map).
+        foot_lock: plant the feet (`lock_feet`, two-bone leg IK on the synthesized frames; on by
+            default). `foot_lock=False` gives the frames of the step constraints alone.
+        contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
+            with the model by `fourierjax fit`); default estimated from the model's cycle
+            (a concrete model; under vmap or grad pass them, and `body_map`).
 
     Returns:
         A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
@@ -238,7 +245,7 @@ def synthesize_gait(
     speed = jnp.broadcast_to(speed, (num_frames,))
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
     t_eff = ticks * dt
-    return _synthesize_gait(
+    result = _synthesize_gait(
         model, skeleton, clearance,
         jnp.asarray(step, dtype), speed, t_eff, jnp.asarray(gait, dtype),
         jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
@@ -247,6 +254,40 @@ def synthesize_gait(
         num_frames=num_frames, feet=feet, groins=groins, pelvis=pelvis, rule=rule,
         num_cycle_samples=num_cycle_samples, up_axis=int(up_axis),
     )
+    if not foot_lock:
+        return result
+    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals)
+
+
+def _foot_lock(where, result, model, skeleton, body_map, contact_intervals):
+    from fourierjax._gait.common import model_body_map
+    from fourierjax._gait.footlock import contact_weights, intervals_from_model
+
+    traced = isinstance(jnp.asarray(model.offset), jax.core.Tracer)
+    if body_map is None:
+        if traced:
+            raise UserError(f"{where}: foot locking under jit, vmap or grad needs `body_map=` (or foot_lock=False)")
+        body_map = model_body_map(model, skeleton)
+    if contact_intervals is None:
+        if traced:
+            raise UserError(f"{where}: foot locking under jit, vmap or grad needs `contact_intervals=` "
+                            "(gait.contact_intervals of the concrete model), or foot_lock=False")
+        contact_intervals = intervals_from_model(model, skeleton, body_map=body_map)
+    iv = jnp.asarray(contact_intervals, result.features.dtype)
+    if iv.shape != (2, 2):
+        raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
+    return _locked_result(result, skeleton, contact_weights(result.phase, iv), body_map=body_map,
+                          representation=model.representation)
+
+
+@filter_jit
+def _locked_result(result, skeleton, weights, *, body_map, representation):
+    from fourierjax._gait.footlock import lock_feet
+
+    feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
+                            root_position=result.root_position, clearance=result.clearance, return_feet=True)
+    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
+    return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
 
 
 @filter_jit

@@ -15,11 +15,10 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
         "step constraints (Unuma 1995 §3.1)",
         "The defaults reproduce the model's own joint angles; with root motion (the default) "
         "the root height comes from the hip-height rule and its path from the feet on the "
-        "ground: the foot point carrying the body stays put, and slides only briefly where "
-        "the support hands over (heel to toe, foot to foot). The summary's foot skating is the "
-        "mean horizontal speed of foot points within 0.5 units of the floor, which counts "
-        "feet lifting off and landing too: CMU 07_01 synthesized 7.7 units/s, the capture "
-        "itself 9.7.",
+        "ground; with foot locking (the default) the feet are then planted where they land "
+        "(two-bone leg IK). The summary's foot skating is the mean horizontal speed of foot "
+        "points within 2% of the body height of the floor, for the synthesized motion and the "
+        "source clip side by side.",
     )
     g.add_argument("--step", type=float, default=1.0, metavar="S",
                    help="scale of every harmonic amplitude A_n, n >= 1 (step length; default 1)")
@@ -45,6 +44,7 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
                    help="root height from the hip rule and root path from the stance feet "
                    "(default on); --no-root-motion keeps the model's own root channels")
     add_path_argument(g)
+    add_foot_lock_arguments(g)
 
 
 def add_path_argument(group) -> None:
@@ -120,6 +120,13 @@ def path_motion(args, template, result, channel_names, frame_time_s, bmap):
     return grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
 
 
+def add_foot_lock_arguments(group) -> None:
+    """Add `--foot-lock/--no-foot-lock` (issue 21) to the step-constraint group."""
+    group.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=True,
+                       help="plant the feet where they land (two-bone leg IK, heel-to-toe roll; "
+                       "default on); --no-foot-lock keeps the step constraints' frames")
+
+
 def _check(args) -> None:
     from fourierjax.errors import UserError
 
@@ -147,7 +154,25 @@ def body_map_for(model, template, body_map=None, path=None):
     return gait.model_body_map(model, template.skeleton(), overrides=path)
 
 
-def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body_map=None):
+def skating_summary(result, frame_time_s: float, bmap, source=None) -> str:
+    """The summary's foot skating (issue 21's metric: horizontal speed of foot points within 2% of
+    the body height of the floor), of the synthesized motion and of `source` (the fitted frames of
+    the source clip, a `Motion`, or None when it is not at hand), side by side."""
+    from fourierjax import gait
+
+    ours = float(gait.contact_skating(result.foot_positions, frame_time_s, body_map=bmap).mean_speed)
+    text = f"foot skating {ours:.2f} units/s"
+    if source is None:
+        return text + " (source clip not found: not compared)"
+    from fourierjax.motion import foot_positions_of
+
+    theirs = float(gait.contact_skating(foot_positions_of(source, body_map=bmap), source.frame_time_s,
+                                        body_map=bmap).mean_speed)
+    return text + f" against {theirs:.2f} units/s in the source clip"
+
+
+def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body_map=None, *,
+               contact_intervals=None, source=None):
     """Synthesize `num_frames` under the step constraints, on any rig the body map understands.
 
     Arguments:
@@ -158,6 +183,8 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         frame_time_s: seconds per frame.
         body_map: a `body.BodyMap` of the skeleton (e.g. stored in the model file); default the
             map of the model's own poses (`--body-map FILE` overrides its fields).
+        contact_intervals: `[2, 2]` contact phases stored with the model (None: estimated).
+        source: the fitted frames of the source clip (a `Motion`) for the skating comparison.
 
     Returns:
         `(motion, summary line)`.
@@ -172,27 +199,30 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
     result = gait.synthesize_gait(
         model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
-        root_motion=args.root_motion,
+        root_motion=args.root_motion, foot_lock=getattr(args, "foot_lock", True),
+        contact_intervals=contact_intervals,
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model).
     motion = gait_motion(template, result, model.channel_names, frame_time_s, body_map=bmap)
     bent = path_motion(args, template, result, model.channel_names, frame_time_s, bmap)
     motion = motion if bent is None else bent
-    skate = gait.foot_skating(result.foot_positions, frame_time_s, result.clearance[None])
     advance = np.array(result.root_position[-1] - result.root_position[0])
     advance[bmap.up_axis] = 0.0
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))
         # Both feet off the ground (the hip rule puts the ground at height 0).
-        flight = float(gait.flight_fraction(result.lowest))
+        # The hip rule's flight frames (N(t) > gait): the foot lock may lift a foot a leg
+        # cannot reach, which is not flight.
+        flight = float(np.mean(np.asarray(result.hip.flight) > 0.5))
         flight_text = (f"flight {100 * flight:.1f}% of frames (N(t) peaks at {n_peak:.3f}: "
                        "--gait below that gives flight)")
     else:  # the model's own root height: no ground is enforced, so no flight to count
         flight_text = "flight not measured (the model's own root height)"
     summary = (
         f"step constraints: hip rule {args.hip_rule}, root motion "
-        f"{'on' if args.root_motion else 'off'}; {flight_text}, foot skating "
-        f"{float(skate.mean_speed):.2f} units/s, root advance "
-        f"{float(np.linalg.norm(advance)):.1f} units"
+        f"{'on' if args.root_motion else 'off'}; {flight_text}, "
+        f"{skating_summary(result, frame_time_s, bmap, source)}, root advance "
+        f"{float(np.linalg.norm(advance)):.1f} units, foot lock "
+        f"{'on' if getattr(args, 'foot_lock', True) else 'off'}"
     )
     return motion, summary

@@ -200,8 +200,11 @@ def _row(args, text, path, motion, skip, fit, out, to_folder, version, model_io)
         if to_folder:
             out.mkdir(parents=True, exist_ok=True)
         prov = dict(row, fourierjax_version=version, command="fit")
+        from fourierjax import gait
+
         model_io.save_model(target, fit.model, motion=motion, provenance=prov,
-                            alignment=fit.alignment, body_map=fit.body_map)
+                            alignment=fit.alignment, body_map=fit.body_map,
+                            contact_intervals=gait.fit_contact_intervals(fit, motion))
         row["model"] = str(target)
     return row
 

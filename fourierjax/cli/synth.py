@@ -110,9 +110,34 @@ def run(args: argparse.Namespace) -> int:
                             model.num_harmonics)
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
-    motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None))
+    intervals, source = _foot_lock_inputs(mf)
+    motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None),
+                                      contact_intervals=intervals, source=source)
     write_bvh(motion, out)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
     print(gait_summary)
     return 0
+
+
+def _foot_lock_inputs(mf):
+    """(contact intervals stored with the model or None, the fitted frames of the source clip or
+    None): the clip is read again from the path the fit recorded, when it is still there."""
+    intervals = getattr(mf, "contact_intervals", None)
+    prov = getattr(mf, "provenance", None) or {}
+    path = prov.get("path")
+    if not path or not pathlib.Path(path).is_file():
+        return intervals, None
+    from fourierjax.errors import UserError
+    from fourierjax.io.bvh import read_bvh
+
+    try:
+        clip = read_bvh(path)
+    except (UserError, OSError):
+        return intervals, None
+    lo, hi = prov.get("frame_start"), prov.get("frame_stop")
+    if isinstance(lo, int) and isinstance(hi, int) and 0 <= lo < hi <= clip.num_frames and hi - lo >= 2:
+        clip = clip[lo:hi]
+    if tuple(clip.topology.names) != tuple(mf.topology.names):
+        return intervals, None
+    return intervals, clip

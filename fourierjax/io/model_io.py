@@ -21,7 +21,7 @@ from fourierjax.errors import UserError
 from fourierjax.io.atomic import write_bytes_atomic
 
 FORMAT_NAME = "fourierjax.fourier_model"
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3
 CHARACTERISTIC_FORMAT_NAME = "fourierjax.fourier_characteristic"
 CHARACTERISTIC_FORMAT_VERSION = 1
 
@@ -83,6 +83,8 @@ class ModelFile:
     provenance: dict = dataclasses.field(default_factory=dict)
     alignment: str = "none"
     stored_body_map: object | None = None  # fourierjax.body.BodyMap read from the header
+    #: `[2, 2]` (left, right) × (start, end) contact phases in radians (version 3), or None.
+    contact_intervals: np.ndarray | None = None
 
     @functools.cached_property
     def body_map(self):
@@ -330,7 +332,7 @@ def _check_arrays(path: str, header: dict, data: dict, trailing: dict) -> tuple[
 
 
 def save_model(path, model, *, motion=None, provenance: dict | None = None,
-               alignment: str = "none", body_map=None) -> None:
+               alignment: str = "none", body_map=None, contact_intervals=None) -> None:
     """Write one FourierModel (no batch axis) to ``path``, written whole or not at all.
 
     Format ``fourierjax.fourier_model``, version 1: an uncompressed ``.npz`` holding ``header``
@@ -343,7 +345,9 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     skeleton, ``skeleton_offsets [J, 3]`` and ``skeleton_end_site_offsets [E, 3]`` (file units),
     so that ``fourierjax synth`` can write a BVH without the source clip. Version 2 adds
     ``body_map`` to the header (`fourierjax.body.BodyMap.to_dict`, joints by name); a file
-    without a body map is written as version 1, which older readers still read.
+    without a body map is written as version 1, which older readers still read. Version 3 adds
+    ``contact_intervals`` (``[[left start, left end], [right start, right end]]``, radians of the
+    cycle; `fourierjax.gait.contact_intervals`); a file without them keeps version 1 or 2.
 
     Arguments:
         path: output file (written as given; conventionally ``*.npz``).
@@ -353,6 +357,7 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         alignment: the phase-alignment event name.
         body_map: the skeleton's `fourierjax.body.BodyMap` (e.g. ``ClipFit.body_map``), stored
             with ``motion``'s skeleton, or None.
+        contact_intervals: ``[2, 2]`` contact phases of the feet (radians), or None.
 
     Raises:
         UserError, before anything is written, for what `load_model` would refuse.
@@ -365,7 +370,10 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
                         f"number, bool, None, NumPy arrays): {err}") from None
     if body_map is not None and motion is None:
         raise UserError("save_model: `body_map` needs `motion` (the skeleton it names)")
-    version = FORMAT_VERSION if body_map is not None else 1
+    version = 2 if body_map is not None else 1
+    intervals = _contact_intervals(os.fspath(path), contact_intervals, UserError)
+    if intervals is not None:
+        version = FORMAT_VERSION
     header = _header(FORMAT_NAME, version, model, "model", skeleton=None,
                      provenance=provenance, alignment=alignment)
     arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
@@ -393,7 +401,25 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
             if tuple(body_map.joint_names) != tuple(topo.names):
                 raise UserError("save_model: `body_map` was made for another skeleton than `motion`'s")
             header["body_map"] = body_map.to_dict()
+    if intervals is not None:
+        header["contact_intervals"] = intervals.tolist()
     _write_archive(path, header, arrays)
+
+
+def _contact_intervals(path: str, value, error):
+    """``value`` as a finite ``[2, 2]`` float64 array (None stays None), else ``error``."""
+    if value is None:
+        return None
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (2, 2) or not np.all(np.isfinite(a)):
+        what = "contact_intervals must be 2 x 2 finite numbers (left, right) x (start, end) radians"
+        if error is UserError:
+            raise UserError(f"save_model: {what}; not written to {path}")
+        raise error(path, what)
+    return np.mod(a, 2 * np.pi)
 
 
 def load_model(path) -> ModelFile:
@@ -472,7 +498,8 @@ def load_model(path) -> ModelFile:
             body_map = body_map_from_dict(stored, topology)
         except (BodyMapError, KeyError, TypeError, ValueError) as err:
             raise ModelFileError(path, f"bad body_map record: {err}") from None
-    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment, body_map)
+    intervals = _contact_intervals(path, header.get("contact_intervals"), ModelFileError)
+    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment, body_map, intervals)
 
 
 _EULER_NAME = re.compile(r"\.[XYZ]rotation$")

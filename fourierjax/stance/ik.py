@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._legik import sphere_circle_point
 from fourierjax._math import safe_sqrt
 from fourierjax.errors import UserError
 from fourierjax.stance import _util as u
@@ -186,25 +187,15 @@ def free_hip_position(
     moves the point to the closest point of the circle. Both constructions give a point on
     the same ray from the circle's centre, the in-plane part of the desired hip vector, so
     the closest circle point is `centre + radius * normalize(in-plane part)`, which we use in
-    both cases (it has no switch and stays differentiable). `tests/test_stance_ik.py` checks
-    it against a literal two-case implementation.
+    both cases (it has no switch and stays differentiable): `_legik.sphere_circle_point`, the
+    two-bone IK that the gait foot lock shares. `tests/test_stance_ik.py` checks it against a
+    literal two-case implementation.
 
     Returns:
         `(free_hip [3], gap)` where `gap > 0` (m) when the circle does not exist (the foot
         cannot be reached; the closest point is returned).
     """
-    A = free_ankle - root_hip
-    nA = u.safe_norm(A)
-    Ahat = u.safe_normalize(A, -_EY)
-    W, C = hip_width, free_leg_length
-    a = (W * W - C * C + nA * nA) / (2.0 * jnp.maximum(nA, 1e-9))
-    r = safe_sqrt(W * W - a * a)
-    a_clamped = u.clip(a, -W, W)
-    gap = jnp.maximum(nA - (W + C), 0.0) + jnp.maximum(jnp.abs(W - C) - nA, 0.0)
-    centre = root_hip + a_clamped * Ahat
-    inplane = hip_dir_desired - u.dot(hip_dir_desired, Ahat) * Ahat
-    fallback = u.safe_normalize(u.cross(Ahat, _EY), _EZ)
-    return centre + r * u.safe_normalize(inplane, fallback), gap
+    return sphere_circle_point(root_hip, free_ankle, hip_width, free_leg_length, hip_dir_desired)
 
 
 def lower_body_ik(

@@ -1,0 +1,562 @@
+"""Foot locking: contact intervals of the gait cycle, stance weights, planted feet by two-bone leg IK."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from fourierjax import rotations
+from fourierjax._legik import quat_between, safe_norm, soft_reach, sphere_circle_point
+from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from fourierjax.body import BodyMap
+    from fourierjax.fourier import FourierModel
+    from fourierjax.skeleton import Skeleton
+
+TWO_PI = 2.0 * math.pi
+#: Leg-reach easing (fractions of thigh + shin): from where, and towards what (`_legik.soft_reach`).
+REACH_KNEE, REACH_LIMIT = 0.9, 0.99
+#: Default blend of the stance weights, radians of the cycle on each side of a contact (6%).
+BLEND_RAD = 0.06 * TWO_PI
+#: Contact: a foot point within this fraction of the body height of its floor (issue 21).
+CONTACT_HEIGHT_FRACTION = 0.02
+
+
+def _smoothstep(x):
+    x = jnp.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def contact_weights(
+    phase: Float[ArrayLike, " T"], intervals: Float[ArrayLike, "2 2"], *, blend: Float[ArrayLike, ""] = BLEND_RAD
+) -> Float[Array, "T 2"]:
+    """Smooth stance weights of both feet from the cycle phase.
+
+    1 inside each foot's contact interval `[start, end]` (circular), easing to 0 (smoothstep)
+    over `blend` radians before the start and after the end: the lock takes hold while the foot
+    is still descending and lets go as it lifts.
+
+    Arguments:
+        phase: `[T]` cycle phase of each frame (radians, any branch).
+        intervals: `[2, 2]` (left, right) × (start, end) phases (radians; `contact_intervals`).
+        blend: radians of the cycle over which a weight eases in and out (> 0).
+
+    Returns:
+        `[T, 2]` weights in [0, 1] (left, right). Pure jnp: jit, vmap and grad (in `phase`).
+    """
+    phase = jnp.asarray(phase)
+    iv = jnp.asarray(intervals, phase.dtype if jnp.issubdtype(phase.dtype, jnp.floating) else None)
+    if iv.shape != (2, 2):
+        raise UserError(f"contact_weights: `intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
+    start, end = iv[:, 0], iv[:, 1]
+    length = jnp.mod(end - start, TWO_PI)
+    u = jnp.mod(phase[:, None] - start[None, :], TWO_PI)
+    b = jnp.asarray(blend, u.dtype)
+    ramp_out = _smoothstep(1.0 - (u - length[None]) / b)
+    ramp_in = _smoothstep(1.0 - (TWO_PI - u) / b)
+    return jnp.where(u <= length[None], 1.0, jnp.maximum(ramp_out, ramp_in))
+
+
+# ------------------------------------------------------------------------- contact intervals
+
+
+def _circular_mean(th: np.ndarray) -> float:
+    return float(np.mod(np.arctan2(np.sin(th).sum(), np.cos(th).sum()), TWO_PI))
+
+
+def _longest_circular_run(on: np.ndarray) -> tuple[int, int] | None:
+    """(first, last) sample of the longest run of True in a circular boolean array."""
+    K = len(on)
+    if on.all():
+        return None
+    if not on.any():
+        return None
+    shift = int(np.argmin(on))  # start the scan at a False sample: no run wraps
+    rolled = np.roll(on, -shift)
+    best, cur, best_end = 0, 0, 0
+    for k in range(K):
+        cur = cur + 1 if rolled[k] else 0
+        if cur > best:
+            best, best_end = cur, k
+    first = (best_end - best + 1 + shift) % K
+    return first, (best_end + shift) % K
+
+
+def intervals_from_contacts(
+    contacts: Bool[ArrayLike, "F 2"], omega_rad_s: float, frame_time_s: float, phase_shift: float = 0.0
+) -> Float[np.ndarray, "2 2"] | None:
+    """Contact intervals learned from a fitted clip's contacts (NumPy).
+
+    Frame `k` of the fitted frames has aligned phase `omega k dt - phase_shift`
+    (`motion.ClipFit`); each foot's start (end) is the circular mean of its touch-down
+    (lift-off) phases.
+
+    Arguments:
+        contacts: `bool [F, 2]` (left, right) of the fitted frames (`motion.foot_contacts_of`).
+        omega_rad_s: the model's fundamental; frame_time_s: the clip's.
+        phase_shift: `ClipFit.phase_shift` (radians).
+
+    Returns:
+        `[2, 2]` (start, end) phases in [0, 2π), or None when a foot never both lands and lifts.
+    """
+    c = np.asarray(contacts, bool)
+    if c.ndim != 2 or c.shape[1] != 2 or len(c) < 3:
+        return None
+    th = float(omega_rad_s) * np.arange(len(c)) * float(frame_time_s) - float(phase_shift)
+    out = np.zeros((2, 2))
+    for f in range(2):
+        d = np.diff(c[:, f].astype(np.int8))
+        on, off = np.flatnonzero(d == 1) + 1, np.flatnonzero(d == -1) + 1
+        if len(on) == 0 or len(off) == 0:
+            return None
+        out[f] = _circular_mean(th[on]), _circular_mean(th[off])
+    return out
+
+
+def _cycle_feet(model, skeleton, body_map, num_samples):
+    from fourierjax._gait.common import pose_points
+    from fourierjax.fourier import synthesize_phase
+
+    feet = body_map.left.foot_points, body_map.right.foot_points
+    if len(feet[0]) != len(feet[1]):
+        raise UserError("contact_intervals: both feet must have the same number of points")
+    idx = jnp.asarray(feet)
+    grid = jnp.linspace(0.0, TWO_PI, num_samples, endpoint=False, dtype=jnp.asarray(model.offset).dtype)
+    feats = synthesize_phase(model, grid)
+    pts, _ = jax.vmap(lambda f: pose_points(skeleton, model.representation, idx, (body_map.pelvis,), f,
+                                            body_map.pelvis))(feats)
+    return np.asarray(grid), np.asarray(pts, np.float64), np.asarray(feats[:, :2], np.float64)
+
+
+def intervals_from_model(
+    model: FourierModel, skeleton: Skeleton, *, body_map: BodyMap, num_samples: int = 128
+) -> Float[np.ndarray, "2 2"]:
+    """Contact intervals estimated from one cycle of the model (NumPy; a concrete model).
+
+    A foot is in contact where its lowest point is low (within 2% of the body height of the
+    lower foot's) and slow (world horizontal speed, the pelvis-frame velocity plus the model's
+    own root velocity, under 30% of the mean root speed); its interval is the longest such run.
+
+    Arguments:
+        model: a `FourierModel`; skeleton: its `Skeleton`; body_map: the skeleton's.
+        num_samples: phases of the cycle.
+
+    Returns:
+        `[2, 2]` (start, end) phases in [0, 2π) (left, right).
+    """
+    model = jax.tree_util.tree_map(jnp.asarray, model)  # NumPy float64 leaves as JAX holds them
+    grid, pts, root_v = _cycle_feet(model, skeleton, body_map, num_samples)
+    up = int(body_map.up_axis)
+    horiz = [k for k in range(3) if k != up]
+    K = num_samples
+    omega = float(np.asarray(model.omega))
+    dt = TWO_PI / K / omega
+    y = pts[..., up] * body_map.up_sign
+    low = y.min(axis=-1)  # [K, 2]
+    thr = CONTACT_HEIGHT_FRACTION * float(body_map.height)
+    is_low = low - low.min(axis=-1, keepdims=True) <= thr
+    v_local = (np.roll(pts, -1, 0) - np.roll(pts, 1, 0))[..., horiz] / (2 * dt)  # [K, 2, P, 2]
+    v_world = v_local + root_v[:, None, None, :]
+    speed = np.linalg.norm(v_world, axis=-1).min(axis=-1)  # the foot's slowest point
+    mean_root = float(np.mean(np.linalg.norm(root_v, axis=-1)))
+    is_slow = speed <= 0.3 * mean_root + 1e-6 * float(body_map.leg_length) * omega
+    out = np.zeros((2, 2))
+    for f in range(2):
+        run = _longest_circular_run(is_low[:, f] & is_slow[:, f])
+        if run is None:  # never (or always) low and slow: the phases where it is the lower foot
+            run = _longest_circular_run(low[:, f] <= low[:, 1 - f])
+        if run is None:
+            out[f] = 0.0, TWO_PI - 1e-3
+            continue
+        first, last = run
+        out[f] = grid[first], np.mod(grid[last] + TWO_PI / K, TWO_PI)
+    return out
+
+
+def contact_intervals(
+    model: FourierModel | None = None,
+    skeleton: Skeleton | None = None,
+    *,
+    body_map: BodyMap | None = None,
+    contacts: Bool[ArrayLike, "F 2"] | None = None,
+    frame_time_s: float | None = None,
+    phase_shift: float = 0.0,
+    num_samples: int = 128,
+) -> Float[Array, "2 2"]:
+    """Per foot, the cycle phases where contact starts and ends.
+
+    Learned from a fitted clip's contacts when `contacts` are given (`intervals_from_contacts`:
+    the fitted frames' `motion.foot_contacts_of`, with `ClipFit.phase_shift`); estimated from
+    the model's own cycle otherwise (`intervals_from_model`: old model files, interpolated or
+    transitioned models), or when the clip's contacts do not show both feet landing and lifting.
+
+    Arguments:
+        model: the `FourierModel` (its ω phases the clip's frames; its cycle is the fallback).
+        skeleton: its `Skeleton` (for the estimate).
+        body_map: the skeleton's `BodyMap` (feet, up axis, height; for the estimate).
+        contacts: `bool [F, 2]` contacts of the fitted frames, or None.
+        frame_time_s: seconds per frame of `contacts`.
+        phase_shift: the fit's phase alignment (radians).
+        num_samples: phases of the cycle for the estimate.
+
+    Returns:
+        `[2, 2]` (left, right) × (start, end) radians in [0, 2π).
+    """
+    if model is None:
+        raise UserError("contact_intervals: pass the model")
+    if contacts is not None:
+        if frame_time_s is None:
+            raise UserError("contact_intervals: `contacts` need `frame_time_s`")
+        iv = intervals_from_contacts(contacts, float(np.asarray(model.omega)), frame_time_s, phase_shift)
+        if iv is not None:
+            return jnp.asarray(iv, jnp.asarray(model.offset).dtype)
+    if skeleton is None or body_map is None:
+        raise UserError("contact_intervals: without the clip's contacts, pass `skeleton` and `body_map` "
+                        "(the estimate from the model's cycle)")
+    iv = intervals_from_model(model, skeleton, body_map=body_map, num_samples=num_samples)
+    return jnp.asarray(iv, jnp.asarray(model.offset).dtype)
+
+
+# ------------------------------------------------------------------------------- foot locking
+
+
+def _leg_columns(skeleton, representation, body_map):
+    """Static: per leg, (joint, first feature column, euler order or "expmap") of hip, knee, ankle."""
+    from fourierjax.features import channel_names_for
+
+    names = channel_names_for(skeleton.topology, representation)
+    first: dict[str, tuple[int, str]] = {}
+    for c, n in enumerate(names):
+        joint, _, chan = n.rpartition(".")
+        if not joint or joint == "root":
+            continue
+        if joint not in first:
+            first[joint] = (c, "")
+        if representation == "euler":
+            first[joint] = (first[joint][0], first[joint][1] + chan[0])
+    topo_names = skeleton.topology.names
+    legs = []
+    for leg in (body_map.left, body_map.right):
+        joints = []
+        for j in (leg.hip, leg.knee, leg.ankle):
+            name = topo_names[j]
+            if name not in first:
+                raise UserError(f"lock_feet: joint {name!r} (a leg joint of the body map) has no rotation "
+                                "channels to lock the foot with")
+            col, order = first[name]
+            joints.append((int(j), col, order if representation == "euler" else "expmap"))
+        legs.append(tuple(joints))
+    return tuple(legs)
+
+
+def _nearest_euler(new, old, order):
+    from fourierjax._math import wrap_angle
+
+    a = old + wrap_angle(new - old)
+    twin = rotations.euler_twin(new, order)
+    b = old + wrap_angle(twin - old)
+    pick = jnp.sum((a - old) ** 2, -1, keepdims=True) <= jnp.sum((b - old) ** 2, -1, keepdims=True)
+    return jnp.where(pick, a, b)
+
+
+def _nearest_expmap(new, old):
+    th = safe_norm(new)[..., None]
+    axis = new / jnp.maximum(th, 1e-12)
+    cands = jnp.stack([new + k * TWO_PI * axis for k in (-1.0, 0.0, 1.0)], 0)
+    d = jnp.sum((cands - old[None]) ** 2, -1)
+    k = jnp.argmin(d, 0)
+    return jnp.take_along_axis(cands, k[None, ..., None], 0)[0]
+
+
+def hold_weights(
+    heights: Float[Array, "*B 2 P"], contact: Float[Array, "*B 2"], band: Float[ArrayLike, ""]
+) -> Float[Array, "*B 2 P"]:
+    """How firmly each foot point is held: 1 within `band` of its floor, easing to 0 at 1.5
+    times that; in stance (`contact`, the phase's weight) from twice the band down, so the lock
+    takes hold while the foot descends. Heel-to-toe roll follows: the heel is held while
+    it is down, the toe while it is.
+
+    Arguments:
+        heights: `[..., 2, P]` height of each foot point above its floor (file units).
+        contact: `[..., 2]` stance weights in [0, 1].
+        band: the contact band (file units).
+
+    Returns:
+        `[..., 2, P]` weights in [0, 1].
+    """
+    low = _smoothstep((1.5 * band - heights) / (0.5 * band))
+    wide = _smoothstep((2.0 * band - heights) / band)
+    return jnp.maximum(low, contact[..., None] * wide)
+
+
+def hold_step(
+    state: tuple[Float[Array, "*B 2 P 3"], Float[Array, "*B 2 P"]],
+    points: Float[Array, "*B 2 P 3"],
+    weights: Float[Array, "*B 2 P"],
+    horizontal: Float[Array, " 3"],
+) -> tuple[tuple[Float[Array, "*B 2 P 3"], Float[Array, "*B 2 P"]], Float[Array, "*B 2 3"]]:
+    """One frame of foot holding: the horizontal shift of each foot that keeps its held points put.
+
+    A point is planted where it is (after the shift) on the frame its weight rises above 0 and
+    released when it falls to 0; the shift is the weighted mean of the held points' errors, times
+    the largest weight (so it eases in and out). The state is per point: its planted position
+    and whether it is planted.
+
+    Arguments:
+        state: `(targets [..., 2, P, 3], planted [..., 2, P])` from the previous frame
+            (`init_hold_state`).
+        points: `[..., 2, P, 3]` this frame's foot points before the lock.
+        weights: `[..., 2, P]` from `hold_weights`.
+        horizontal: `[3]` 1 on the ground-plane axes, 0 on the up axis.
+
+    Returns:
+        `(state, shift [..., 2, 3])`; add the shift to the whole foot.
+    """
+    targets, planted = state
+    held = weights * planted
+    err = (targets - points) * jnp.reshape(horizontal, (1,) * (points.ndim - 1) + (3,))
+    total = jnp.sum(held, -1, keepdims=True)
+    mean = jnp.sum(held[..., None] * err, -2) / jnp.maximum(total, 1e-9)
+    shift = mean * jnp.max(held, -1, keepdims=True)
+    landed = (weights > 0) & (planted <= 0)
+    moved = points + shift[..., None, :]
+    targets = jnp.where(landed[..., None], moved, targets)
+    planted = jnp.where(weights > 0, 1.0, 0.0).astype(planted.dtype)
+    return (targets, planted), shift
+
+
+def init_hold_state(points: Float[Array, "*B 2 P 3"]) -> tuple[Float[Array, "*B 2 P 3"], Float[Array, "*B 2 P"]]:
+    """The state of `hold_step` before the first frame: nothing planted."""
+    return jnp.zeros_like(points), jnp.zeros(points.shape[:-1], points.dtype)
+
+
+def _next(mask, idx, T):
+    return jax.lax.cummin(jnp.where(mask, idx, T), axis=0, reverse=True)
+
+
+def _plant(points, lam, low):
+    """Horizontal shift `[T, 3]` holding one foot's points where they land (offline: the
+    landing of a contact is known before it happens, so a descending foot is drawn to it).
+
+    A contact is a run of frames with a point down (`low`: the points that the skating metric
+    counts). Every point is held at its place
+    in mid-contact while its weight lasts: the heel while it is down, then the toe (heel-to-toe
+    roll); the shift is the weighted mean of the held points' errors."""
+    T, P = lam.shape
+    idx = jnp.arange(T)
+    on = jnp.any(low, -1)
+    prev_on = jnp.concatenate([jnp.zeros((1,), bool), on[:-1]])
+    next_on = jnp.concatenate([on[1:], jnp.zeros((1,), bool)])
+    seg_start = jax.lax.cummax(jnp.where(on & ~prev_on, idx, -1), axis=0)
+    seg_start = jnp.clip(seg_start, 0, T - 1)
+    # The planted place: the foot's pose in the middle of the frames of the contact where it
+    # is down (mid-stance, the foot flat); segments are numbered by their first frame.
+    down = jnp.any(low, -1) & on
+    first = jax.ops.segment_min(jnp.where(down, idx, T), seg_start, num_segments=T)[seg_start]
+    last = jax.ops.segment_max(jnp.where(down, idx, -1), seg_start, num_segments=T)[seg_start]
+    s = jnp.where(first < T, (first + last) // 2, seg_start)  # [T]
+    err = points[s] - points
+    total = jnp.sum(lam, -1, keepdims=True)
+    held = jnp.sum(lam[..., None] * err, -2) / jnp.maximum(total, 1e-9)
+    # In the air the shift eases from the last contact's to the next one's (smoothstep over the
+    # swing): no jump at lift-off or landing.
+    last_end = jax.lax.cummax(jnp.where(on & ~next_on, idx, -1), axis=0)
+    next_start = _next(on & ~prev_on, idx, T)
+    prev_shift = held[jnp.clip(last_end, 0, T - 1)]
+    next_shift = held[jnp.clip(next_start, 0, T - 1)]
+    prev_shift = jnp.where((last_end >= 0)[:, None], prev_shift, next_shift)
+    next_shift = jnp.where((next_start < T)[:, None], next_shift, prev_shift)
+    u = _smoothstep((idx - last_end) / jnp.maximum(next_start - last_end, 1))
+    air = prev_shift + u[:, None] * (next_shift - prev_shift)
+    return jnp.where(on[:, None], held, air)
+
+
+def _lock(features, skeleton, contact, root_position, clearance, ground, band, *, representation,
+          body_map, legs):
+    from fourierjax.features import local_pose_from_features
+    from fourierjax.kinematics import forward_kinematics
+
+    up = int(body_map.up_axis)
+    sign = float(body_map.up_sign)
+    pelvis = int(body_map.pelvis)
+    parents = skeleton.topology.parents
+    foot_idx = jnp.asarray([body_map.left.foot_points, body_map.right.foot_points])  # [2, P]
+
+    def fk(f):
+        r = forward_kinematics(skeleton, *local_pose_from_features(skeleton, f, representation, pelvis))
+        return r.rotations, jnp.concatenate([r.positions, r.end_site_positions], 0)
+
+    quats, pts = jax.vmap(fk)(features)
+    pts = pts + root_position[:, None, :]
+    upv = jnp.zeros(3, features.dtype).at[up].set(1.0)
+    feet_pts = pts[:, foot_idx]  # [T, 2, P, 3]
+    rel = sign * feet_pts[..., up] - ground - clearance[None]  # [T, 2, P] above each point's floor
+    lam = hold_weights(rel, contact, band)
+    # Down: within the band; in stance (the phase's weight) also a foot that hovers under twice it.
+    low = (rel <= band) | ((contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True))
+    shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f]) for f in range(2)], 1)
+    shift = shift * (1.0 - upv)[None, None]
+    # Vertically: the foot's lowest point onto the floor while held, never below it.
+    gap = jnp.min(rel, axis=-1)  # [T, 2]
+    W = jnp.max(lam, axis=-1)
+    dy = -gap * jnp.where(gap > 0, W, 1.0)
+    shift = shift + (sign * dy)[..., None] * upv[None, None]
+    out = features
+    feet_out = []
+    for f, ((hip, c_hip, o_hip), (knee, c_knee, o_knee), (ankle, c_ankle, o_ankle)) in enumerate(legs):
+        H, K, A = pts[:, hip], pts[:, knee], pts[:, ankle]
+        P = feet_pts[:, f]
+        G = A + shift[:, f]
+        # Two-bone IK: the knee on the circle of points at thigh length from the hip and shin
+        # length from the goal, on the side it bent to; a goal past reach is eased (no snap).
+        l1, l2 = safe_norm(K - H), safe_norm(A - K)
+        HG = G - H
+        d = safe_norm(HG)
+        G = H + HG * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H)) / jnp.maximum(d, 1e-9))[:, None]
+        K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, K - H)
+        R1 = quat_between(K - H, K2 - H)
+        R2 = quat_between(rotations.quat_apply(R1, A - K), G - K2)
+        qm, qc = rotations.quat_multiply, rotations.quat_conjugate
+        Q = quats
+        q_hip = qm(qc(Q[:, parents[hip]]), qm(R1, Q[:, hip]))
+        q_knee = qm(qc(Q[:, parents[knee]]), qm(qc(R1), qm(R2, qm(R1, Q[:, knee]))))
+        q_ankle = qm(qc(Q[:, parents[ankle]]), qm(qc(R1), qm(qc(R2), Q[:, ankle])))
+        active = (W[:, f] > 0) | (gap[:, f] < 0) | jnp.any(shift[:, f] != 0, -1)
+        for q, col, order in ((q_hip, c_hip, o_hip), (q_knee, c_knee, o_knee), (q_ankle, c_ankle, o_ankle)):
+            old = out[:, col:col + 3]
+            if order == "expmap":
+                new = _nearest_expmap(rotations.expmap_from_quat(q), old)
+            else:
+                new = _nearest_euler(rotations.euler_from_quat(q, order), old, order)
+            out = out.at[:, col:col + 3].set(jnp.where(active[:, None], new, old))
+        # The foot below the ankle keeps its world orientation: its points move with the ankle.
+        feet_out.append(P + jnp.where(active[:, None, None], (G - A)[:, None, :], 0.0))
+    return out, jnp.stack(feet_out, axis=1), lam
+
+
+def lock_feet(
+    features: Float[ArrayLike, "T C"],
+    skeleton: Skeleton,
+    contact: Float[ArrayLike, "T 2"],
+    *,
+    body_map: BodyMap,
+    representation: str,
+    root_position: Float[ArrayLike, "T 3"] | None = None,
+    frame_time_s: float | None = None,
+    clearance: Float[ArrayLike, "2 P"] | None = None,
+    ground: Float[ArrayLike, ""] = 0.0,
+    contact_band: Float[ArrayLike, ""] | None = None,
+    return_feet: bool = False,
+) -> Float[Array, "T C"] | tuple[Float[Array, "T C"], Float[Array, "T 2 P 3"]]:
+    """Planted feet for synthesized feature frames: a post-process by two-bone leg IK.
+
+    Each contact (a run of `contact > 0` of one foot) gets one planted target, where the foot
+    lands (its position at the first frame of full weight). The ankle is held there, then, as
+    the heel lifts, the toe (heel-to-toe roll); the weights blend in and out. The hip stays
+    where the synthesis put it; the knee goes on the circle of valid knee positions on the side
+    it bent to (`_legik.sphere_circle_point`, shared with the stance lower body); goals past the
+    leg's reach are eased short of it, so the knee never straightens fully, never hyperextends
+    and never snaps. The foot keeps its world orientation; its lowest point is put on the floor
+    in contact and is never below it. Frames without contact keep their features exactly.
+
+    Arguments:
+        features: `[T, C]` feature frames (`fourier` layout), the root already grounded
+            (`synthesize_gait`, `ground_features`).
+        skeleton: the `Skeleton`.
+        contact: `[T, 2]` stance weights in [0, 1] (left, right; `contact_weights`).
+        body_map: the skeleton's `BodyMap` (legs, feet, pelvis, up axis, height); static.
+        representation: the features' ("euler" or "expmap"); static.
+        root_position: `[T, 3]` world pelvis positions (`GaitResult.root_position`); default the
+            trapezoid integral of `root.vx, root.vz` (needs `frame_time_s`) at height `root.y`.
+        frame_time_s: seconds per frame (only without `root_position`).
+        clearance: `[2, P]` sole clearances of the foot points (`GaitResult.clearance`); default 0.
+        ground: floor height (file units; the hip rule's ground is 0).
+        contact_band: a foot whose lowest point is within this height (file units) of the floor
+            is held as in contact (weight 1, easing to 0 at twice the height); default 2% of
+            the body height (the skating metric's band).
+        return_feet: also return the locked world foot points `[T, 2, P, 3]`.
+
+    Returns:
+        `[T, C]` features (and the foot points with `return_feet`). Pure: jit, vmap over
+        characters and grad.
+    """
+    features = jnp.asarray(features)
+    if features.ndim != 2 or features.shape[0] < 2:
+        raise UserError(f"lock_feet: `features` must be [T >= 2, C], got shape {features.shape}")
+    T = features.shape[0]
+    contact = jnp.asarray(contact, features.dtype)
+    if contact.shape != (T, 2):
+        raise UserError(f"lock_feet: `contact` must be [T={T}, 2], got {contact.shape}")
+    if tuple(body_map.joint_names) != tuple(skeleton.topology.names):
+        raise UserError("lock_feet: `body_map` was made for another skeleton")
+    P = len(body_map.left.foot_points)
+    if len(body_map.right.foot_points) != P:
+        raise UserError("lock_feet: both feet must have the same number of points")
+    if root_position is None:
+        if frame_time_s is None:
+            raise UserError("lock_feet: pass `root_position` (or `frame_time_s` to integrate the root channels)")
+        root_position = integrate_root(features, frame_time_s, body_map.up_axis)
+    root_position = jnp.asarray(root_position, features.dtype)
+    if root_position.shape != (T, 3):
+        raise UserError(f"lock_feet: `root_position` must be [T={T}, 3], got {root_position.shape}")
+    clearance = jnp.zeros((2, P), features.dtype) if clearance is None else jnp.asarray(clearance, features.dtype)
+    if clearance.shape != (2, P):
+        raise UserError(f"lock_feet: `clearance` must be [2, {P}], got {clearance.shape}")
+    legs = _leg_columns(skeleton, representation, body_map)
+    if contact_band is None:
+        contact_band = CONTACT_HEIGHT_FRACTION * float(body_map.height)
+    out, feet, _ = _lock(features, skeleton, contact, root_position, clearance,
+                         jnp.asarray(ground, features.dtype),
+                         jnp.asarray(contact_band, features.dtype),
+                         representation=representation, body_map=body_map, legs=legs)
+    return (out, feet) if return_feet else out
+
+
+def integrate_root(features: Float[ArrayLike, "T C"], frame_time_s: float, up_axis: int = 1) -> Float[Array, "T 3"]:
+    """World root path of feature frames: trapezoid integral of `root.vx, root.vz`, height `root.y`.
+
+    Arguments:
+        features: `[T, C]`; frame_time_s: seconds per frame; up_axis: index of the up axis.
+
+    Returns:
+        `[T, 3]` (starting at the origin in the ground plane).
+    """
+    x = jnp.asarray(features)
+    dt = jnp.asarray(frame_time_s, x.dtype)
+    horiz = [k for k in range(3) if k != up_axis]
+
+    def integ(v):
+        return jnp.concatenate([jnp.zeros((1,), v.dtype), jnp.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+
+    root = jnp.zeros((x.shape[0], 3), x.dtype)
+    root = root.at[:, horiz[0]].set(integ(x[:, 0])).at[:, horiz[1]].set(integ(x[:, 1]))
+    return root.at[:, up_axis].set(x[:, 2])
+
+
+
+
+def fit_contact_intervals(fit, motion) -> Float[np.ndarray, "2 2"] | None:
+    """The contact intervals of a fitted clip, to store with its model (`io.model_io.save_model`).
+
+    Arguments:
+        fit: a successful `motion.ClipFit`; motion: the `Motion` given to `motion.fit_motions`.
+
+    Returns:
+        `[2, 2]` phases (`contact_intervals` from the fitted frames' contacts, else from the
+        model's cycle), or None without a body map.
+    """
+    from fourierjax.motion import foot_contacts_of
+
+    if fit.body_map is None or not fit.successful:
+        return None
+    sub = motion[fit.frame_start:fit.frame_stop]
+    iv = contact_intervals(fit.model, motion.skeleton(), body_map=fit.body_map,
+                           contacts=foot_contacts_of(sub, body_map=fit.body_map),
+                           frame_time_s=fit.frame_time_s, phase_shift=fit.phase_shift)
+    return np.asarray(iv, np.float64)
