@@ -117,6 +117,7 @@ def hip_rule(
     l_max: Float[ArrayLike, ""] | None = None,
     temperature: Float[ArrayLike, ""] | None = None,
     width: Float[ArrayLike, ""] = 0.01,
+    check_traced: bool = True,
 ) -> HipRule:
     """Unuma 1995 eq. 4-5: hip position of a walk or run from the two leg heights.
 
@@ -144,6 +145,10 @@ def hip_rule(
         temperature: smooth rule: log-sum-exp temperature τ > 0 (file units) for
             `max(L_L, L_R)`; default `0.002 · max L`.
         width: smooth rule: sigmoid width κ > 0 of the threshold, in units of N.
+        check_traced: False when the caller has already checked `gait`, `jump`, `width` and
+            `temperature` as concrete values (e.g. `synthesize_gait` before its jit): no
+            `eqx.error_if` then, whose host callback keeps a program out of the persistent
+            compile cache.
 
     Returns:
         A `HipRule`. Gradients are finite everywhere, `L = Lmax` and zero-length legs included.
@@ -161,8 +166,9 @@ def hip_rule(
         raise UserError(f"hip_rule: `leg` must be [T, 2] (L_L, L_R), got shape {leg.shape}")
     check_finite("hip_rule", "gait", gait)
     check_jump("hip_rule", jump)
-    leg = smooth_parameter_checks("hip_rule", leg, width, temperature)
-    leg = traced_jump_checks("hip_rule", leg, gait, jump)
+    if check_traced:
+        leg = smooth_parameter_checks("hip_rule", leg, width, temperature)
+        leg = traced_jump_checks("hip_rule", leg, gait, jump)
     # Lmax > 0 for any standing figure; the soft max of the smooth rule is >= max(leg), so
     # max(leg) > 0 covers every rule (and the default temperature, 0.002 max(leg), needs it).
     ref = jnp.max(leg) if l_max is None else jnp.asarray(l_max)

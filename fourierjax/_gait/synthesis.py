@@ -63,7 +63,8 @@ def _integrate_trapezoid(v, dt):
 @filter_jit
 def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
                      root_motion, frame_time_s, width, temperature, *,
-                     num_frames, feet, groins, pelvis, rule, num_cycle_samples, up_axis):
+                     num_frames, feet, groins, pelvis, rule, num_cycle_samples, up_axis,
+                     check_traced=True):
     # Every number a caller may vary is an array (traced): filter_jit holds Python numbers
     # static, and each new frame time, width or temperature would compile again.
     from fourierjax.fourier import synthesize_phase
@@ -99,9 +100,10 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
     # The frames themselves may reach past the grid's max: include them, so N >= 0.
     both = jnp.concatenate([cyc_leg, leg], axis=0)
-    l_max = hip_rule(both, gait, jump, rule=rule, temperature=temperature, width=width).l_max
+    l_max = hip_rule(both, gait, jump, rule=rule, temperature=temperature, width=width,
+                     check_traced=check_traced).l_max
     hip = hip_rule(leg, gait, jump, rule=rule, l_max=l_max, temperature=temperature,
-                   width=width)
+                   width=width, check_traced=check_traced)
     horiz = [k for k in range(3) if k != up_axis]
     # Both roots are cheap next to FK: compute both and select, so `root_motion` is traced
     # (one compilation serves both).
@@ -253,6 +255,10 @@ def synthesize_gait(
         None if temperature is None else jnp.asarray(temperature, dtype),
         num_frames=num_frames, feet=feet, groins=groins, pelvis=pelvis, rule=rule,
         num_cycle_samples=num_cycle_samples, up_axis=int(up_axis),
+        # Concrete values were checked above: no traced checks (their host callbacks would keep
+        # the program out of the persistent compile cache). A caller's own jit, vmap or grad
+        # leaves them traced, and `hip_rule` checks them with `eqx.error_if`.
+        check_traced=any(isinstance(v, jax.core.Tracer) for v in (gait, jump, width, temperature)),
     )
     if not foot_lock:
         return result
