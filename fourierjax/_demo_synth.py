@@ -140,7 +140,10 @@ def _gait_bvh(st: _State, name: str, clip: str, model, **kw) -> dict:
                              clearance=clear, **kw)
     _write_motion(st, name, _import("fourierjax.io.gait_bvh").gait_motion(m[:1], r, model.channel_names, dt))
     lowest = np.asarray(r.lowest).min(axis=1)
-    info = {"flight_fraction": float(np.mean(lowest > 1e-3)),
+    # Flight is the hip rule's (N(t) > gait), as in `synth`'s summary: foot locking may lift a
+    # foot that the leg cannot reach, which is not flight (that is `feet_off_floor_fraction`).
+    info = {"flight_fraction": float(np.mean(np.asarray(r.hip.flight) > 0.5)),
+            "feet_off_floor_fraction": float(np.mean(lowest > 1e-3)),
             "distance_units": float(np.hypot(*(np.asarray(r.root_position[-1] - r.root_position[0])[[0, 2]])))}
     return info
 
