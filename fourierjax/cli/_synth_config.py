@@ -92,7 +92,7 @@ def load_config(path):
 #: (the config says everything; a flag silently ignored would mislead).
 _REPLACED = {"model": None, "seconds": None, "fps": None, "add": [], "noise": 0.0, "noise_harmonics": 3,
              "seed": 0, "step": 1.0, "speed": 1.0, "gait": 1.0, "jump": 0.0, "hip_rule": "unuma1995",
-             "body_map": None, "root_motion": True, "foot_lock": False}  # foot_lock: once synth has the flag
+             "body_map": None, "root_motion": True, "foot_lock": True, "path": None}
 
 
 def run_config(args) -> int:
