@@ -174,6 +174,7 @@ def ground(m):
 def synth(clip, **kw):
     m = motions[clip]
     pts, groins, clear = ground(m)
+    kw.setdefault("foot_lock", False)  # the step constraints alone (foot locking is shown last)
     return gait.synthesize_gait(fits[clip].model, m.skeleton(), 240, m.frame_time_s, feet=pts,
                                 groins=groins, clearance=clear, **kw)"""),
         ("md", r"""In a walk one foot is always on the ground, so the hip height is the longer of the two legs'
@@ -412,7 +413,7 @@ plt.show()"""),
     ]
 
 
-NOTEBOOKS["04_style_on_real_data.ipynb"] = style_on_real_data()
+NOTEBOOKS["04_style_on_real_data.ipynb"] = style_on_real_data
 
 
 def main() -> None:
