@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._legik import safe_norm, safe_normalize  # noqa: F401  (one copy, shared with the foot lock)
 
 _EPS = 1e-12
 
@@ -32,17 +33,6 @@ def rsqrt_where(sq, small):
     return where(small, 0.0, jax.lax.rsqrt(where(small, 1.0, sq)))
 
 
-def safe_norm(v: Float[Array, "... n"]) -> Float[Array, "..."]:
-    """|v| with a zero (not NaN) gradient at v = 0 (double-where shim)."""
-    sq = _sum3(v * v)
-    return sq * rsqrt_where(sq, sq < _EPS * _EPS)
-
-
-def safe_normalize(v: Float[Array, "... n"], fallback: Float[Array, "... n"]) -> Float[Array, "... n"]:
-    """v / |v|, or `fallback` (assumed unit) where |v| is ~0; finite gradients everywhere."""
-    sq = _sum3(v * v)[..., None]
-    small = sq < 1e-20
-    return where(small, fallback, v * rsqrt_where(sq, small))
 
 
 def where(cond, x, y):
