@@ -1,6 +1,8 @@
 """Test configuration: strict rank promotion, x64 on demand, bundled-data paths."""
 
 import os
+import shutil
+import tempfile
 
 import jax
 import pytest
@@ -11,6 +13,24 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # compiled by another test process. tests/test_cli_cache.py gives its subprocesses their own
 # cache folder and clears this variable.
 os.environ.setdefault("FOURIERJAX_NO_CACHE", "1")
+
+#: One compile-cache folder for the whole run, shared by the xdist workers and by the command-line
+#: subprocesses started through `tests.helpers.cli_env` (a fresh folder: nothing from an earlier
+#: run or from the user's cache is read). In-process calls keep the cache off (above).
+RUN_CACHE_ENV = "FOURIERJAX_TEST_RUN_CACHE"
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput") and RUN_CACHE_ENV not in os.environ:
+        os.environ[RUN_CACHE_ENV] = tempfile.mkdtemp(prefix="fourierjax-test-cache-")
+        config._fourierjax_run_cache = os.environ[RUN_CACHE_ENV]
+
+
+def pytest_unconfigure(config):
+    path = getattr(config, "_fourierjax_run_cache", None)
+    if path:
+        shutil.rmtree(path, ignore_errors=True)
+        os.environ.pop(RUN_CACHE_ENV, None)
 
 
 @pytest.fixture

@@ -166,3 +166,20 @@ class NamesTopology:
 
     def __init__(self, names, es_par):
         self.names, self.end_site_parents = tuple(names), tuple(es_par)
+
+
+# --- command-line subprocesses: the run's shared compile cache (tests/conftest.py) ---
+def cli_env(**extra) -> dict:
+    """The environment for a `python -m fourierjax ...` subprocess of a test: this run's shared
+    compile-cache folder, so that the second and later commands of the run read the programs
+    the first compiled (a fresh folder per run; never the user's ~/.cache). ``extra`` adds or
+    replaces variables."""
+    import os
+
+    env = dict(os.environ)
+    folder = env.get("FOURIERJAX_TEST_RUN_CACHE")
+    if folder:
+        env.pop("FOURIERJAX_NO_CACHE", None)
+        env["FOURIERJAX_CACHE_DIR"] = folder
+    env.update(extra)
+    return env

@@ -1,7 +1,6 @@
 """Subprocess tests of `fourierjax fit` and `fourierjax synth`, with user mistakes."""
 
 import json
-import os
 import subprocess
 import sys
 
@@ -9,10 +8,11 @@ import numpy as np
 import pytest
 
 from fourierjax import data
+from tests.helpers import cli_env
 
 
 def _run(*args, cwd=None):
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env = cli_env(JAX_PLATFORMS="cpu")
     return subprocess.run([sys.executable, "-m", "fourierjax", *args], capture_output=True,
                           text=True, cwd=cwd, env=env, timeout=600)
 

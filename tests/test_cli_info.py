@@ -9,6 +9,7 @@ import pytest
 from fourierjax import data
 from fourierjax.cli import main
 from fourierjax.io.bvh import read_bvh
+from tests.helpers import cli_env
 
 SIX_CHANNELS = """HIERARCHY
 ROOT Hips
@@ -41,7 +42,7 @@ Frame Time: 0.04
 def _run(*args):
     return subprocess.run(
         [sys.executable, "-m", "fourierjax", "info", *map(str, args)],
-        capture_output=True, text=True, timeout=120,
+        capture_output=True, text=True, timeout=120, env=cli_env(),
     )  # fmt: skip
 
 

@@ -9,11 +9,12 @@ from PIL import Image
 
 from fourierjax import data
 from fourierjax.cli import main
+from tests.helpers import cli_env
 
 
 def fj(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "fourierjax", *map(str, args)], capture_output=True,
-                          text=True, cwd=cwd, timeout=600)
+                          text=True, cwd=cwd, timeout=600, env=cli_env())
 
 
 @pytest.fixture(scope="module")

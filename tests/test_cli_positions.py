@@ -6,11 +6,12 @@ import sys
 import numpy as np
 
 from fourierjax import data
-from tests.helpers import reference_fk
+from tests.helpers import cli_env, reference_fk
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "fourierjax", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "fourierjax", *args], capture_output=True, text=True, timeout=300,
+                          env=cli_env())
 
 
 def test_positions_writes_every_frame_in_file_order(tmp_path):

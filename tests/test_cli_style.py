@@ -11,11 +11,13 @@ from fourierjax import data, model_io, style
 from fourierjax import motion as fmotion
 from fourierjax.fourier import FourierModel
 from fourierjax.io.bvh import read_bvh
+from tests.helpers import cli_env
 
 
 def run_cli(*args, cwd):
     return subprocess.run(
-        [sys.executable, "-m", "fourierjax", *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=600
+        [sys.executable, "-m", "fourierjax", *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=600,
+        env=cli_env(),
     )
 
 

@@ -9,6 +9,7 @@ import pytest
 from PIL import Image
 
 from fourierjax import demo
+from tests.helpers import cli_env
 
 CLIPS = "07_01,07_04,07_12,02_01,02_03,09_01"
 
@@ -27,7 +28,8 @@ GIFS = ["walk_styles", "run_brisk_superposed", "walk_to_run", "run_flight", "wal
 def demo_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     r = subprocess.run([sys.executable, "-m", "fourierjax", "demo", "--out", str(out), "--clips",
-                        CLIPS, "--seconds", "1.5"], capture_output=True, text=True, timeout=900)
+                        CLIPS, "--seconds", "1.5"], capture_output=True, text=True, timeout=900,
+                       env=cli_env())
     assert r.returncode == 0, r.stderr[-3000:]
     return out, r
 

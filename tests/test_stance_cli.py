@@ -7,7 +7,9 @@ import sys
 
 import pytest
 
-ENV = {**os.environ, "JAX_PLATFORMS": "cpu"}
+from tests.helpers import cli_env
+
+ENV = cli_env(JAX_PLATFORMS="cpu")
 
 
 def _run(*args, env=None, cwd=None):

@@ -173,6 +173,11 @@ def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, tim
     for k, c in enumerate(rows):
         strikes[k, :len(c.left)] = c.left
     counts = np.array([len(c.left) for c in rows])
+    # A chunk whose masks leave out whole frames only is fitted with a frame mask [B, T]: the
+    # same fit, by a program without the per-channel refill (about 40% less to compile).
+    frames = mask.any(axis=2)
+    if not (frames[..., None] & ~mask).any():
+        mask = frames
     res, pve, shifted = _chunk_program(
         skel, put(feats), put(mask, bool), put(dts), put(om_steps), put(strikes),
         put(counts, np.int32),
@@ -210,7 +215,7 @@ def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_ha
         return res, None, (delta, shifted)
     t = jnp.arange(feats.shape[1], dtype=feats.dtype)[None, :] * dts[:, None]
     xhat = fr.synthesize_batch(res.model, t)
-    frames = jnp.any(mask, axis=2)
+    frames = jnp.any(mask, axis=2) if mask.ndim == 3 else mask
     pve = jax.vmap(lambda s, a, b, m: _position_ve_impl(s, a, b, m, representation, pelvis))(
         skeleton, feats, xhat, frames)
     return res, pve, (delta, shifted)
