@@ -17,7 +17,8 @@ def _position_harmonics(model, skeleton, body_map, num_harmonics: int, num_sampl
     """
     from fourierjax import style
 
-    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples), float)  # [K, J, 3]
+    p = style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map)
+    p = np.asarray(p, float)  # [K, J, 3]
     p = (p - p[:, body_map.pelvis : body_map.pelvis + 1]) / body_map.leg_length
     c = np.fft.rfft(p, axis=0) / num_samples  # [K/2+1, J, 3]
     h = c[1 : num_harmonics + 1] * 2

@@ -102,11 +102,11 @@ def amplitude_ratio(base, a, b):
     return eqx.tree_at(lambda m: m.amplitude, out, base.amplitude * ratio)
 
 
-def max_jump(model, skeleton, frame_time_s, num_samples: int = 256) -> float:
+def max_jump(model, skeleton, frame_time_s, num_samples: int = 256, *, body_map=None) -> float:
     """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
     from fourierjax import style
 
-    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples))
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map))
     per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
     # the per-sample jump scaled to a frame (a smooth cycle, so linear)
     return per_sample * num_samples * float(model.omega) * frame_time_s / (2 * np.pi)

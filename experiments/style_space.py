@@ -200,7 +200,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             i_t, i_b = g[(dst, s)], g[(dst, normal)]
             a, b = models[g[(src, s)]], models[g[(src, normal)]]
             base, target, skel = models[i_b], models[i_t], skels[i_t]
-            d0 = float(style.cycle_distance(base, target, skel, num_samples=ns))
+            bm = maps[i_t]
+            d0 = float(style.cycle_distance(base, target, skel, num_samples=ns, body_map=bm))
             others_src = [models[g[(src, x)]] for x in sty if x != s]
             others_dst = [models[g[(dst, x)]] for x in sty if x != s]
             cand = {"baseline": base,
@@ -214,19 +215,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                         "group_weights", "ridge_map"):
                 cand[mth] = style.model_from_style_vector(jnp.asarray(vm[mth]), base)
             # the weight of the content-mean transfer, chosen on the other styles (leaving s out of all)
-            score = {}
-            for w in cfg["weight_grid"]:
-                r = []
-                for x in sty:
-                    if x in (s, normal):
-                        continue
-                    keep = [z for z in sty if z not in (s, x)]
-                    m = style.transfer(models[g[(src, x)]], [models[g[(src, z)]] for z in keep],
-                                       [models[g[(dst, z)]] for z in keep], method="content_mean", weight=w)
-                    dx0 = float(style.cycle_distance(base, models[g[(dst, x)]], skel, num_samples=ns))
-                    r.append(float(style.cycle_distance(m, models[g[(dst, x)]], skel, num_samples=ns)) / dx0)
-                score[w] = float(np.median(r))
-            w_cv = min(score, key=score.get)
+            rest = [x for x in sty if x != s]
+            w_cv = style.fit_transfer_weight(others_src, others_dst, skel, grid=cfg["weight_grid"], baseline=base,
+                                             held_out=[k for k, x in enumerate(rest) if x != normal],
+                                             body_map=bm, num_samples=ns).weight
             cand["content_mean_cv"] = style.transfer(a, others_src, others_dst, method="content_mean", weight=w_cv)
             # oracle: another take of the real target, where the target content has one
             other = [i for (c2, s2, t2), i in lab.items() if c2 == dst and s2 == s and i != i_t]
@@ -238,7 +230,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             x_c, _ = feature_matrix(fx, FEATURE_SETS[MAIN_FEATURES])
             rec = {c: classify(c, x_real, y[real], x_c, column_weights=cw, **kw) for c in CLASSIFIERS}
             for k, mth in enumerate(names):
-                d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns))
+                d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
                               "weight": w_cv if mth == "content_mean_cv" else None,
@@ -250,7 +242,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             # target's.
             fts = motions[i_t].frame_time_s
             for i in {i_b, *g.values()} - set(jump):
-                jump[i] = max_jump(models[i], skel, fts)
+                jump[i] = max_jump(models[i], skel, fts, body_map=bm)
             ref_eq8 = max(jump[i] for i in (i_b, g[(src, s)], g[(src, normal)]))
             ref_all = max(jump[g[(c, x)]] for c in (src, dst) for x in sty if (c, x) != (dst, s))
             for mth in names:
@@ -258,7 +250,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                     continue
                 ref_jump = ref_eq8 if mth in ("eq8", "eq8_phasor", "amplitude_ratio") else ref_all
                 char = style.characteristic(cand[mth], base)
-                jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts)
+                jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts, body_map=bm)
                          for w in cfg["weights"]}
                 worst = max(jumps.values())
                 upto1 = max((v for w, v in jumps.items() if w <= 1.0), default=float("nan"))
@@ -367,7 +359,7 @@ def take_floor(cfg, clips, fitted) -> dict:
     """Median over styles of d(take 1, take 2) / d(neutral, take 1), per content with two takes."""
     from fourierjax import style
 
-    models, skels = fitted[0], fitted[1]
+    models, skels, maps = fitted[0], fitted[1], fitted[2]
     lab = {(c["content"], c["style"], c["take"]): i for i, c in enumerate(clips)}
     out = {}
     for content in cfg["contents"]:
@@ -380,8 +372,9 @@ def take_floor(cfg, clips, fitted) -> dict:
             j, n = lab.get((c, s, t2)), lab.get((c, cfg["normal"], t1))
             if c != content or t != t1 or s == cfg["normal"] or j is None or n is None:
                 continue
-            d12 = float(style.cycle_distance(models[j], models[i], skels[i], num_samples=cfg["num_samples"]))
-            d0 = float(style.cycle_distance(models[n], models[i], skels[i], num_samples=cfg["num_samples"]))
+            kw = {"num_samples": cfg["num_samples"], "body_map": maps[i]}
+            d12 = float(style.cycle_distance(models[j], models[i], skels[i], **kw))
+            d0 = float(style.cycle_distance(models[n], models[i], skels[i], **kw))
             r.append(d12 / d0)
         if r:
             out[content] = {"median": float(np.median(r)), "min": float(np.min(r)), "max": float(np.max(r)),

@@ -146,12 +146,8 @@ def test_no_limb_flip_at_any_weight_on_bandai():
 
 def test_no_retrace_for_new_weights_or_models(cmu):
     """Weights are arrays and models leaves: new values of either reuse the compiled programs."""
-    import importlib
-
+    from fourierjax._style import _transfer as transfer
     from fourierjax._style import characteristics
-
-    # the module (its package re-exports the function `transfer` under the same name)
-    transfer = importlib.import_module("fourierjax._style.transfer")
     _, names = cmu
     ms = [model(names, s) for s in range(6)]
     style.transfer(ms[0], ms[1:3], ms[3:5], method="content_mean", weight=0.5)
@@ -161,3 +157,91 @@ def test_no_retrace_for_new_weights_or_models(cmu):
         style.transfer(ms[5], ms[2:4], ms[0:2], method="content_mean", weight=w)
         style.transfer(ms[5], ms[3], ms[4], weight=w)
     assert (transfer._content_mean.num_traces(), characteristics._superpose.num_traces()) == before
+
+
+def test_transfer_module_is_not_shadowed():
+    """The private module is `_style._transfer`; `_style.transfer` and `style.transfer` are the function."""
+    import types
+
+    import fourierjax._style as pkg
+    from fourierjax._style import _transfer
+
+    assert isinstance(_transfer, types.ModuleType) and _transfer.transfer is style.transfer
+    assert pkg.transfer is style.transfer and callable(pkg.transfer)
+
+
+def test_gains_of_one_are_the_plain_transfer_and_scale_the_style(cmu):
+    _, names = cmu
+    src = [model(names, s) for s in range(4)]
+    dst = [model(names, 10 + s) for s in range(4)]
+    styled = model(names, 20)
+    c = len(names)
+    plain = style.transfer(styled, src, dst, method="content_mean", weight=0.7)
+    ones = style.transfer(styled, src, dst, method="content_mean", weight=0.7, gains=jnp.ones(c + 1))
+    np.testing.assert_allclose(signal(ones), signal(plain), atol=1e-5)
+    assert float(ones.omega) == pytest.approx(float(plain.omega), rel=1e-5)
+    # gain g on one channel: that channel moves by g w (source - m_s), the others by w (...)
+    g = jnp.ones(c + 1).at[5].set(0.0).at[-1].set(0.5)
+    got = style.transfer(styled, src, dst, method="content_mean", weight=0.7, gains=g)
+    m_t = style.content_mean(dst)
+    np.testing.assert_allclose(signal(got)[:, 5], signal(m_t)[:, 5], atol=1e-5)
+    np.testing.assert_allclose(signal(got)[:, 6:], signal(plain)[:, 6:], atol=1e-5)
+    m_s = style.content_mean(src)
+    want = float(m_t.omega) * (float(styled.omega) / float(m_s.omega)) ** (0.7 * 0.5)
+    assert float(got.omega) == pytest.approx(want, rel=1e-5)
+    with pytest.raises(UserError, match="gains"):
+        style.transfer(styled, src, dst, method="content_mean", gains=jnp.ones(c))
+    with pytest.raises(UserError, match="content_mean option"):
+        style.transfer(styled, src[0], dst[0], gains=jnp.ones(c + 1))
+
+
+def test_fit_transfer_gains_recovers_per_channel_slopes(cmu):
+    """Targets whose style offsets are the sources' times known per-channel slopes (and cadence
+    scaled by 0.5 in log): the unshrunk fit returns the slopes; ridge pulls toward 1."""
+    _, names = cmu
+    c = len(names)
+    base_s, base_t = model(names, 1, scale=0.1), model(names, 2, scale=0.1)
+    slopes = np.linspace(0.2, 1.6, c)
+    rng = np.random.default_rng(5)
+    src, dst = [], []
+    for k in range(5):
+        d_off, d_amp = rng.normal(0, 0.05, c), rng.normal(0, 0.02, base_s.amplitude.shape)
+        d_logw = rng.normal(0, 0.1)
+        src.append(eqx.tree_at(lambda m: (m.offset, m.amplitude, m.omega), base_s,
+                               (base_s.offset + d_off, base_s.amplitude + 0.0, base_s.omega * np.exp(d_logw))))
+        dst.append(eqx.tree_at(lambda m: (m.offset, m.amplitude, m.omega), base_t,
+                               (base_t.offset + slopes * d_off, base_t.amplitude + 0.0,
+                                base_t.omega * np.exp(0.5 * d_logw))))
+        del d_amp
+    g = np.asarray(style.fit_transfer_gains(src, dst, ridge=0.0))
+    assert g.shape == (c + 1,)
+    np.testing.assert_allclose(g[3:-1], slopes[3:], atol=1e-3)  # the root channels: same offsets rule
+    assert g[-1] == pytest.approx(0.5, abs=1e-3)
+    g1 = np.asarray(style.fit_transfer_gains(src, dst, ridge=1.0))
+    np.testing.assert_allclose(g1[3:-1], (slopes[3:] + 1) / 2, atol=1e-3)
+    with pytest.raises(UserError, match="paired"):
+        style.fit_transfer_gains(src, dst[:3])
+
+
+def test_fit_transfer_weight_picks_the_weight_that_carries_the_style(cmu):
+    """Targets built as m_t + 0.5 (source - m_s) for every style: leaving each out, the weight 0.5
+    reproduces it exactly (ratio 0), so it wins; weight='cv' uses it."""
+    skel, names = cmu
+    src = [model(names, s) for s in range(5)]
+    m_t0 = model(names, 30)
+    m_s0 = style.content_mean(src)
+    dst = [style.transfer(s, m_s0, m_t0, method="content_mean", weight=0.5) for s in src]
+    tw = style.fit_transfer_weight(src, dst, skel, grid=(0.25, 0.5, 1.0), num_samples=8)
+    assert tw.weight == 0.5 and tw.grid == (0.25, 0.5, 1.0)
+    assert tw.scores[1] < 1e-3 < min(tw.scores[0], tw.scores[2])
+    styled = model(names, 40)
+    got = style.transfer(styled, src, dst, method="content_mean", weight="cv", skeleton=skel,
+                         weight_grid=(0.25, 0.5, 1.0))
+    want = style.transfer(styled, src, dst, method="content_mean", weight=0.5)
+    np.testing.assert_allclose(signal(got), signal(want), atol=1e-5)
+    with pytest.raises(UserError, match="skeleton="):
+        style.transfer(styled, src, dst, method="content_mean", weight="cv")
+    with pytest.raises(UserError, match="'cv'"):
+        style.transfer(styled, src[0], dst[0], weight="cv", skeleton=skel)
+    with pytest.raises(UserError, match="held_out"):
+        style.fit_transfer_weight(src, dst, skel, held_out=[7])
