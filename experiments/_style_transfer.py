@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 #: Transfer methods in table order; "baseline" is the target content's neutral clip unchanged and
-#: "content_mean_only" the mean of its other styles (no style information at all).
+#: "content_mean_only" the mean of its other styles (no style information at all); the last two have
+#: no limb-flip rows (their weights are swept directly, the ``transfer_weights`` rows).
 METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
            "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
-           "content_mean_cv")
+           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv")
 
 
 def branch_vectors(models, reference):

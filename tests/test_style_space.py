@@ -260,3 +260,27 @@ def test_cycle_positions_are_the_root_relative_poses(cmu):
     np.testing.assert_allclose(p, ref - ref[:, :1], atol=1e-4)
     with pytest.raises(UserError, match="cycle_positions: `num_samples`"):
         style.cycle_positions(a, skel, num_samples=0)
+
+
+def test_the_pelvis_comes_from_the_body_map(cmu):
+    """`cycle_positions` puts the body map's pelvis at the origin (not joint 0); without a map it
+    infers the model's own (`gait.model_body_map`); with both models traced it asks for one."""
+    import dataclasses
+
+    from fourierjax.gait import model_body_map
+
+    _, skel, names = cmu
+    a, b = random_model(names, 3), random_model(names, 4)
+    bm = model_body_map(a, skel)
+    p = np.asarray(style.cycle_positions(a, skel, num_samples=8, body_map=bm))
+    assert np.abs(p[:, bm.pelvis]).max() < 1e-5
+    np.testing.assert_allclose(np.asarray(style.cycle_positions(a, skel, num_samples=8)), p, atol=1e-6)
+    other = dataclasses.replace(bm, pelvis=bm.spine[0])
+    q = np.asarray(style.cycle_positions(a, skel, num_samples=8, body_map=other))
+    assert np.abs(q[:, other.pelvis]).max() < 1e-5 and np.abs(q - p).max() > 1e-3
+    d = float(style.cycle_distance(a, b, skel, num_samples=8, body_map=bm))
+    assert float(style.cycle_distance(a, b, skel, num_samples=8)) == pytest.approx(d, rel=1e-6)
+    with pytest.raises(UserError, match="body_map="):
+        jax.grad(lambda x: style.cycle_distance(x, x, skel, num_samples=8))(a)
+    with pytest.raises(UserError, match="another skeleton"):
+        style.cycle_distance(a, b, skel, body_map=dataclasses.replace(bm, joint_names=("x",) * len(bm.joint_names)))

@@ -177,7 +177,7 @@ def _gain_transfer(source, ms, mt, gains, weight):
 
 
 def fit_transfer_gains(
-    sources: Sequence[FourierModel], targets: Sequence[FourierModel], *, ridge: Float[ArrayLike, ""] = 1.0,
+    sources: Sequence[FourierModel], targets: Sequence[FourierModel], *, ridge: Float[ArrayLike, ""] = 0.25,
     max_gain: float = 2.0,
 ) -> Float[Array, " C+1"]:
     """Per-channel gains of a content-mean transfer, fitted across styles.
@@ -188,8 +188,10 @@ def fit_transfer_gains(
     least-squares slope over the styles and a channel's coordinates (offset and phasors),
     shrunk toward 1 (plain transfer) by `ridge`: `g = (S_xy + ridge S_xx) / ((1 + ridge) S_xx)`,
     clipped to `[0, max_gain]`. A channel that does not vary with style (`S_xx = 0`) gets 1.
-    On Bandai-1, runs vary their cadence with style less than walks do, and a gain of 1 on
-    log ω carried the walk's cadence ratio onto the run in full (`docs/findings.md`).
+    On Bandai-1, runs vary their cadence with style about half as much as walks do (log-ω
+    gain 0.5–0.6), and a gain of 1 carried the walk's cadence ratio onto the run in full:
+    that, not an angle branch, made the limbs of the w = 1.5 transfers move faster than any
+    real clip's (`docs/findings.md`; the default `ridge` is the better of 0.25 and 1 there).
 
     Arguments:
         sources, targets: paired sequences (one style each, at least 2) of compatible,
