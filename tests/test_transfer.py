@@ -120,28 +120,56 @@ def test_transfer_errors(cmu):
         style.content_mean([a, other])
 
 
-@pytest.mark.skipif(not BANDAI.is_dir(), reason="Bandai-1 not found at ../shared/data/mocap/bandai1")
-def test_no_limb_flip_at_any_weight_on_bandai():
-    """Walk -> run on Bandai-1 through fit -> synthesize -> FK: at weights 0 to 1.5 the
-    content-mean transfer's largest joint jump per frame stays within the sources' (issue #22,
-    item 4); a transfer that crossed an angle branch would jump by a limb length."""
+@pytest.fixture(scope="module")
+def bandai_walk_run():
+    """Walk and run of four Bandai-1 styles, fitted once for the module (8 clips)."""
+    if not BANDAI.is_dir():
+        pytest.skip("Bandai-1 not found at ../shared/data/mocap/bandai1")
     from experiments._style_data import fit_clips
-    from experiments._style_transfer import max_jump
 
     keys = [(c, s) for c in ("walk", "run") for s in ("normal", "sad", "happy", "old")]
     clips = [{"path": BANDAI / f"dataset-1_{c}_{s}_001.bvh", "content": c, "style": s, "take": "001"}
              for c, s in keys]
     # the experiment's on-disk cache (outside the repository; keyed by the clips and settings)
-    fitted, skels, _, motions, failed = fit_clips(clips, 3, "euler", pathlib.Path("/tmp/fourierjax_style_space_cache"))
+    fitted, skels, maps, motions, failed = fit_clips(clips, 3, "euler",
+                                                     pathlib.Path("/tmp/fourierjax_style_space_cache"))
     assert not failed
-    models = dict(zip(keys, fitted, strict=True))
-    skel, dt = skels[keys.index(("run", "normal"))], motions[keys.index(("run", "normal"))].frame_time_s
-    ref = max(max_jump(m, skel, dt) for m in models.values())
+    i = keys.index(("run", "normal"))
+    return dict(zip(keys, fitted, strict=True)), skels[i], maps[i], motions[i].frame_time_s
+
+
+def test_no_limb_flip_at_any_weight_on_bandai(bandai_walk_run):
+    """Walk -> run on Bandai-1 through fit -> synthesize -> FK: at weights 0 to 1.5 the
+    content-mean transfer's largest joint jump per frame stays within the sources' (issue #22,
+    item 4); a transfer that crossed an angle branch would jump by a limb length."""
+    from experiments._style_transfer import max_jump
+
+    models, skel, bm, dt = bandai_walk_run
+    ref = max(max_jump(m, skel, dt, body_map=bm) for m in models.values())
     others = ["normal", "happy", "old"]
     for w in (0.0, 0.5, 1.0, 1.5):
         m = style.transfer(models[("walk", "sad")], [models[("walk", s)] for s in others],
                            [models[("run", s)] for s in others], method="content_mean", weight=w)
-        assert max_jump(m, skel, dt) <= 1.01 * ref, w
+        assert max_jump(m, skel, dt, body_map=bm) <= 1.01 * ref, w
+
+
+def test_gains_carry_less_of_the_walks_cadence_onto_the_run(bandai_walk_run):
+    """The cause of the fast limbs at w = 1.5 (docs/findings.md): runs vary their cadence with style
+    less than walks do, so the fitted log-omega gain is below 1, and the gained transfer's cadence
+    and largest joint jump per frame are below the plain transfer's at every style left out."""
+    from experiments._style_transfer import max_jump
+
+    models, skel, bm, dt = bandai_walk_run
+    for s in ("sad", "happy", "old"):
+        others = [x for x in ("normal", "sad", "happy", "old") if x != s]
+        src, dst = [models[("walk", x)] for x in others], [models[("run", x)] for x in others]
+        g = style.fit_transfer_gains(src, dst)
+        assert 0.0 <= float(g[-1]) < 0.9, s
+        plain = style.transfer(models[("walk", s)], src, dst, method="content_mean", weight=1.5)
+        gained = style.transfer(models[("walk", s)], src, dst, method="content_mean", weight=1.5, gains=g)
+        m_t = style.content_mean(dst)
+        assert abs(np.log(float(gained.omega / m_t.omega))) < abs(np.log(float(plain.omega / m_t.omega))), s
+        assert max_jump(gained, skel, dt, body_map=bm) < max_jump(plain, skel, dt, body_map=bm), s
 
 
 def test_no_retrace_for_new_weights_or_models(cmu):
