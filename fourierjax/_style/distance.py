@@ -31,6 +31,11 @@ def _positions(model: FourierModel, skeleton: Skeleton, num_samples: int, pelvis
 _positions_jit = filter_jit(_positions)
 
 
+#: Pelvis inferred per topology (a rig's pelvis does not change from clip to clip; inference poses
+#: a whole cycle, too slow to repeat per distance).
+_INFERRED_PELVIS: dict = {}
+
+
 def _pelvis(where: str, body_map, skeleton: Skeleton, *models: FourierModel) -> int:
     """The pelvis joint of the poses: `body_map`'s, else that of the first concrete model's own cycle."""
     from fourierjax.body import BodyMap
@@ -38,6 +43,10 @@ def _pelvis(where: str, body_map, skeleton: Skeleton, *models: FourierModel) -> 
     if body_map is None:
         from fourierjax.gait import model_body_map
 
+        if not isinstance(skeleton, Skeleton):
+            raise UserError(f"{where}: `skeleton` must be a Skeleton, got {type(skeleton).__name__}")
+        if skeleton.topology in _INFERRED_PELVIS:
+            return _INFERRED_PELVIS[skeleton.topology]
         concrete = [m for m in models if not isinstance(m.offset, jax.core.Tracer)]
         if not concrete:
             raise UserError(f"{where}: the pelvis is read from a body map, inferred from a concrete model; "
@@ -46,6 +55,7 @@ def _pelvis(where: str, body_map, skeleton: Skeleton, *models: FourierModel) -> 
         if m.amplitude.ndim == 3:  # stacked: the first pair's
             m = jax.tree_util.tree_map(lambda x: x[0] if eqx.is_array(x) else x, m)
         body_map = model_body_map(m, skeleton)
+        _INFERRED_PELVIS[skeleton.topology] = int(body_map.pelvis)
     if not isinstance(body_map, BodyMap):
         raise UserError(f"{where}: `body_map` must be a BodyMap, got {type(body_map).__name__}")
     if tuple(body_map.joint_names) != tuple(skeleton.topology.names):
@@ -127,7 +137,8 @@ def cycle_distance(
         num_samples: phases per cycle (a static shape: each value compiles once).
         body_map: the rig's `body.BodyMap` (pass it where you have it: a clip's
             `body.infer_body_map`); `None`: the map of the first concrete model's own cycle
-            (`gait.model_body_map`). Under jit, vmap or grad of both models it is required.
+            (`gait.model_body_map`), inferred once per topology. Under jit, vmap or grad of
+            both models, with no pelvis inferred yet for the topology, it is required.
 
     Returns:
         Scalar distance, in the skeleton's file units (Bandai: cm; CMU: ~0.0564 m).
