@@ -5,7 +5,54 @@ from __future__ import annotations
 import numpy as np
 
 #: Feature groups, in the order `features` concatenates them.
-GROUPS = ("angles", "positions", "timing")
+GROUPS = ("angles", "positions", "timing", "quat", "sixd")
+#: Rotation channels of the `quat` and `sixd` groups.
+ROTATION_KINDS = ("quat", "sixd")
+
+
+def _cycle_rotations_fn():
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    from fourierjax import features as fx
+    from fourierjax import fourier
+
+    @eqx.filter_jit
+    def cycle_rotations(model, skeleton, pelvis: int, num_samples: int):
+        phase = jnp.arange(num_samples, dtype=model.amplitude.dtype) * (2 * jnp.pi / num_samples)
+        f = fourier.synthesize_phase(model, phase)
+        return jax.vmap(lambda x: fx.local_pose_from_features(skeleton, x, model.representation, pelvis)[1])(f)
+
+    return cycle_rotations
+
+
+_CYCLE_ROTATIONS = []
+
+
+def _rotation_harmonics(model, skeleton, body_map, num_harmonics: int, num_samples: int = 32):
+    """Fourier coefficients over one cycle of every joint's local rotation as a unit quaternion
+    (on one hemisphere per joint, continuous over the cycle) and as the 6-D representation (the
+    first two columns of its matrix; Zhou et al. 2019). The pelvis is in the heading frame.
+
+    Returns ``{"quat": [J, 4, 1 + 2 N], "sixd": [J, 6, 1 + 2 N]}``.
+    """
+    from fourierjax import rotations
+
+    if not _CYCLE_ROTATIONS:
+        _CYCLE_ROTATIONS.append(_cycle_rotations_fn())
+    q = np.asarray(_CYCLE_ROTATIONS[0](model, skeleton, int(body_map.pelvis), num_samples), float)  # [K, J, 4]
+    for k in range(1, num_samples):  # continuity over the cycle (q and -q are one rotation)
+        q[k] *= np.where((q[k] * q[k - 1]).sum(-1, keepdims=True) < 0, -1.0, 1.0)
+    q *= np.where(q.mean(0, keepdims=True)[..., :1] < 0, -1.0, 1.0)  # one hemisphere: w of the mean >= 0
+    r = np.asarray(rotations.matrix_from_quat(q), float)  # [K, J, 3, 3]
+    six = np.concatenate([r[..., :, 0], r[..., :, 1]], axis=-1)  # [K, J, 6]
+    out = {}
+    for name, v in (("quat", q), ("sixd", six)):
+        c = np.fft.rfft(v, axis=0) / num_samples
+        h = c[1 : num_harmonics + 1] * 2
+        out[name] = np.concatenate([c[:1].real, h.real, h.imag], axis=0).transpose(1, 2, 0)
+    return out
 
 
 def _position_harmonics(model, skeleton, body_map, num_harmonics: int, num_samples: int = 32):
@@ -17,7 +64,8 @@ def _position_harmonics(model, skeleton, body_map, num_harmonics: int, num_sampl
     """
     from fourierjax import style
 
-    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples), float)  # [K, J, 3]
+    p = style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map)
+    p = np.asarray(p, float)  # [K, J, 3]
     p = (p - p[:, body_map.pelvis : body_map.pelvis + 1]) / body_map.leg_length
     c = np.fft.rfft(p, axis=0) / num_samples  # [K/2+1, J, 3]
     h = c[1 : num_harmonics + 1] * 2
@@ -49,12 +97,15 @@ def features(model, skeleton, body_map, *, num_harmonics: int | None = None) -> 
 
     ``angles``: the joint-angle channels (the root's velocity and height channels left out);
     ``positions``: body-space harmonics of the pelvis-relative joint positions through FK, per
-    leg length (rig- and unit-independent); ``timing``: cadence, stride and root height.
+    leg length (rig- and unit-independent); ``timing``: cadence, stride and root height;
+    ``quat`` and ``sixd``: harmonics of the joints' rotations as quaternions and in 6-D.
     """
     n = model.amplitude.shape[1] if num_harmonics is None else num_harmonics
+    rot = _rotation_harmonics(model, skeleton, body_map, n)
     return {"angles": _angle_harmonics(model, ("root.",)).ravel(),
             "positions": _position_harmonics(model, skeleton, body_map, n).ravel(),
-            "timing": _timing(model, body_map)}
+            "timing": _timing(model, body_map),
+            **{k: rot[k].ravel() for k in ROTATION_KINDS}}
 
 
 def feature_matrix(feats, groups=GROUPS):

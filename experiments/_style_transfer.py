@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 
 #: Transfer methods in table order; "baseline" is the target content's neutral clip unchanged and
-#: "content_mean_only" the mean of its other styles (no style information at all).
+#: "content_mean_only" the mean of its other styles (no style information at all); the last two have
+#: no limb-flip rows (their weights are swept directly, the ``transfer_weights`` rows).
 METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
            "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
-           "content_mean_cv")
+           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv")
 
 
 def branch_vectors(models, reference):
@@ -102,11 +103,11 @@ def amplitude_ratio(base, a, b):
     return eqx.tree_at(lambda m: m.amplitude, out, base.amplitude * ratio)
 
 
-def max_jump(model, skeleton, frame_time_s, num_samples: int = 256) -> float:
+def max_jump(model, skeleton, frame_time_s, num_samples: int = 256, *, body_map=None) -> float:
     """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
     from fourierjax import style
 
-    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples))
+    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map))
     per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
     # the per-sample jump scaled to a frame (a smooth cycle, so linear)
     return per_sample * num_samples * float(model.omega) * frame_time_s / (2 * np.pi)

@@ -32,9 +32,16 @@ from experiments._util import ROOT, parse, run_main, write_table
 
 #: Feature sets compared for recognition: name -> groups (``"vector"`` is `style.style_vector`).
 FEATURE_SETS = {"style_vector": ("vector",), "angles": ("angles",), "positions": ("positions",),
-                "angles+positions": ("angles", "positions"), "all": ("angles", "positions", "timing")}
+                "angles+positions": ("angles", "positions"), "all": ("angles", "positions", "timing"),
+                "quat": ("quat",), "sixd": ("sixd",), "quat+positions": ("quat", "positions"),
+                "sixd+positions": ("sixd", "positions")}
 #: The feature set of the transfer's recognition check.
 MAIN_FEATURES = "angles+positions"
+
+
+def sweep_weights(cfg) -> list[float]:
+    """The weights of the transfer weight sweep: the flip-check weights but 0, and 2."""
+    return sorted({float(w) for w in cfg["weights"]} - {0.0} | {2.0})
 
 
 def loto(x, cw, y, content, take, test_content, *, pooled, kw, k=None):
@@ -160,6 +167,26 @@ def recognition(cfg, out, clips, feats, summary):
     return best
 
 
+def representation_recognition(cfg, clips, feats, representation) -> list[dict]:
+    """Recognition of the walks by channel representation: the fit's own joint angles (Euler or
+    expmap channels), and for the first representation the quaternion and 6-D rotation
+    harmonics, alone and with the body-space positions (leave one take out, + other contents)."""
+    y = np.array([c["style"] for c in clips], object)
+    content = np.array([c["content"] for c in clips])
+    take = np.array([c["take"] for c in clips])
+    kw = {"k": cfg["knn"], "shrinkage": cfg["shrinkage"], "l2": cfg["l2"]}
+    sets = {f"angles ({representation})": ("angles",), f"angles ({representation})+positions": ("angles", "positions")}
+    if representation == cfg["representations"][0]:
+        sets.update({k: FEATURE_SETS[k] for k in ("quat", "sixd", "quat+positions", "sixd+positions")})
+    rows = []
+    for name, groups in sets.items():
+        x, cw = feature_matrix(feats, groups)
+        idx, preds = loto(x, cw, y, content, take, cfg["recognition_content"], pooled=True, kw=kw)
+        rows += [{"features": name, "classifier": c, "accuracy": float(np.mean(preds[c] == y[idx])), "n": len(idx)}
+                 for c in CLASSIFIERS]
+    return rows
+
+
 def transfer(cfg, out, clips, models, skels, maps, motions, summary, representation):
     """Transfer tables (distance ratio, recognition) and the limb-flip check, for one representation."""
     import jax.numpy as jnp
@@ -174,7 +201,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         first_take.setdefault((c, s), i)
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
-    trows, flips = [], []
+    trows, flips, wrows, gain_omega = [], [], [], []
     harm = None
     for src, dst in cfg["transfers"]:
         sty = [s for s in styles if (src, s) in first_take and (dst, s) in first_take]
@@ -200,7 +227,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             i_t, i_b = g[(dst, s)], g[(dst, normal)]
             a, b = models[g[(src, s)]], models[g[(src, normal)]]
             base, target, skel = models[i_b], models[i_t], skels[i_t]
-            d0 = float(style.cycle_distance(base, target, skel, num_samples=ns))
+            bm = maps[i_t]
+            d0 = float(style.cycle_distance(base, target, skel, num_samples=ns, body_map=bm))
             others_src = [models[g[(src, x)]] for x in sty if x != s]
             others_dst = [models[g[(dst, x)]] for x in sty if x != s]
             cand = {"baseline": base,
@@ -214,20 +242,25 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                         "group_weights", "ridge_map"):
                 cand[mth] = style.model_from_style_vector(jnp.asarray(vm[mth]), base)
             # the weight of the content-mean transfer, chosen on the other styles (leaving s out of all)
-            score = {}
-            for w in cfg["weight_grid"]:
-                r = []
-                for x in sty:
-                    if x in (s, normal):
-                        continue
-                    keep = [z for z in sty if z not in (s, x)]
-                    m = style.transfer(models[g[(src, x)]], [models[g[(src, z)]] for z in keep],
-                                       [models[g[(dst, z)]] for z in keep], method="content_mean", weight=w)
-                    dx0 = float(style.cycle_distance(base, models[g[(dst, x)]], skel, num_samples=ns))
-                    r.append(float(style.cycle_distance(m, models[g[(dst, x)]], skel, num_samples=ns)) / dx0)
-                score[w] = float(np.median(r))
-            w_cv = min(score, key=score.get)
+            rest = [x for x in sty if x != s]
+            w_cv = style.fit_transfer_weight(others_src, others_dst, skel, grid=cfg["weight_grid"], baseline=base,
+                                             held_out=[k for k, x in enumerate(rest) if x != normal],
+                                             body_map=bm, num_samples=ns).weight
             cand["content_mean_cv"] = style.transfer(a, others_src, others_dst, method="content_mean", weight=w_cv)
+            # per-channel gains (and log omega's) fitted across the other styles: how much of a style's
+            # offset from the source content's mean reappears in the target content
+            gains = style.fit_transfer_gains(others_src, others_dst)
+            gain_omega.append(float(gains[-1]))
+            cand["content_mean_gains"] = style.transfer(a, others_src, others_dst, method="content_mean", gains=gains)
+            cand["content_mean_gains_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                           gains=gains, weight=w_cv)
+            # the weight sweep: recognition rises with w, the distance is best near 0.5
+            sweep = {}
+            for w in sweep_weights(cfg):
+                sweep[("content_mean", w)] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                            weight=w)
+                sweep[("content_mean_gains", w)] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                                  gains=gains, weight=w)
             # oracle: another take of the real target, where the target content has one
             other = [i for (c2, s2, t2), i in lab.items() if c2 == dst and s2 == s and i != i_t]
             if other:
@@ -237,20 +270,31 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             x_real, cw = feature_matrix(fx_real, FEATURE_SETS[MAIN_FEATURES])
             x_c, _ = feature_matrix(fx, FEATURE_SETS[MAIN_FEATURES])
             rec = {c: classify(c, x_real, y[real], x_c, column_weights=cw, **kw) for c in CLASSIFIERS}
+            fts = motions[i_t].frame_time_s
+            ref_sweep = max(max_jump(models[g[(c, x)]], skel, fts, body_map=bm)
+                            for c in (src, dst) for x in sty if (c, x) != (dst, s))
+            x_s, _ = feature_matrix([features(m, skel, maps[i_t]) for m in sweep.values()],
+                                    FEATURE_SETS[MAIN_FEATURES])
+            rec_s = {c: classify(c, x_real, y[real], x_s, column_weights=cw, **kw) for c in CLASSIFIERS}
+            for k, ((mth, w), m) in enumerate(sweep.items()):
+                wrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
+                              "method": mth, "weight": w,
+                              "ratio": float(style.cycle_distance(m, target, skel, num_samples=ns, body_map=bm)) / d0,
+                              "jump_ratio": max_jump(m, skel, fts, body_map=bm) / ref_sweep,
+                              **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS}})
             for k, mth in enumerate(names):
-                d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns))
+                d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
-                              "weight": w_cv if mth == "content_mean_cv" else None,
+                              "weight": w_cv if mth in ("content_mean_cv", "content_mean_gains_cv") else None,
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
             # Reference: the largest jump of the clips a method reads, through the same fit ->
             # synthesize -> FK path: eq. 8 and its variants read three (the two neutral clips and
             # the styled source), the style-space methods every clip of both contents but the
             # target's.
-            fts = motions[i_t].frame_time_s
             for i in {i_b, *g.values()} - set(jump):
-                jump[i] = max_jump(models[i], skel, fts)
+                jump[i] = max_jump(models[i], skel, fts, body_map=bm)
             ref_eq8 = max(jump[i] for i in (i_b, g[(src, s)], g[(src, normal)]))
             ref_all = max(jump[g[(c, x)]] for c in (src, dst) for x in sty if (c, x) != (dst, s))
             for mth in names:
@@ -258,7 +302,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                     continue
                 ref_jump = ref_eq8 if mth in ("eq8", "eq8_phasor", "amplitude_ratio") else ref_all
                 char = style.characteristic(cand[mth], base)
-                jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts)
+                jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts, body_map=bm)
                          for w in cfg["weights"]}
                 worst = max(jumps.values())
                 upto1 = max((v for w, v in jumps.items() if w <= 1.0), default=float("nan"))
@@ -283,7 +327,21 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           "max_jump_ratio": max((f["ratio"] for f in fl), default=None),
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
                           "n": len(rs)})
-    return trows, flips, srows
+    wsum = []
+    for tname in dict.fromkeys(r["transfer"] for r in wrows):
+        for mth in ("content_mean", "content_mean_gains"):
+            for w in sweep_weights(cfg):
+                rs = [r for r in wrows if r["transfer"] == tname and r["method"] == mth and r["weight"] == w]
+                wsum.append({"representation": representation, "transfer": tname, "method": mth, "weight": w,
+                             "median_ratio": float(np.median([r["ratio"] for r in rs])),
+                             **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
+                                for c in CLASSIFIERS},
+                             "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs)})
+    if gain_omega:
+        summary.setdefault("gain_log_omega", {})[representation] = {
+            "median": float(np.median(gain_omega)), "min": float(np.min(gain_omega)),
+            "max": float(np.max(gain_omega))}
+    return trows, flips, srows, wsum
 
 
 def body(argv=None) -> None:
@@ -299,7 +357,7 @@ def body(argv=None) -> None:
     cache = cache if cache.is_absolute() else ROOT / cache
     summary: dict = {"folder": str(folder), "clips": len(clips), "harmonics": cfg["harmonics"],
                      "representations": cfg["representations"]}
-    all_t, all_f, all_s = [], [], []
+    all_t, all_f, all_s, all_w, rep_rows = [], [], [], [], []
     for r, rep in enumerate(cfg["representations"]):
         models, skels, maps, motions, failed = fit_clips(clips, cfg["harmonics"], rep, cache)
         keep = [i for i, c in enumerate(clips) if c["path"].name not in failed]
@@ -314,7 +372,11 @@ def body(argv=None) -> None:
                 f["vector"] = v
             summary.update(failed=failed, styles=sorted({c["style"] for c in cl}), representation=rep)
             recognition(cfg, out, cl, feats, summary)
-        t, f, s = transfer(cfg, out, cl, ms, sk, bm, mo, summary, rep)
+        else:
+            feats = [features(m, s, b) for m, s, b in zip(ms, sk, bm, strict=True)]
+        rep_rows += representation_recognition(cfg, cl, feats, rep)
+        t, f, s, w = transfer(cfg, out, cl, ms, sk, bm, mo, summary, rep)
+        all_w += w
         all_t += t
         all_f += f
         all_s += s
@@ -322,6 +384,12 @@ def body(argv=None) -> None:
     write_table(all_f, out, "flips", "Largest joint jump per frame at the configured weights vs the sources'")
     write_table(all_s, out, "transfer_summary", "Transfer methods: median distance ratio and recognition rate")
     summary["transfer"] = all_s
+    write_table(all_w, out, "transfer_weights", "Transfer by weight: median distance ratio, recognition by the "
+                "classifier of real target-content clips, largest joint jump per frame over the clips'")
+    summary["transfer_weights"] = all_w
+    write_table(rep_rows, out, "recognition_representations",
+                "Walk recognition by rotation channels (leave one take out, + other contents, centred)")
+    summary["recognition_representations"] = rep_rows
     _transfer_plot(all_s, cfg["representations"][0], out / "transfer_ratios.png")
     # take-to-take floor: two takes of one style against the neutral-to-style distance (walks)
     summary["take_to_take"] = take_floor(cfg, clips, fit_clips(clips, cfg["harmonics"], cfg["representations"][0],
@@ -367,7 +435,7 @@ def take_floor(cfg, clips, fitted) -> dict:
     """Median over styles of d(take 1, take 2) / d(neutral, take 1), per content with two takes."""
     from fourierjax import style
 
-    models, skels = fitted[0], fitted[1]
+    models, skels, maps = fitted[0], fitted[1], fitted[2]
     lab = {(c["content"], c["style"], c["take"]): i for i, c in enumerate(clips)}
     out = {}
     for content in cfg["contents"]:
@@ -380,8 +448,9 @@ def take_floor(cfg, clips, fitted) -> dict:
             j, n = lab.get((c, s, t2)), lab.get((c, cfg["normal"], t1))
             if c != content or t != t1 or s == cfg["normal"] or j is None or n is None:
                 continue
-            d12 = float(style.cycle_distance(models[j], models[i], skels[i], num_samples=cfg["num_samples"]))
-            d0 = float(style.cycle_distance(models[n], models[i], skels[i], num_samples=cfg["num_samples"]))
+            kw = {"num_samples": cfg["num_samples"], "body_map": maps[i]}
+            d12 = float(style.cycle_distance(models[j], models[i], skels[i], **kw))
+            d0 = float(style.cycle_distance(models[n], models[i], skels[i], **kw))
             r.append(d12 / d0)
         if r:
             out[content] = {"median": float(np.median(r)), "min": float(np.min(r)), "max": float(np.max(r)),

@@ -98,13 +98,14 @@ def test_style_space_runs_small(tmp_path):
     cfg = cfg.replace('cache = "/tmp/fourierjax_style_space_cache"', f'cache = "{tmp_path / "cache"}"')
     assert str(tmp_path) in cfg
     (tmp_path / "c.toml").write_text(cfg)
-    r = subprocess.run([sys.executable, "-m", "experiments.style_space", "--small", "--config",
-                        str(tmp_path / "c.toml"), "--out", str(tmp_path)], cwd=ROOT, capture_output=True,
-                       text=True, timeout=900)
-    assert r.returncode == 0, r.stderr[-3000:]
+    from experiments.style_space import main
+
+    # in-process (the experiment's own CLI entry point): no second interpreter and JAX import
+    assert main(["--small", "--config", str(tmp_path / "c.toml"), "--out", str(tmp_path)]) == 0
     out = tmp_path / "style_space"
     for f in ("recognition.md", "recognition_pca.csv", "recognition_contents.csv", "transfer.csv",
-              "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png", "transfer_ratios.png"):
+              "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png", "transfer_ratios.png",
+              "transfer_weights.csv", "recognition_representations.md"):
         assert (out / f).stat().st_size > 0, f
     assert list((tmp_path / "cache").glob("fits_euler_3_*.npz"))  # the fits are cached
     s = json.loads((out / "summary.json").read_text())
@@ -116,3 +117,9 @@ def test_style_space_runs_small(tmp_path):
     assert set(rows) >= {"eq8", "content_mean", "content_mean_w", "ridge_map", "ls_weights", "harmonic_weights",
                          "group_weights"}
     assert rows["content_mean_w"]["median_ratio"] < rows["baseline"]["median_ratio"]
+    assert {"content_mean_gains", "content_mean_gains_cv"} <= set(rows)
+    sweep = {(r["method"], r["weight"]) for r in s["transfer_weights"]}
+    assert sweep == {(m, w) for m in ("content_mean", "content_mean_gains") for w in (1.5, 2.0)}
+    reps = {r["features"] for r in s["recognition_representations"]}
+    assert {"angles (euler)", "quat", "sixd", "quat+positions", "sixd+positions"} <= reps
+    assert 0 <= s["gain_log_omega"]["euler"]["min"] <= s["gain_log_omega"]["euler"]["max"] <= 2

@@ -260,3 +260,51 @@ def test_cycle_positions_are_the_root_relative_poses(cmu):
     np.testing.assert_allclose(p, ref - ref[:, :1], atol=1e-4)
     with pytest.raises(UserError, match="cycle_positions: `num_samples`"):
         style.cycle_positions(a, skel, num_samples=0)
+
+
+def test_the_pelvis_comes_from_the_body_map(cmu):
+    """`cycle_positions` puts the body map's pelvis at the origin (not joint 0); without a map it
+    infers the model's own (`gait.model_body_map`); with both models traced it asks for one."""
+    import dataclasses
+
+    from fourierjax.gait import model_body_map
+
+    _, skel, names = cmu
+    a, b = random_model(names, 3), random_model(names, 4)
+    bm = model_body_map(a, skel)
+    p = np.asarray(style.cycle_positions(a, skel, num_samples=8, body_map=bm))
+    assert np.abs(p[:, bm.pelvis]).max() < 1e-5
+    np.testing.assert_allclose(np.asarray(style.cycle_positions(a, skel, num_samples=8)), p, atol=1e-6)
+    other = dataclasses.replace(bm, pelvis=bm.spine[0])
+    q = np.asarray(style.cycle_positions(a, skel, num_samples=8, body_map=other))
+    assert np.abs(q[:, other.pelvis]).max() < 1e-5 and np.abs(q - p).max() > 1e-3
+    d = float(style.cycle_distance(a, b, skel, num_samples=8, body_map=bm))
+    assert float(style.cycle_distance(a, b, skel, num_samples=8)) == pytest.approx(d, rel=1e-6)
+    from fourierjax._style import distance
+
+    distance._INFERRED_PELVIS.clear()  # nothing inferred yet for this rig: a traced call must ask
+    with pytest.raises(UserError, match="body_map="):
+        jax.grad(lambda x: style.cycle_distance(x, x, skel, num_samples=8))(a)
+    with pytest.raises(UserError, match="another skeleton"):
+        style.cycle_distance(a, b, skel, body_map=dataclasses.replace(bm, joint_names=("x",) * len(bm.joint_names)))
+
+
+def test_rotation_features_see_rotations_not_angle_branches(cmu):
+    """The quaternion and 6-D features of the experiment: an Euler offset moved by a whole turn is the
+    same rotation (same features); a constant pose has no harmonics, and its mean quaternion is a unit one."""
+    from experiments._style_features import _rotation_harmonics
+    from fourierjax.gait import model_body_map
+
+    _, skel, names = cmu
+    a = random_model(names, 7)
+    bm = model_body_map(a, skel)
+    turned = eqx.tree_at(lambda m: m.offset, a, a.offset.at[6:].add(2 * np.pi))
+    fa, ft = _rotation_harmonics(a, skel, bm, 3), _rotation_harmonics(turned, skel, bm, 3)
+    for k in ("quat", "sixd"):
+        np.testing.assert_allclose(fa[k], ft[k], atol=1e-4)
+    assert fa["quat"].shape == (skel.topology.num_joints, 4, 7) and fa["sixd"].shape[1:] == (6, 7)
+    still = eqx.tree_at(lambda m: m.amplitude, a, jnp.zeros_like(a.amplitude))
+    fs = _rotation_harmonics(still, skel, bm, 3)
+    assert np.abs(fs["quat"][:, :, 1:]).max() < 1e-5 and np.abs(fs["sixd"][:, :, 1:]).max() < 1e-5
+    np.testing.assert_allclose(np.linalg.norm(fs["quat"][:, :, 0], axis=1), 1.0, atol=1e-5)
+    assert np.abs(fa["quat"][:, :, 1:]).max() > 1e-2  # a moving model has harmonics

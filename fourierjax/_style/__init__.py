@@ -1,6 +1,14 @@
 """Private implementation of `fourierjax.style`; import the public names from there."""
 
 from fourierjax._style._common import Ease, Method, OmegaMode, check_compatible, phasor
+from fourierjax._style._transfer import (
+    TransferMethod,
+    TransferWeight,
+    content_mean,
+    fit_transfer_gains,
+    fit_transfer_weight,
+    transfer,
+)
 from fourierjax._style.characteristics import (
     Characteristic,
     add_noise,
@@ -27,7 +35,6 @@ from fourierjax._style.space import (
     style_pca,
     style_vector,
 )
-from fourierjax._style.transfer import TransferMethod, content_mean, transfer
 from fourierjax._style.transitions import ease, transition, transition_schedule
 
 __all__ = [
@@ -37,6 +44,7 @@ __all__ = [
     "OmegaMode",
     "StylePCA",
     "TransferMethod",
+    "TransferWeight",
     "add_noise",
     "blend_time_domain",
     "characteristic",
@@ -49,6 +57,8 @@ __all__ = [
     "cycle_positions",
     "ease",
     "fit_style_weights",
+    "fit_transfer_gains",
+    "fit_transfer_weight",
     "interpolate",
     "interpolate_omega",
     "model_from_style_vector",
