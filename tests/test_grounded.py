@@ -214,23 +214,34 @@ def test_cmu_run_flight_matches_the_capture(cmu_transition):
 
 
 def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
-    """Only the root channels change; the root travels as fast as the blend's own root velocity;
-    `foot_lock` is the one place where the transition calls `gait.lock_feet`."""
+    """Without locking only the root channels change; the root travels as fast as the blend's
+    own root velocity. Foot locking (the default) changes the legs' angles only, keeps the root
+    path, and needs contact intervals under a trace."""
     motions, fits = _fits(("02_01", "02_03"), 5)
     bm, dt = fits[0].body_map, fits[0].frame_time_s
     T = int(round(4.0 / dt))
-    g = style.grounded_transition(fits[0].model, fits[1].model, motions[0].skeleton(), T, dt, 1.0, 1.5, body_map=bm)
+    sk = motions[0].skeleton()
+    g = style.grounded_transition(fits[0].model, fits[1].model, sk, T, dt, 1.0, 1.5, body_map=bm, foot_lock=False)
     x = style.transition(fits[0].model, fits[1].model, jnp.arange(T) * dt, 1.0, 1.5)
     np.testing.assert_allclose(np.asarray(g.features[:, 3:]), np.asarray(x[:, 3:]), atol=1e-5)  # same pose
     # Grounded: the root travels at the blend's own speed.
     travel = np.linalg.norm(np.asarray(g.root_position[-1] - g.root_position[0])[[0, 2]])
     own = np.linalg.norm(np.asarray(x[:, :2]).sum(0) * dt)
     assert abs(travel / own - 1) < 0.05
-    if hasattr(gait, "lock_feet"):
-        pytest.skip("gait.lock_feet exists: the foot-lock tests cover foot_lock=True")
-    with pytest.raises(UserError, match="lock_feet"):
-        style.grounded_transition(fits[0].model, fits[1].model, motions[0].skeleton(), 8, dt, 0.0, 0.1,
-                                  body_map=bm, foot_lock=True)
+    locked = style.grounded_transition(fits[0].model, fits[1].model, sk, T, dt, 1.0, 1.5, body_map=bm)
+    np.testing.assert_array_equal(np.asarray(locked.root_position), np.asarray(g.root_position))
+    names = fits[0].model.channel_names
+    legs = {sk.topology.names[j] for leg in (bm.left, bm.right) for j in (leg.hip, leg.knee, leg.ankle)}
+    leg_cols = np.asarray([i for i, n in enumerate(names) if n.partition(".")[0] in legs])
+    other = np.asarray([i for i in range(3, len(names)) if i not in set(leg_cols)])
+    np.testing.assert_allclose(np.asarray(locked.features[:, other]), np.asarray(g.features[:, other]), atol=1e-6)
+    assert np.abs(np.asarray(locked.features[:, leg_cols] - g.features[:, leg_cols])).max() > 1e-3
+    assert float(np.asarray(locked.lowest).min()) >= -1e-3  # never below the floor
+    import jax
+
+    with pytest.raises(UserError, match="contact_intervals"):
+        jax.jit(lambda a: style.grounded_transition(a, fits[1].model, sk, 8, dt, 0.0, 0.1, body_map=bm).features)(
+            fits[0].model)
 
 
 @pytest.mark.slow
