@@ -250,7 +250,8 @@ def test_bandai_new_user_commands(new_user_outputs):
     assert glob.glob(f"{w}/sn.bvh")
 
 
-@pytest.mark.xfail(strict=True, reason="issue 21: `characteristic A B` is A - B (normal - old), so `synth A "
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue 21: `characteristic A B` is A - B (normal - old), so `synth A "
                    "--add it=1` extrapolates to 2 normal - old: root 179 cm/s against 124, skating 149 "
                    "units/s before locking; `gait.lock_feet` holds the planted foot until the leg's reach "
                    "runs out and then lifts it (weight 1, the unlocked foot on the floor): median lowest "
