@@ -217,16 +217,15 @@ def _floor_and_forward(path):
     return cos, float(np.median(low))
 
 
-@pytest.mark.xfail(strict=False, reason="issue 21: a floor check fails since foot locking (on by default) "
-                   "and the grounded transition were merged; not re-measured in this session")
-def test_bandai_new_user_commands(bandai_models, tmp_path):
-    """Issue #20 "Tried as a new user would": fit, then interpolate, characteristic, synth and
-    transition on the models: each works, travels forward and stands on the floor (~1 cm)."""
+@pytest.fixture(scope="module")
+def new_user_outputs(bandai_models, tmp_path_factory):
+    """Issue #20 "Tried as a new user would": characteristic, interpolate, synth and transition on
+    the fitted models, in process (one run of each for the tests below)."""
     from fourierjax.cli import main
 
     out, files = bandai_models
     a, b = str(out / "dataset-1_walk_normal_001.npz"), str(out / "dataset-1_walk_old_001.npz")
-    w = str(tmp_path)
+    w = str(tmp_path_factory.mktemp("new_user"))
     assert main(["characteristic", a, b, "--out", f"{w}/old.npz"]) == 0
     assert main(["interpolate", a, b, "--s", "0.5", "--seconds", "4", "--out", f"{w}/i.bvh"]) == 0
     assert main(["synth", a, "--seconds", "4", "--out", f"{w}/s.bvh"]) == 0
@@ -234,15 +233,34 @@ def test_bandai_new_user_commands(bandai_models, tmp_path):
     assert main(["synth", a, "--seconds", "4", "--no-root-motion", "--out", f"{w}/sn.bvh"]) == 0
     assert main(["transition", a, b, "--seconds", "6", "--start", "2", "--duration", "2",
                  "--out", f"{w}/t.bvh"]) == 0
-    # The hip rule (synth) puts the lowest foot point on its ground, height 0; interpolate and
-    # transition keep the captured root height, so their feet stand where the capture's do
-    # (Bandai's foot points sit ~4 cm above the file's y = 0 in stance).
     _, captured_low = _floor_and_forward(next(f for f in files if "walk_normal" in f))
-    for name, floor in (("i", captured_low), ("s", 0.0), ("sa", 0.0), ("t", captured_low)):
+    return w, captured_low
+
+
+def test_bandai_new_user_commands(new_user_outputs):
+    """Each works, travels forward and stands on the floor (~1 cm). The hip rule (synth, and
+    interpolate, grounded like synth) puts the lowest foot point on its ground, height 0; the
+    transition keeps A's captured floor, so its feet stand where the capture's do (Bandai's foot
+    points sit ~4 cm above the file's y = 0 in stance)."""
+    w, captured_low = new_user_outputs
+    for name, floor in (("i", 0.0), ("s", 0.0), ("t", captured_low)):
         cos, low = _floor_and_forward(f"{w}/{name}.bvh")
         assert cos >= 0.95, (name, cos)
         assert abs(low - floor) <= 1.0, (name, low, floor)  # cm
     assert glob.glob(f"{w}/sn.bvh")
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="issue 21: `characteristic A B` is A - B (normal - old), so `synth A "
+                   "--add it=1` extrapolates to 2 normal - old: root 179 cm/s against 124, skating 149 "
+                   "units/s before locking; `gait.lock_feet` holds the planted foot until the leg's reach "
+                   "runs out and then lifts it (weight 1, the unlocked foot on the floor): median lowest "
+                   "foot point 3.4 cm above the floor, 7.0 cm at the 90% quantile (0 without locking)")
+def test_bandai_new_user_extrapolated_synth_stands_on_the_floor(new_user_outputs):
+    w, _ = new_user_outputs
+    cos, low = _floor_and_forward(f"{w}/sa.bvh")
+    assert cos >= 0.95, cos
+    assert abs(low) <= 1.0, low  # cm
 
 
 def _cycle_positions(model, skeleton, num=48):

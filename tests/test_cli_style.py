@@ -89,6 +89,7 @@ def test_interpolate_writes_the_model_and_a_motion(files):
         "60",
         "--method",
         "phasor",
+        "--no-root-motion",  # the model's own root channels (grounded by default: the hip rule)
         cwd=d,
     )
     assert proc.returncode == 0, proc.stderr
@@ -114,7 +115,9 @@ def test_interpolate_bad_number_is_one_line(files):
 def test_transition_writes_a_bvh(files):
     d, models = files
     proc = run_cli(
-        "transition", "a.npz", "b.npz", "--seconds", "3", "--start", "1", "--duration", "1", "--out", "t.bvh", cwd=d
+        "transition", "a.npz", "b.npz", "--seconds", "3", "--start", "1", "--duration", "1", "--out", "t.bvh",
+        "--no-foot-lock",  # the transition's own angles (foot locking, on by default, changes the legs')
+        cwd=d,
     )
     assert proc.returncode == 0, proc.stderr
     motion = read_bvh(d / "t.bvh")
@@ -198,3 +201,45 @@ def test_interpolate_reexports_the_input_helpers():
 
     for name in ("Gait", "add_gait_arguments", "fit_bvhs", "load_gait_pair", "load_gaits"):
         assert getattr(interpolate, name) is getattr(_inputs, name)
+
+
+def _leg_and_other_channels(motion):
+    """(leg columns, other rotation columns) of a Motion's BVH channels: the body map's hips,
+    knees and ankles (what foot locking may change) and every other joint's rotations."""
+    from fourierjax import body
+
+    bm = body.infer_body_map(motion)
+    legs = {j for leg in (bm.left, bm.right) for j in (leg.hip, leg.knee, leg.ankle)}
+    cols, other = [], []
+    topo = motion.topology
+    for j, (start, names) in enumerate(zip(topo.channel_offsets, topo.channels)):
+        for k, n in enumerate(names):
+            if n.endswith("rotation"):
+                (cols if j in legs else other).append(start + k)
+    return np.asarray(cols), np.asarray(other), bm
+
+
+@pytest.mark.parametrize("command", ["transition", "interpolate"])
+def test_foot_lock_flags(files, command, monkeypatch):
+    """`--foot-lock` plants the feet: only the leg joints' angles change against `--no-foot-lock`;
+    the flag reaches both commands (issue 21). On by default in interpolate, off in transition
+    (its knee moves break a walk <-> run transition's no-pop bound)."""
+    from fourierjax import _compile_cache
+    from fourierjax.cli import main
+
+    d, _ = files
+    monkeypatch.setattr(_compile_cache, "enable_compile_cache", lambda: False)
+    monkeypatch.chdir(d)
+    args = (["transition", "a.npz", "b.npz", "--seconds", "1", "--start", "0.2", "--duration", "0.5"]
+            if command == "transition" else ["interpolate", "a.npz", "b.npz", "--s", "0.5", "--seconds", "1"])
+    out = {}
+    for flag in (None, "--foot-lock", "--no-foot-lock"):
+        name = f"{command}{flag or ''}.bvh"
+        assert main([*args, "--out", name, *([flag] if flag else [])]) == 0
+        out[flag] = read_bvh(d / name)
+    default = "--foot-lock" if command == "interpolate" else "--no-foot-lock"
+    np.testing.assert_array_equal(out[None].channels, out[default].channels)
+    legs, other, _ = _leg_and_other_channels(out[None])
+    on, off = out["--foot-lock"].channels, out["--no-foot-lock"].channels
+    np.testing.assert_allclose(on[:, other], off[:, other], atol=1e-3)
+    assert np.abs(on[:, legs] - off[:, legs]).max() > 0.5  # degrees: the lock moved the legs

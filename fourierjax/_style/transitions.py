@@ -298,6 +298,7 @@ def grounded_transition(
     method: Method = "polar",
     omega_mode: OmegaMode = "geometric",
     foot_lock: bool = False,
+    contact_intervals: tuple[Float[ArrayLike, "2 2"], Float[ArrayLike, "2 2"]] | None = None,
 ) -> GroundedTransition:
     """A walk ↔ run transition that stands on the floor: `transition`, grounded.
 
@@ -316,7 +317,12 @@ def grounded_transition(
         body_map: the `body.BodyMap` of the skeleton; default the map of `a`'s own cycle
             (`gait.model_body_map`, a concrete model).
         clearance: `[2, P]` sole clearances; default estimated from the frames.
-        foot_lock: plant the feet with leg IK (`gait.lock_feet`).
+        foot_lock: plant the feet with leg IK (`gait.lock_feet`), with stance weights from both
+            models' contact intervals at the integrated phase, blended by s. Off by default:
+            on 02_01 <-> 02_03 (N = 5) the locked run -> walk moves a joint 1.166 units in one
+            frame against the sources' 1.016 (walk -> run 0.964), which breaks the no-pop bound.
+        contact_intervals: `(A's, B's)` `[2, 2]` contact phases (`gait.contact_intervals`, stored
+            with a model by `fourierjax fit`); default estimated from each model's cycle.
 
     Returns:
         A `GroundedTransition`. Raises `UserError` as `transition` does.
@@ -349,14 +355,24 @@ def grounded_transition(
     root = root.at[:, up].set(height)
     feet = feet.at[..., up].add(lift[:, None, None])
     if foot_lock:
-        # FOOT LOCK (issue #21 item 1): engineer footlock's `gait.lock_feet` plants each
-        # contact with leg IK; contacts here are the grounded frames' own (a foot within 2% of
-        # the body height of the floor). Turned on at the merge.
-        lock_feet = getattr(gait, "lock_feet", None)
-        if lock_feet is None:
-            raise UserError("grounded_transition: foot_lock=True needs `gait.lock_feet` (not in this build)")
-        lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
-        contact = (lowest <= 0.02 * float(body_map.height)).astype(feats.dtype)
-        feats = lock_feet(feats, skeleton, contact, body_map=body_map, representation=rep)
+        weights = _transition_contacts(a, on_branch_of(a, b), skeleton, body_map, s, theta, contact_intervals)
+        feats, feet = gait.lock_feet(feats, skeleton, weights, body_map=body_map, representation=rep,
+                                     root_position=root, clearance=clearance, ground=floor_a, return_feet=True)
     lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
     return GroundedTransition(feats, root, feet, lowest, s, theta, clearance)
+
+
+def _transition_contacts(a, b, skeleton, body_map, s, theta, contact_intervals):
+    """`[T, 2]` stance weights of a transition's frames: each model's `gait.contact_weights` at the
+    integrated phase, blended by s (the contact intervals change with the gait, as ω does)."""
+    from fourierjax import gait
+
+    if contact_intervals is None:
+        if isinstance(jnp.asarray(a.offset), jax.core.Tracer):
+            raise UserError("grounded_transition: foot locking under jit, vmap or grad needs "
+                            "`contact_intervals=` (or foot_lock=False)")
+        contact_intervals = tuple(gait.contact_intervals(m, skeleton, body_map=body_map) for m in (a, b))
+    if len(contact_intervals) != 2:
+        raise UserError("grounded_transition: `contact_intervals` must be (A's [2, 2], B's [2, 2])")
+    w_a, w_b = (gait.contact_weights(theta, jnp.asarray(iv, theta.dtype)) for iv in contact_intervals)
+    return (1.0 - s)[:, None] * w_a + s[:, None] * w_b

@@ -120,11 +120,12 @@ def path_motion(args, template, result, channel_names, frame_time_s, bmap):
     return grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
 
 
-def add_foot_lock_arguments(group) -> None:
-    """Add `--foot-lock/--no-foot-lock` (issue 21) to the step-constraint group."""
-    group.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=True,
+def add_foot_lock_arguments(group, default: bool = True, why: str = "") -> None:
+    """Add `--foot-lock/--no-foot-lock` (issue 21) to a group; `default` on unless said."""
+    group.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=default,
                        help="plant the feet where they land (two-bone leg IK, heel-to-toe roll; "
-                       "default on); --no-foot-lock keeps the step constraints' frames")
+                       f"default {'on' if default else 'off'}{why}); --no-foot-lock keeps the step "
+                       "constraints' frames")
 
 
 def _check(args) -> None:

@@ -90,6 +90,20 @@ def template_of(a: Gait, b: Gait, command: str):
     )
 
 
+def grounded_interpolation(model, template, num_frames: int, frame_time_s: float, *, foot_lock: bool = True):
+    """An interpolated (or any) model synthesized as `synth` does, as a writeable `Motion`: the
+    hip-height rule, root motion from the stance feet and, with `foot_lock`, planted feet
+    (`gait.synthesize_gait` on the body map of the model's own poses; the contact intervals are
+    estimated from its cycle, since neither model's stored ones belong to the blend)."""
+    from fourierjax import gait
+    from fourierjax.io.gait_bvh import gait_motion
+
+    bmap = gait.model_body_map(model, template.skeleton())
+    r = gait.synthesize_gait(model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
+                             foot_lock=foot_lock)
+    return gait_motion(template, r, model.channel_names, frame_time_s, body_map=bmap)
+
+
 # ------------------------------------------------------------------------------------ command
 
 
@@ -113,6 +127,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--fps", default=None, metavar="F", help="frame rate of a .bvh output (default: that of A's clip, else 120)"
     )
+    g = parser.add_argument_group(
+        "grounding of a .bvh output (issue 21)",
+        "As `fourierjax synth`: the hip-height rule puts the lowest foot point on the floor, the "
+        "root path follows the stance feet, and foot locking plants them (two-bone leg IK).")
+    g.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
+                   help="root height from the hip rule and root path from the stance feet (default "
+                   "on); --no-root-motion keeps the interpolated model's own root channels (and no "
+                   "foot lock)")
+    from fourierjax.cli._gait_args import add_foot_lock_arguments
+
+    add_foot_lock_arguments(g)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -122,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax import fourier, style
     from fourierjax.errors import UserError
     from fourierjax.io import model_io
+    from fourierjax.io.bvh import write_bvh
 
     s = parse_number(args.s, "--s")
     out = check_out(args.out, (".npz", ".bvh"))
@@ -143,7 +169,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         template, frame_time_s = template_of(a, b, "interpolate")
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
-        t = jnp.arange(frame_count(seconds, dt)) * dt
-        write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model)
+        num = frame_count(seconds, dt)
+        if getattr(args, "root_motion", True):
+            write_bvh(grounded_interpolation(model, template, num, dt, foot_lock=getattr(args, "foot_lock", True)),
+                      out)
+        else:
+            t = jnp.arange(num) * dt
+            write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model)
     print(f"wrote {out}")
     return 0

@@ -38,11 +38,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_grounding_arguments(parser: argparse.ArgumentParser) -> None:
-    """`--root-motion/--no-root-motion` (issue #21: grounded transitions)."""
-    parser.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
-                        help="root path from the stance feet and the lowest foot on the captured floor, "
-                        "flying only where the run does (default on); --no-root-motion keeps the "
-                        "blended models' own root channels")
+    """`--root-motion/--no-root-motion` and `--foot-lock/--no-foot-lock` (issue #21: grounded
+    transitions, planted feet)."""
+    from fourierjax.cli._gait_args import add_foot_lock_arguments
+
+    g = parser.add_argument_group("grounding (issue 21)")
+    g.add_argument("--root-motion", action=argparse.BooleanOptionalAction, default=True,
+                   help="root path from the stance feet and the lowest foot on the captured floor, "
+                   "flying only where the run does (default on); --no-root-motion keeps the "
+                   "blended models' own root channels (and no foot lock)")
+    add_foot_lock_arguments(g, default=False, why=": locking's knee moves break the no-pop bound of a "
+                            "walk <-> run transition")
 
 
 def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: float, duration: float):
@@ -52,7 +58,8 @@ def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: 
 
     bmap = gait.model_body_map(a.model, template.skeleton())
     r = style.grounded_transition(a.model, b.model, template.skeleton(), num_frames, dt, start, duration,
-                                  body_map=bmap, ease=args.ease, method=args.method)
+                                  body_map=bmap, ease=args.ease, method=args.method,
+                                  foot_lock=getattr(args, "foot_lock", False))
     return grounded_motion(template, r.features, r.root_position, a.model.channel_names, dt, body_map=bmap)
 
 
