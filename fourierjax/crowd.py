@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -12,6 +14,9 @@ from fourierjax._sincos import sincos as _sincos
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 from fourierjax.skeleton import Skeleton, Topology
+
+if TYPE_CHECKING:
+    from fourierjax.body import BodyMap
 
 __all__ = ["Crowd", "make_crowd", "crowd_positions"]
 
@@ -174,7 +179,17 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     return _fk.gather_levels(the_plan, p, 3, False, (crowd.num_characters,), dtype)
 
 
-def crowd_positions(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "B J 3"]:
+def crowd_positions(
+    crowd: Crowd,
+    t: Float[Array, ""],
+    foot_lock: bool = False,
+    *,
+    body_map: BodyMap | None = None,
+    intervals: Float[Array, "B 2 2"] | None = None,
+    state: tuple[Array, Array] | None = None,
+    floor: Float[Array, " B"] | None = None,
+    clearance: Float[Array, "2 P"] | None = None,
+) -> Float[Array, "B J 3"] | tuple[Float[Array, "B J 3"], tuple[Array, Array]]:
     """World positions of every joint of every character at time `t` (jitted entry point).
 
     Per character: the channels of Unuma 1995 eq. 1 at `theta = omega t` (linear form, harmonics
@@ -182,21 +197,40 @@ def crowd_positions(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "B J 3"]:
     joint, position channels replacing OFFSET components). Equal to
     `kinematics.joint_positions(skeleton, jax.vmap(lambda m: fourier.synthesize(m, t[None])[0])(models))`
     for the skeleton and models the crowd was made from. Differentiable in `t` and in the
-    crowd's arrays.
+    crowd's arrays. With `foot_lock=True` the positions then go through `gait.lock_crowd`
+    (held foot points and two-bone leg IK; frames are posed in order, carrying `state`).
 
     Arguments:
         crowd: from `make_crowd`.
         t: scalar time in seconds (traced: a new time does not recompile).
+        foot_lock: lock the feet of every character in stance (`gait.lock_crowd`).
+        body_map: the skeleton's `BodyMap` (feet, legs, up axis); needed with `foot_lock`.
+        intervals: `[B, 2, 2]` contact intervals per character (`gait.contact_intervals` of each
+            model); needed with `foot_lock`.
+        state: the previous frame's lock state (None on the first frame).
+        floor: `[B]` floor heights (default 0); clearance: `[2, P]` sole clearances (default 0).
 
     Returns:
-        `[B, J, 3]` joint positions in file units, joints in file order.
+        `[B, J, 3]` joint positions in file units, joints in file order; with `foot_lock`,
+        `(positions, state)`, the state to pass with the next frame.
+
+    Raises:
+        `UserError` naming the argument when the crowd, `t`, or the foot-lock inputs do not fit.
     """
     if not isinstance(crowd, Crowd):
         raise UserError(f"crowd_positions: `crowd` must be a Crowd (make_crowd), got {type(crowd).__name__}")
     t = jnp.asarray(t, crowd.coefficients.dtype)
     if t.shape != ():
         raise UserError(f"crowd_positions: `t` must be a scalar time in seconds, got shape {t.shape}")
-    return _positions_jit(crowd, t)
+    if not foot_lock:
+        return _positions_jit(crowd, t)
+    if body_map is None or intervals is None:
+        raise UserError("crowd_positions: foot_lock=True needs `body_map` (the skeleton's BodyMap) and "
+                        "`intervals` ([B, 2, 2] contact intervals, gait.contact_intervals per model)")
+    from fourierjax import gait
+
+    return gait.lock_crowd(_positions_jit(crowd, t), crowd.omega * t, intervals, state, body_map=body_map,
+                           parents=crowd.topology.parents, floor=floor, clearance=clearance)
 
 
 def _positions(crowd: Crowd, t: Array) -> Array:

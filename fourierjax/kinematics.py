@@ -9,6 +9,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import _fk, _jit, rotations
+from fourierjax._fourier._buckets import length_bucket as _bucket
 from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
 
@@ -191,8 +192,12 @@ def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) ->
 
 
 def _check_batch(skeleton: Skeleton, channels, name: str):
+    """`channels` as an array: a jax array or Tracer as it is, anything else as NumPy (the jitted
+    call moves it to the device; `jnp.asarray` would compile a `stage` program per shape)."""
     topology = skeleton.topology
-    channels = jnp.asarray(channels)
+    if not isinstance(channels, jax.Array):
+        channels = np.asarray(channels)
+        channels = channels.astype(jax.dtypes.canonicalize_dtype(channels.dtype), copy=False)
     if channels.ndim < 1 or channels.shape[-1] != topology.num_channels:
         raise UserError(
             f"{name}: `channels` has shape {channels.shape}, expected (..., "
@@ -230,10 +235,9 @@ def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
 _FK_CHUNK = 4096
 
 
-def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool, name: str):
+def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
     """`_fk_chunk` of `[..., C]` channels, in chunks of frames when there are many."""
     topology = skeleton.topology
-    channels = _check_batch(skeleton, channels, name)
     batch = channels.shape[:-1]
     m = int(np.prod(batch))
     flat = channels.reshape(m, topology.num_channels)  # not -1: a skeleton may have no channels
@@ -261,14 +265,70 @@ def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool, name: str):
     return tuple(back(a) for a in out)
 
 
+#: Batches of up to this many frames (all leading axes together) are padded to
+#: `_fourier._buckets.length_bucket` frames, so clips of new lengths reuse the compiled FK of
+#: their bucket; larger batches compile for their own shape (their run time dwarfs a compile,
+#: and padding them would cost up to 2x the work).
+PAD_LIMIT = 1 << 16
+
+
+def _bucketed(jitted, skeleton: Skeleton, channels):
+    """`jitted(skeleton, channels)` with the frames of a concrete `[..., C]` batch flattened and
+    padded to their length bucket, and the outputs cut back to `[..., ...]`.
+
+    Frames are independent, so padding is exact. On CPU the padding and the cut are NumPy
+    copies, not XLA programs, so a new length compiles nothing at all; elsewhere they are two
+    small eager ops. Traced channels (inside jit, vmap or grad) are passed through: the caller's
+    program has one shape anyway.
+    """
+    batch = channels.shape[:-1]
+    m = int(np.prod(batch))
+    rows = _bucket(m)
+    if isinstance(channels, jax.core.Tracer) or m > PAD_LIMIT or (rows == m and len(batch) == 1):
+        return jitted(skeleton, channels)
+    cpu = isinstance(channels, np.ndarray) or jax.default_backend() == "cpu"
+    width = channels.shape[-1]
+    if cpu:
+        flat = np.asarray(channels).reshape(m, width)
+        padded = np.zeros((rows, width), flat.dtype)
+        padded[:m] = flat
+    else:
+        padded = jnp.pad(channels.reshape(m, width), ((0, rows - m), (0, 0)))
+    out = jitted(skeleton, padded)
+
+    def cut(a):
+        if a is None:
+            return None
+        if cpu:  # device_put, not jnp.asarray: no `stage` program per shape
+            return jax.device_put(np.asarray(a)[:m].reshape(*batch, *a.shape[1:]))
+        return a[:m].reshape(*batch, *a.shape[1:])
+
+    return jax.tree.map(cut, out, is_leaf=lambda a: a is None)
+
+
 # `_jit.jit` (the one wrapper's mechanism over `jax.jit`), not `filter_jit`: equinox's argument
-# filtering cost ~150 us more per call on small batches (2-core machine, jax 0.10.2), which FK
-# is called with per frame. The classic CPU emitters (`_jit.CPU_COMPILER_OPTIONS`) compile the
-# unrolled levels 2-2.5x faster than the new fusion emitters (3.2 vs 6.9 s under a load of 12
-# on 2 cores) at a run time equal within the noise of the shared machine.
+# filtering cost ~150 us more per call on small batches (2-core machine, jax 0.10.2; 0.94 ms
+# against 13 us under a load of 13), which FK is called with per frame. The classic CPU
+# emitters (`_jit.CPU_COMPILER_OPTIONS`) compile the unrolled levels 2-2.5x faster than the new
+# fusion emitters (3.2 vs 6.9 s under a load of 12 on 2 cores) at a run time equal within the
+# noise of the shared machine.
 @_jit.jit
-def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
+def _joint_positions_jit(skeleton: Skeleton, channels):
+    return _fk_batch(skeleton, channels, False)[1]
+
+
+@_jit.jit
+def _fk_frames_jit(skeleton: Skeleton, channels):
+    rot, pos, ends = _fk_batch(skeleton, channels, True)
+    return FKResult(rotations=rot, positions=pos, end_site_positions=ends)
+
+
+def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> Float[Array, "... joints 3"]:
     """World positions of every joint for every frame (jitted entry point).
+
+    Concrete batches of up to `PAD_LIMIT` frames are padded to their length bucket
+    (`fourierjax._fourier._buckets.length_bucket`), so clips of different lengths in one bucket
+    share one compiled program.
 
     Arguments:
         skeleton: the skeleton (unbatched offsets).
@@ -278,15 +338,15 @@ def joint_positions(skeleton: Skeleton, channels: Float[Array, "... channels"]):
     Returns:
         `[..., J, 3]` joint positions in file units, joints in file order.
     """
-    return _fk_batch(skeleton, channels, False, "joint_positions")[1]
+    channels = _check_batch(skeleton, channels, "joint_positions")
+    return _bucketed(_joint_positions_jit, skeleton, channels)
 
 
-@_jit.jit
 def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKResult:
     """`FKResult` for every frame of `[..., C]` BVH channels (jitted entry point).
 
-    Same values as `jax.vmap(fk_from_channels)`, computed in a frame-minor layout (see the
-    notes above this function).
+    Same values as `jax.vmap(fk_from_channels)`, computed in a frame-minor layout; concrete
+    batches are padded to their length bucket as in `joint_positions`.
 
     Arguments:
         skeleton: the skeleton (unbatched offsets).
@@ -295,5 +355,10 @@ def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     Returns:
         An `FKResult` whose leaves get the leading dims `...` of `channels`.
     """
-    rot, pos, ends = _fk_batch(skeleton, channels, True, "fk_frames")
-    return FKResult(rotations=rot, positions=pos, end_site_positions=ends)
+    channels = _check_batch(skeleton, channels, "fk_frames")
+    return _bucketed(_fk_frames_jit, skeleton, channels)
+
+
+# The retrace guard of the tests counts the compiled programs behind each entry point.
+joint_positions.num_traces = _joint_positions_jit.num_traces  # type: ignore[attr-defined]
+fk_frames.num_traces = _fk_frames_jit.num_traces  # type: ignore[attr-defined]

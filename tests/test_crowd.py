@@ -152,3 +152,32 @@ def test_bad_input_raises_user_error_naming_the_argument():
     with pytest.raises(UserError, match="`t`"):
         crowd.crowd_positions(c, jnp.zeros(3))
     assert isinstance(UserError("x"), ValueError)
+
+
+def test_foot_lock_in_the_crowd_equals_lock_crowd_by_hand():
+    from fourierjax import gait
+    from fourierjax.body import infer_body_map
+
+    m = data.load("07_01")
+    skel, bm = m.skeleton(), infer_body_map(m)
+    rng = np.random.default_rng(0)
+    models = _models(rng, m.channels.mean(0), num_chars=5)  # the shapes of the first test: no new FK
+    c = crowd.make_crowd(skel, models)
+    start = rng.uniform(0, 2 * np.pi, (5, 2))
+    iv = jnp.asarray(np.stack([start, start + 3.8], -1), jnp.float32)
+    floor = jnp.full((5,), float(np.asarray(crowd.crowd_positions(c, 0.0))[:, :, 1].min()))
+    s_crowd = s_hand = None
+    moved = 0.0
+    for k in range(4):
+        t = jnp.float32(0.05 * k)
+        ours, s_crowd = crowd.crowd_positions(c, t, True, body_map=bm, intervals=iv, state=s_crowd, floor=floor)
+        plain = crowd.crowd_positions(c, t)
+        hand, s_hand = gait.lock_crowd(plain, models.omega * t, iv, s_hand, body_map=bm,
+                                       parents=skel.topology.parents, floor=floor)
+        np.testing.assert_array_equal(np.asarray(ours), np.asarray(hand))
+        for a, b in zip(jax.tree.leaves(s_crowd), jax.tree.leaves(s_hand)):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        moved = max(moved, float(jnp.abs(ours - plain).max()))
+    assert moved > 1e-3  # the lock changed the feet (the test can fail)
+    with pytest.raises(UserError, match="intervals"):
+        crowd.crowd_positions(c, 0.0, True, body_map=bm)

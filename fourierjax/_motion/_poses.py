@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Bool, Float, Int
@@ -18,15 +19,24 @@ def motion_joint_positions(
 ) -> Float[np.ndarray, "K J 3"]:
     """World joint positions of a clip through forward kinematics of its BVH channels.
 
+    The frames are padded to their length bucket (`length_bucket`) in NumPy and cut back, so
+    clips of different lengths in one bucket share one compiled FK and compile nothing else.
+
     Arguments:
         motion: a Motion; frames: optional frame indices (default: every frame).
     Returns:
         ``[F, J, 3]`` file units (JAX's default float dtype), joints in file order.
     """
-    from fourierjax.kinematics import joint_positions
+    from fourierjax.kinematics import PAD_LIMIT, joint_positions
 
     ch = motion.channels if frames is None else motion.channels[np.asarray(frames)]
-    return np.asarray(joint_positions(motion.skeleton(), jnp.asarray(ch)))
+    ch = np.asarray(ch, jax.dtypes.canonicalize_dtype(ch.dtype))  # JAX's default float
+    num_frames = ch.shape[0]
+    if num_frames > PAD_LIMIT:
+        return np.asarray(joint_positions(motion.skeleton(), ch))
+    padded = np.zeros((_bucket(num_frames), ch.shape[1]), ch.dtype)
+    padded[:num_frames] = ch
+    return np.asarray(joint_positions(motion.skeleton(), padded))[:num_frames]
 
 
 _root_relative_positions_jit = _jit.filter_jit(root_relative_positions)
