@@ -35,8 +35,18 @@ def _known_options(options: dict) -> dict:
     return {name: value for name, value in options.items() if _option_known(name, value)}
 
 
+#: (option, jaxlib version) pairs known to be accepted: no probe compile for them. The probe
+#: is one more program (trace, lowering, compile or cache read) in every process, which a
+#: command line call pays before its first entry point.
+_ACCEPTED: frozenset[tuple[str, str]] = frozenset({("xla_cpu_use_fusion_emitters", "0.10.2")})
+
+
 @functools.cache
 def _option_known(name: str, value) -> bool:
+    import jaxlib
+
+    if (name, jaxlib.__version__) in _ACCEPTED:
+        return True
     lowered = jax.jit(lambda x: x + 1).lower(jax.ShapeDtypeStruct((), "float32"))
     try:
         lowered.compile(compiler_options={name: value})

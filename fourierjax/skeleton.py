@@ -6,10 +6,10 @@ import dataclasses
 from functools import cached_property
 
 import equinox as eqx
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from fourierjax._host import as_default_float
 from fourierjax.errors import UserError
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
@@ -177,10 +177,11 @@ class Skeleton(eqx.Module):
 
     def __init__(self, topology: Topology, offsets, end_site_offsets=None):
         self.topology = topology
-        self.offsets = jnp.asarray(offsets, dtype=float)
+        # On the host for NumPy input: `jnp.asarray(x, float)` of float64 is a program per shape.
+        self.offsets = as_default_float(offsets)
         if end_site_offsets is None:
             end_site_offsets = np.zeros((topology.num_end_sites, 3))
-        self.end_site_offsets = jnp.asarray(end_site_offsets, dtype=float)
+        self.end_site_offsets = as_default_float(end_site_offsets)
 
     def __check_init__(self):
         j, e = self.topology.num_joints, self.topology.num_end_sites

@@ -52,28 +52,28 @@ rots, pos, parents, offsets, _, _ = bvh.get_data()
 fk(rots, pos[:, 0, :], offsets, parents)
 """
 
-#: Runs one command under JAX's monitoring events and writes where its seconds went.
+#: Runs one command under `fourierjax._programs.ProgramCount` (the program counter the tests
+#: use through $FOURIERJAX_PROGRAM_LOG) and writes where its seconds and programs went.
 PHASES_SCRIPT = """
-import json, sys, time
+import json, logging, sys, time
 t0 = time.perf_counter()
-from jax import monitoring
-ev = {}
-def listener(event, duration_secs, **_):
-    a = ev.setdefault(event.rsplit("/", 1)[-1], [0, 0.0]); a[0] += 1; a[1] += duration_secs
-monitoring.register_event_duration_secs_listener(listener)
-import logging
+from fourierjax._programs import ProgramCount
+uncacheable = []
 class Misses(logging.Handler):
     def emit(self, record):
         msg = record.getMessage()
         if msg.startswith("Not writing persistent cache entry"):
-            ev.setdefault("uncacheable", []).append(msg.split("'")[1])
+            uncacheable.append(msg.split("'")[1])
 logging.getLogger("jax._src.compiler").addHandler(Misses())
 logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
-from fourierjax.cli import main
-code = main(sys.argv[2:])
-ev["total_s"] = time.perf_counter() - t0
+with ProgramCount() as count:
+    from fourierjax.cli import main
+    code = main(sys.argv[2:])
+out = count.summary()
+out["total_s"] = time.perf_counter() - t0
+out["uncacheable"] = sorted(set(uncacheable))
 with open(sys.argv[1], "w") as f:
-    json.dump(ev, f)
+    json.dump(out, f)
 sys.exit(code)
 """
 
@@ -143,17 +143,17 @@ def _commands(py: str) -> dict[str, tuple[list[str], list[list[str]]]]:
 
 
 def _phases(py: str, cmd: list[str], env: dict, cwd: str) -> dict:
-    """Where a warm call's seconds go: JAX's trace / lowering / compile / cache-read totals."""
+    """Where a warm call's seconds go: JAX's trace / lowering / compile-or-load / cache-read
+    totals, and how many programs (compiled or read from the cache) and traces it made."""
     path = os.path.join(cwd, "phases.json")
     _wall([py, "-c", PHASES_SCRIPT, path, *cmd[3:]], env, cwd)
     with open(path) as f:
         ev = json.load(f)
-    pick = {"trace": "jaxpr_trace_duration", "lower": "jaxpr_to_mlir_module_duration",
-            "xla_compile_or_load": "backend_compile_duration",
-            "cache_read": "cache_retrieval_time_sec"}
-    out = {f"{k}_s": round(ev[v][1], 3) for k, v in pick.items() if v in ev}
-    out["programs"] = ev.get("backend_compile_duration", [0])[0]
-    out["programs_not_cacheable"] = sorted(set(ev.get("uncacheable", [])))
+    out = {f"{k}_s": round(v, 3) for k, v in ev["seconds"].items()}
+    out["programs"] = ev["programs"]
+    out["traces"] = ev["traces"]
+    out["programs_where"] = ev["where"]
+    out["programs_not_cacheable"] = ev["uncacheable"]
     out["total_in_process_s"] = round(ev["total_s"], 3)
     return out
 
@@ -161,7 +161,8 @@ def _phases(py: str, cmd: list[str], env: dict, cwd: str) -> dict:
 def run(size: str) -> list[Record]:
     py = sys.executable
     small = size != "full"
-    repeats = 1 if small else 7
+    # $FOURIERJAX_BENCH_REPEATS: fewer rounds on a crowded machine (default 7).
+    repeats = 1 if small else int(os.environ.get("FOURIERJAX_BENCH_REPEATS", "7"))
     records = []
     with tempfile.TemporaryDirectory(prefix="fourierjax-startup-") as tmp:
         env = _env(os.path.join(tmp, "cache"))
@@ -222,7 +223,7 @@ def run(size: str) -> list[Record]:
             for p in prepare:
                 _wall(p, env, work)
             cold = _wall(cmd, env, work)[0]
-            warm = [_wall(cmd, env, work)[0] for _ in range(3)]
+            warm = [_wall(cmd, env, work)[0] for _ in range(min(3, repeats))]
             rec = Record(f"startup_second_{name}", statistics.median(warm), cold, "s", target=3.0,
                          target_on="ours", target_op="<=", lower_is_better=True,
                          description=f"second call of `fourierjax {' '.join(cmd[3:])}` (warm cache)",

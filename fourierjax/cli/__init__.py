@@ -65,9 +65,11 @@ def _build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the `fourierjax` script. Returns the process exit code."""
-    from fourierjax.errors import FourierJaxError
+    """Entry point of the `fourierjax` script. Returns the process exit code.
 
+    With ``$FOURIERJAX_PROGRAM_LOG`` set to a path, the JAX programs and traces the command
+    made are written there as JSON (`fourierjax._programs.ProgramCount`).
+    """
     parser = _build_parser()
     args = parser.parse_args(argv)
     from fourierjax import _compile_cache
@@ -79,6 +81,22 @@ def main(argv: list[str] | None = None) -> int:
         _compile_cache.enable_compile_cache()
     if args.command in _DRAWS:
         use_agg()
+    log = os.environ.get("FOURIERJAX_PROGRAM_LOG")  # `_programs.PROGRAM_LOG_ENV`, unimported
+    if log:
+        from fourierjax._programs import ProgramCount
+
+        with ProgramCount() as count:
+            try:
+                return _run(args)
+            finally:
+                count.write(log)
+    return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the parsed command; user errors become one line on stderr and exit status 2."""
+    from fourierjax.errors import FourierJaxError
+
     try:
         return int(args._run(args) or 0)
     except FourierJaxError as err:

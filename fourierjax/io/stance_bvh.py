@@ -2,9 +2,9 @@
 
 import os
 
-import jax.numpy as jnp
 import numpy as np
 
+from fourierjax._host import as_default_float
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import Motion, write_bvh
 from fourierjax.motion import make_euler_continuous
@@ -38,7 +38,7 @@ def pose_to_motion(body: Body, poses: StancePose, frame_time_s: float = 1.0 / 30
     quats = np.asarray(poses.quats, np.float64)
     if root.ndim == 1:
         root, quats = root[None], quats[None]
-    eul = np.asarray(dof_euler_frames(jnp.asarray(quats)), np.float64)
+    eul = np.asarray(dof_euler_frames(as_default_float(quats)), np.float64)  # no conversion program
     eul = np.degrees(make_euler_continuous(eul, ROTATION_ORDER))
     frames = root.shape[0]
     channels = np.concatenate([root, eul.reshape(frames, -1)], axis=1)

@@ -104,6 +104,29 @@ class ShapeSet:
             out[k] = jnp.where(use_pos, pos_states[k], neg_states[k])
         return out
 
+    def check_shape(self, shape: Float[Array, "20"], intensity, object_xyz=None) -> None:
+        """Refuse a known shape vector of this set that `problem` could not solve (traced: no
+        check here; the solvers flag it as `invalid_input`).
+
+        Arguments:
+            shape: `[20]` the shape vector at `intensity` (`evaluate(...)["shape"]`).
+            intensity, object_xyz: the values it was evaluated at (for the message).
+
+        Raises:
+            UserError: NaN or infinite values (a huge intensity overflows the "late" curves,
+                which square it), or a knee or elbow bend out of range (`check_bends`).
+        """
+        if isinstance(shape, jax.core.Tracer):
+            return
+        if not np.isfinite(shape).all():
+            bad = [n for n, v in zip(SHAPE_PARAMS, np.asarray(shape)) if not np.isfinite(v)]
+            with_object = "" if object_xyz is None else f" (object_xyz {np.asarray(object_xyz).tolist()})"
+            raise UserError(
+                f"shape set {self.name!r}: intensity {float(intensity):.6g}{with_object} gives a shape "
+                f"vector with infinite or NaN values in {bad}; use a smaller intensity"
+            )
+        check_bends(shape, f"shape set {self.name!r}: intensity {float(intensity):.6g}")
+
     def problem(
         self,
         body: Body,
@@ -143,16 +166,7 @@ class ShapeSet:
             dominant=dominant,
         )
         ev = self.evaluate(intensity, object_xyz)
-        if not isinstance(ev["shape"], jax.core.Tracer) and not np.isfinite(ev["shape"]).all():
-            # A huge but finite intensity overflows (the "late" curves square it).
-            bad = [n for n, v in zip(SHAPE_PARAMS, np.asarray(ev["shape"])) if not np.isfinite(v)]
-            with_object = "" if object_xyz is None else f" (object_xyz {np.asarray(object_xyz).tolist()})"
-            raise UserError(
-                f"shape set {self.name!r}: intensity {float(intensity):.6g}{with_object} gives a shape "
-                f"vector with infinite or NaN values in {bad}; use a smaller intensity"
-            )
-        if not isinstance(ev["shape"], jax.core.Tracer):  # then the intensity is known too
-            check_bends(ev["shape"], f"shape set {self.name!r}: intensity {float(intensity):.6g}")
+        self.check_shape(ev["shape"], intensity, object_xyz)
         gaze = base.gaze_point
         if object_xyz is not None:
             gaze = jnp.where(ev["gaze_object"] > 0.5, jnp.asarray(object_xyz, gaze.dtype), gaze)

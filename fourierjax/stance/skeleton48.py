@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._host import as_default_float
 from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 from fourierjax.kinematics import FKResult, forward_kinematics
@@ -247,12 +248,14 @@ def make_body(height_m: float = 1.75, mass_kg: float = 75.0) -> Body:
     s = h / DE_LEVA_STATURE_M
     off, ends, mass, com, mon = _rest_geometry()
     return Body(
-        skeleton=Skeleton(TOPOLOGY, jnp.asarray(off * s), jnp.asarray(ends * s)),
-        mass_fractions=jnp.asarray(mass / mass.sum()),
-        com_offsets=jnp.asarray(com * s),
-        monitor_points=jnp.asarray(mon * s),
-        height_m=jnp.asarray(h),
-        mass_kg=jnp.asarray(m),
+        # Converted on the host (`as_default_float`): eager `jnp.asarray` of float64 NumPy
+        # arrays made one conversion program per array.
+        skeleton=Skeleton(TOPOLOGY, off * s, ends * s),
+        mass_fractions=as_default_float(mass / mass.sum()),
+        com_offsets=as_default_float(com * s),
+        monitor_points=as_default_float(mon * s),
+        height_m=jax.device_put(h),  # weakly typed, as jnp.asarray(h), without its program
+        mass_kg=jax.device_put(m),
     )
 
 
