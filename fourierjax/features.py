@@ -121,7 +121,7 @@ def heading_of(motion, *, body_map=None) -> float:
     return float(np.arctan2(s, c))
 
 
-def _check_static_above(motion, rj) -> None:
+def check_static_above(motion, rj) -> None:
     """Joints above the trajectory joint are written back at the template's values: refuse a
     clip where they move."""
     topo = motion.topology
@@ -207,7 +207,7 @@ def features_from_motion(
     if motion.num_frames < 2:
         raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
     rj = root_joints(motion, body_map)
-    _check_static_above(motion, rj)
+    check_static_above(motion, rj)
     psi = (heading_of(motion, body_map=body_map) if heading_rad is None
            else number(heading_rad, "features_from_motion: `heading_rad`"))
     pos, q_root = _world_pose(motion, rj.pelvis)

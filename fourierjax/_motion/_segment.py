@@ -118,7 +118,7 @@ def steady_segment(
     Returns: ``(start, stop)`` frame indices into ``motion``.
     """
     pos, _ = _world_pose(motion, _root_joints(motion, body_map).pelvis)
-    return steady_from_positions(pos[:, [0, 2]], frame_time_s, window_s=window_s,
+    return steady_from_positions(pos[:, [0, 2]], motion.frame_time_s, window_s=window_s,
                                  min_speed_fraction=min_speed_fraction,
                                  max_turn_deg_s=max_turn_deg_s, min_duration_s=min_duration_s,
                                  turn_window_s=turn_window_s, trim_fraction=trim_fraction)
