@@ -9,6 +9,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float, Integer
 
 from fourierjax._checks import number
+from fourierjax._contactops import cleanup as _cleanup
+from fourierjax._contactops import hysteresis as _hysteresis
+from fourierjax._contactops import speeds as _speeds
 from fourierjax._math import safe_sqrt
 from fourierjax.errors import UserError
 
@@ -299,29 +302,6 @@ def _runs(mask: np.ndarray):
     return np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
 
 
-def _cleanup(c: np.ndarray, min_len: int, max_gap: int) -> np.ndarray:
-    c = c.copy()
-    # Close short gaps inside contacts (marker jitter), never at the clip's ends.
-    starts, stops = _runs(~c)
-    for a, b in zip(starts, stops):
-        if a > 0 and b < len(c) and b - a <= max_gap:
-            c[a:b] = True
-    starts, stops = _runs(c)
-    for a, b in zip(starts, stops):
-        if b - a < min_len:
-            c[a:b] = False
-    return c
-
-
-def _hysteresis(enter: np.ndarray, stay: np.ndarray) -> np.ndarray:
-    out = np.zeros_like(enter)
-    on = False
-    for t in range(len(enter)):
-        on = bool(enter[t]) or (on and bool(stay[t]))
-        out[t] = on
-    return out
-
-
 def estimate_ground(
     foot_positions: Float[ArrayLike, "T F *P 3"],
     frame_time_s: float,
@@ -357,8 +337,7 @@ def estimate_ground(
         ground_height = number(ground_height, "ground_height:")
         intercepts = np.maximum(np.percentile(h, 2, axis=0), ground_height)
         return GroundEstimate(intercepts, np.zeros(2), th, tv)
-    speed = np.asarray(point_speeds(p, frame_time_s))
-    intercepts, slope = _fit_floor(h, hz, speed < tv, th)
+    intercepts, slope = _fit_floor(h, hz, _speeds(p, frame_time_s) < tv, th)
     return GroundEstimate(intercepts, slope, th, tv)
 
 
@@ -404,32 +383,64 @@ def foot_contacts(
     non-positive `frame_time_s` or threshold, a non-finite `ground_height`, negative or
     non-finite durations, or an `up_axis` other than the integer 0, 1 or 2.
     """
-    p = _as_points(foot_positions)
+    return foot_contacts_many([foot_positions], [frame_time_s], up_axis=up_axis,
+                              ground_height=ground_height, height_threshold=height_threshold,
+                              speed_threshold=speed_threshold, min_contact_s=min_contact_s,
+                              max_gap_s=max_gap_s)[0]
+
+
+def foot_contacts_many(
+    foot_positions: list,
+    frame_times_s: list,
+    *,
+    up_axis: int = 1,
+    ground_height: float | None = None,
+    height_threshold: float | None = None,
+    speed_threshold: float | None = None,
+    min_contact_s: float = 0.04,
+    max_gap_s: float = 0.025,
+) -> list:
+    """`foot_contacts` of many clips at once: the floor is fitted per clip, the thresholds,
+    hysteresis and cleanup run as array ops over all clips (padded to the longest).
+
+    Arguments:
+        foot_positions: one `[T_i, F, 3]` or `[T_i, F, P, 3]` array per clip (the same F, P).
+        frame_times_s: seconds per frame of each clip.
+        up_axis, ground_height, height_threshold, speed_threshold, min_contact_s, max_gap_s:
+            as `foot_contacts`, for every clip.
+
+    Returns:
+        One `bool [T_i, F]` per clip, equal to `foot_contacts` of each.
+    """
     min_contact_s = number(min_contact_s, "min_contact_s:", nonnegative=True)
     max_gap_s = number(max_gap_s, "max_gap_s:", nonnegative=True)
-    g = estimate_ground(
-        p,
-        frame_time_s,
-        up_axis=up_axis,
-        ground_height=ground_height,
-        height_threshold=height_threshold,
-        speed_threshold=speed_threshold,
-    )
-    frame_time_s, up_axis = float(frame_time_s), int(up_axis)  # checked by estimate_ground
-    h = p[..., up_axis]
-    hz = np.delete(p, up_axis, axis=-1)
-    above = h - g.intercepts - hz @ g.slope
-    speed = np.asarray(point_speeds(p, frame_time_s))
-    enter = (above < g.height_threshold) & (speed < g.speed_threshold)
-    stay = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)
-    T, F, P = h.shape
-    min_len = max(1, int(round(min_contact_s / frame_time_s)))
-    max_gap = int(round(max_gap_s / frame_time_s))
-    out = np.zeros((T, F), bool)
-    for f in range(F):
-        pts = [_hysteresis(enter[:, f, k], stay[:, f, k]) for k in range(P)]
-        out[:, f] = _cleanup(np.any(pts, axis=0), min_len, max_gap)
-    return out
+    ps = [_as_points(p) for p in foot_positions]
+    if not ps:
+        return []
+    T = max(len(p) for p in ps)
+    F, P = ps[0].shape[1:3]
+    enter = np.zeros((T, len(ps), F, P), bool)
+    stay = np.zeros_like(enter)
+    min_len = np.zeros(len(ps), int)
+    max_gap = np.zeros(len(ps), int)
+    for i, (p, dt) in enumerate(zip(ps, frame_times_s, strict=True)):
+        g = estimate_ground(p, dt, up_axis=up_axis, ground_height=ground_height,
+                            height_threshold=height_threshold, speed_threshold=speed_threshold)
+        dt, up = float(dt), int(up_axis)  # checked by estimate_ground
+        above = p[..., up] - g.intercepts - np.delete(p, up, axis=-1) @ g.slope
+        speed = _speeds(p, dt)
+        n = len(p)
+        enter[:n, i] = (above < g.height_threshold) & (speed < g.speed_threshold)
+        stay[:n, i] = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)
+        min_len[i] = max(1, int(round(min_contact_s / dt)))
+        max_gap[i] = int(round(max_gap_s / dt))
+    on = _hysteresis(enter, stay).any(axis=3)  # [T, B, F]: any point of the foot
+    lengths = np.array([len(p) for p in ps])[:, None]
+    out = np.zeros(on.shape, bool)
+    for lo, gap in dict.fromkeys(zip(min_len, max_gap)):  # clips of one frame rate together
+        rows = (min_len == lo) & (max_gap == gap)
+        out[:, rows] = _cleanup(on[:, rows], lo, gap, lengths[rows])
+    return [out[:len(p), i] for i, p in enumerate(ps)]
 
 
 def step_events(contacts: Bool[ArrayLike, "T F"]) -> tuple[Integer[np.ndarray, " strikes"], ...]:

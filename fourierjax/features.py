@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from fourierjax import rotations
+from fourierjax import _eulerscan, rotations
 from fourierjax._checks import number
 from fourierjax._fourier._layout import (
     ancestors as _ancestors,
@@ -121,7 +121,7 @@ def heading_of(motion, *, body_map=None) -> float:
     return float(np.arctan2(s, c))
 
 
-def _check_static_above(motion, rj) -> None:
+def check_static_above(motion, rj) -> None:
     """Joints above the trajectory joint are written back at the template's values: refuse a
     clip where they move."""
     topo = motion.topology
@@ -171,24 +171,12 @@ def make_euler_continuous(
                         f"{a.shape}")
     if a.shape[0] < 2:
         return a
-    two_pi = 2 * np.pi
     F = a.shape[0]
-    flat = a.reshape(F, -1, 3)  # a view: writes go to `a`
-    K = flat.shape[1]
-    ok = np.ones((F, K), bool) if valid is None else np.broadcast_to(
-        np.asarray(valid, bool).reshape(F, -1), (F, K))
-    ref = np.zeros(K, int)  # per joint: the last valid frame
-    cols = np.arange(K)
-    twins = rotations.euler_twin(flat.copy(), order)  # of the raw frames: one call, not F
-    for t in range(1, F):
-        prev = np.where(ok[t][:, None], flat[ref, cols], flat[t - 1])
-        cur, alt = flat[t], twins[t]
-        c0 = cur + two_pi * np.round((prev - cur) / two_pi)
-        c1 = alt + two_pi * np.round((prev - alt) / two_pi)
-        d0 = np.sum((c0 - prev) ** 2, axis=-1)
-        d1 = np.sum((c1 - prev) ** 2, axis=-1)
-        flat[t] = np.where((d1 < d0 - 1e-12)[:, None], c1, c0)
-        ref = np.where(ok[t] | ~ok[ref, cols], t, ref)
+    flat = a.reshape(F, -1, 3)
+    ok = np.ones(flat.shape[:2], bool) if valid is None else np.broadcast_to(
+        np.asarray(valid, bool).reshape(F, -1), flat.shape[:2])
+    # Of the raw frames, all at once; then a parallel prefix over frames (no frame loop).
+    a = _eulerscan.continuous(flat, rotations.euler_twin(flat.copy(), order), ok).reshape(a.shape)
     return a
 
 
@@ -219,7 +207,7 @@ def features_from_motion(
     if motion.num_frames < 2:
         raise UserError(f"features_from_motion: need at least 2 frames, got {motion.num_frames}")
     rj = root_joints(motion, body_map)
-    _check_static_above(motion, rj)
+    check_static_above(motion, rj)
     psi = (heading_of(motion, body_map=body_map) if heading_rad is None
            else number(heading_rad, "features_from_motion: `heading_rad`"))
     pos, q_root = _world_pose(motion, rj.pelvis)

@@ -285,3 +285,72 @@ def test_step_period_rejects_bad_frame_time(frame_time_s):
         C.step_period_s(c, frame_time_s)
     with pytest.raises(UserError, match="frame_time_s: must be"):
         C.mean_step_period_s(c, frame_time_s)
+
+
+# -- vectorised detection (issue 25, item 3) against the per-frame loops it replaced -----------
+def _hysteresis_loop(enter, stay):
+    out = np.zeros_like(enter)
+    on = False
+    for t in range(len(enter)):
+        on = bool(enter[t]) or (on and bool(stay[t]))
+        out[t] = on
+    return out
+
+
+def _cleanup_loop(c, min_len, max_gap):
+    c = c.copy()
+    starts, stops = C._runs(~c)
+    for a, b in zip(starts, stops, strict=True):
+        if a > 0 and b < len(c) and b - a <= max_gap:
+            c[a:b] = True
+    starts, stops = C._runs(c)
+    for a, b in zip(starts, stops, strict=True):
+        if b - a < min_len:
+            c[a:b] = False
+    return c
+
+
+def test_vectorised_hysteresis_and_cleanup_equal_the_loops():
+    rng = np.random.default_rng(3)
+    for trial in range(40):
+        T, K = int(rng.integers(1, 60)), int(rng.integers(1, 5))
+        enter = rng.random((T, K)) < rng.uniform(0.05, 0.6)
+        stay = enter | (rng.random((T, K)) < 0.6)
+        if trial % 2:
+            stay = rng.random((T, K)) < 0.5  # enter need not imply stay
+        got = C._hysteresis(enter, stay)
+        for k in range(K):
+            assert got[:, k].tolist() == _hysteresis_loop(enter[:, k], stay[:, k]).tolist()
+        lengths = rng.integers(1, T + 1, K)
+        min_len, max_gap = int(rng.integers(1, 5)), int(rng.integers(0, 4))
+        out = C._cleanup(got, min_len, max_gap, lengths)
+        for k in range(K):
+            n = lengths[k]
+            assert out[:n, k].tolist() == _cleanup_loop(got[:n, k], min_len, max_gap).tolist()
+            assert not out[n:, k].any()
+
+
+def _foot_contacts_loop(p, dt):
+    """The detection as it was: eager `point_speeds`, per-point hysteresis and cleanup loops."""
+    p = C._as_points(p)
+    g = C.estimate_ground(p, dt)
+    above = p[..., 1] - g.intercepts - np.delete(p, 1, axis=-1) @ g.slope
+    speed = np.asarray(C.point_speeds(p, dt))
+    enter = (above < g.height_threshold) & (speed < g.speed_threshold)
+    stay = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)
+    min_len, max_gap = max(1, int(round(0.04 / dt))), int(round(0.025 / dt))
+    out = np.zeros(p.shape[:2], bool)
+    for f in range(p.shape[1]):
+        pts = [_hysteresis_loop(enter[:, f, k], stay[:, f, k]) for k in range(p.shape[2])]
+        out[:, f] = _cleanup_loop(np.any(pts, axis=0), min_len, max_gap)
+    return out
+
+
+def test_foot_contacts_many_equals_the_per_clip_loop_on_bundled_clips():
+    clips = [clip_feet(n) for n in ("07_01", "09_01", "07_12")]  # three lengths, walk and run
+    many = C.foot_contacts_many([p for p, _ in clips], [dt for _, dt in clips])
+    for (p, dt), got in zip(clips, many, strict=True):
+        ref = _foot_contacts_loop(p, dt)
+        assert got.shape == ref.shape and np.array_equal(got, ref)
+        assert np.array_equal(C.foot_contacts(p, dt), ref)
+        assert 0.2 < got.mean() < 0.9  # not a degenerate all-off or all-on detection

@@ -91,3 +91,80 @@ def test_stream_chunk_follows_the_memory_budget(clips):
     assert 1 <= small < M.STREAM_CHUNK
     tiny = _pipeline._stream_chunk(clip, 3, 1)
     assert tiny == 1
+
+
+# -- the stages before the fit, vectorised over a chunk (issue 25, item 3) ---------------------
+def _euler_continuous_loop(angles, order, valid=None):
+    """`features.make_euler_continuous` as it was: one frame at a time."""
+    from fourierjax import rotations
+
+    a = np.array(angles, dtype=np.float64, copy=True)
+    F = a.shape[0]
+    flat = a.reshape(F, -1, 3)
+    K = flat.shape[1]
+    ok = np.ones((F, K), bool) if valid is None else np.broadcast_to(
+        np.asarray(valid, bool).reshape(F, -1), (F, K))
+    ref, cols, two_pi = np.zeros(K, int), np.arange(K), 2 * np.pi
+    twins = rotations.euler_twin(flat.copy(), order)
+    for t in range(1, F):
+        prev = np.where(ok[t][:, None], flat[ref, cols], flat[t - 1])
+        c0 = flat[t] + two_pi * np.round((prev - flat[t]) / two_pi)
+        c1 = twins[t] + two_pi * np.round((prev - twins[t]) / two_pi)
+        d0, d1 = np.sum((c0 - prev) ** 2, axis=-1), np.sum((c1 - prev) ** 2, axis=-1)
+        flat[t] = np.where((d1 < d0 - 1e-12)[:, None], c1, c0)
+        ref = np.where(ok[t] | ~ok[ref, cols], t, ref)
+    return a
+
+
+def test_euler_continuity_without_a_frame_loop_equals_the_loop():
+    rng = np.random.default_rng(7)
+    for order in ("ZYX", "ZXY", "XZX"):
+        for trial in range(12):
+            F, K = int(rng.integers(2, 150)), int(rng.integers(1, 5))
+            # Random walks that wrap and pass near gimbal lock.
+            a = np.cumsum(rng.normal(0, 0.35, (F, K, 3)), axis=0)
+            a = (a + np.pi) % (2 * np.pi) - np.pi
+            valid = [None, rng.random((F, K)) > 0.2, rng.random(F) > 0.1][trial % 3]
+            got = M.make_euler_continuous(a, order, valid)
+            assert np.array_equal(got, _euler_continuous_loop(a, order, valid)), (order, trial)
+    # A real clip with a glitch (142_02's left arm at frame 1140) and a winding spine.
+    m = data.load("142_02")[1000:1300]
+    e = np.radians(m.channels[:, 3:].reshape(m.num_frames, -1, 3))
+    valid = ~M.glitch_joints(m)  # [F, J]: every joint has 3 rotation channels
+    assert (~valid).any()
+    got = M.make_euler_continuous(e, "ZYX", valid)
+    assert np.array_equal(got, _euler_continuous_loop(e, "ZYX", valid))
+    assert np.abs(got - e).max() > 1.0  # something was unwrapped
+
+
+@pytest.fixture(scope="module")
+def chunk():
+    """Short clips (one length bucket) of different lengths and skeletons: a CMU walk and a run,
+    142_02 around its glitch (clipped so that the glitch's padding meets the clip's start), and
+    a Bandai walk (its trajectory joint above the pelvis) when ../shared has it."""
+    import pathlib
+
+    from fourierjax.io.bvh import read_bvh
+
+    ms = [data.load("07_01")[:200], data.load("142_02")[1134:1360], data.load("09_01")]
+    bandai = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+    files = sorted(bandai.glob("dataset-1_walk_*_001.bvh"))[:1] if bandai.is_dir() else []
+    return ms + [read_bvh(p)[:250] for p in files]
+
+
+def test_prepare_chunk_equals_the_per_clip_path(chunk):
+    from fourierjax._motion import _batch
+
+    opts = dict(representation="euler", segment=True, use_contacts=True, start_frame=None,
+                stop_frame=None, timings=None)
+    ref = [_pipeline._prepare(k, m, None, **opts) for k, m in enumerate(chunk)]
+    got = _batch.prepare_chunk([(k, m, None) for k, m in enumerate(chunk)], **opts)
+    assert [g.index for g in got] == list(range(len(chunk)))
+    for r, g in zip(ref, got, strict=True):
+        assert (g.start, g.stop, g.names) == (r.start, r.stop, r.names)
+        assert np.array_equal(g.mask, r.mask)
+        assert np.array_equal(g.left, r.left) and np.array_equal(g.right, r.right)
+        np.testing.assert_allclose(g.features, r.features, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(g.omega_steps, r.omega_steps, rtol=1e-6)
+        assert g.body_map == r.body_map
+    assert any(len(g.left) for g in got) and any((~g.mask).any() for g in got)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from fourierjax._body import _names
@@ -65,7 +67,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     if len(legs) == 2:
         sources["legs"] = "file"
     else:
-        by_name = {s: _names.match_chain(names, parents, s, _names.LEG_ROLES, ("toe",)) for s in ("left", "right")}
+        by_name = {s: _match_chain(names, parents, s, "leg") for s in ("left", "right")}
         if all(by_name.values()) and not set(_present(by_name["left"])) & set(_present(by_name["right"])):
             legs, sources["legs"] = by_name, "names"  # type: ignore[assignment]
         else:
@@ -104,7 +106,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     if pelvis_ov is not None:
         pelvis, sources["pelvis"] = resolve_joint(names, pelvis_ov, "pelvis"), "file"
     else:
-        sources["pelvis"] = "names" if pelvis in _names.match_centre(names, "pelvis") else "geometry"
+        sources["pelvis"] = "names" if pelvis in _match_centre(names, "pelvis") else "geometry"
 
     left_leg = _leg(legs["left"], names, esp, ov, "left")
     right_leg = _leg(legs["right"], names, esp, ov, "right")
@@ -155,6 +157,31 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
         forward=_tuple3(forward), facing=_tuple3(facing), leg_length=leg_length, height=height, units=units,
         metres_per_unit=mpu, sources=tuple(sorted(sources.items())),
     )
+
+
+# ------------------------------------------------------------------------------ names
+
+
+def _match_chain(names, parents, side, kind: str):
+    """`_names.match_chain` of a leg or an arm, once per skeleton (a fresh dict each call)."""
+    found = _match_chain_cached(tuple(names), tuple(parents), side, kind)
+    return None if found is None else dict(found)
+
+
+@functools.lru_cache(maxsize=256)
+def _match_chain_cached(names, parents, side, kind):
+    roles, optional = (_names.LEG_ROLES, ("toe",)) if kind == "leg" else (_names.ARM_ROLES, ("collar",))
+    return _names.match_chain(names, parents, side, roles, optional)
+
+
+def _match_centre(names, role: str) -> list[int]:
+    """`_names.match_centre`, once per skeleton."""
+    return list(_match_centre_cached(tuple(names), role))
+
+
+@functools.lru_cache(maxsize=256)
+def _match_centre_cached(names, role):
+    return tuple(_names.match_centre(names, role))
 
 
 # ------------------------------------------------------------------------------ geometry
@@ -367,7 +394,7 @@ def _head_and_neck(ov, names, parents, esp, local, u, pelvis, leg_joints, source
     if "head" in ov:
         head, sources["head"] = resolve_joint(names, ov["head"], "head"), "file"
     else:
-        named = [j for j in _names.match_centre(names, "head") if j in below]
+        named = [j for j in _match_centre(names, "head") if j in below]
         if named:
             head, sources["head"] = named[0], "names"
         elif below:
@@ -382,7 +409,7 @@ def _head_and_neck(ov, names, parents, esp, local, u, pelvis, leg_joints, source
         neck, sources["neck"] = resolve_joint(names, ov["neck"], "neck"), "file"
         return head, neck
     route = _path(parents, pelvis, head)[1:-1]
-    named = [j for j in _names.match_centre(names, "neck") if j in route]
+    named = [j for j in _match_centre(names, "neck") if j in route]
     if named:
         sources["neck"] = "names"
         return head, min(named, key=route.index)
@@ -400,7 +427,7 @@ def _arms(ov, names, parents, sources) -> tuple[Arm | None, Arm | None]:
                      for k in _ARM_FIELDS}
             sources["arms"] = "file"
         else:
-            chain = _names.match_chain(names, parents, side, _names.ARM_ROLES, ("collar",))
+            chain = _match_chain(names, parents, side, "arm")
         if chain is None or any(chain[k] is None for k in _ARM_FIELDS[1:]):
             return None, None
         out.append(Arm(collar=-1 if chain["collar"] is None else chain["collar"], shoulder=chain["shoulder"],

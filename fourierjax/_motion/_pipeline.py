@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from fourierjax import _jit, _passes
+from fourierjax._motion._batch import prepare_chunk
 from fourierjax._motion._clip import (
     ClipFit,
     _frame_range,
@@ -364,8 +365,8 @@ def iter_fit_motions(
     size = [chunk_size]
 
     def read_chunk() -> list[_Clip]:
-        chunk = []
-        while size[0] is None or len(chunk) < size[0]:
+        entries = []
+        while size[0] is None or len(entries) < size[0]:
             try:
                 m = next(items)
             except StopIteration:
@@ -374,11 +375,15 @@ def iter_fit_motions(
                 bm = next(maps)
             except StopIteration:
                 raise UserError(f"fit_motions: fewer body maps than motions ({count[0]})") from None
-            chunk.append(_prepare(count[0], m, bm, **opts))
+            if size[0] is None:  # the first clip alone sizes the chunks
+                first = _prepare(count[0], m, bm, **opts)
+                size[0] = _stream_chunk(first, num_harmonics, fit_kwargs.get("max_memory"))
+                entries.append(first)
+            else:
+                entries.append((count[0], m, bm))
             count[0] += 1
-            if size[0] is None:
-                size[0] = _stream_chunk(chunk[0], num_harmonics, fit_kwargs.get("max_memory"))
-        return chunk
+        done = [e for e in entries if isinstance(e, _Clip)]
+        return done + prepare_chunk([e for e in entries if not isinstance(e, _Clip)], **opts)
 
     from tqdm import tqdm
 

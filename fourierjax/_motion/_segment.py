@@ -117,20 +117,29 @@ def steady_segment(
         motion: a Motion (Y up); body_map: its `fourierjax.body.BodyMap` (None: inferred).
     Returns: ``(start, stop)`` frame indices into ``motion``.
     """
-    F = motion.num_frames
     pos, _ = _world_pose(motion, _root_joints(motion, body_map).pelvis)
-    p = pos[:, [0, 2]]
-    w = max(1, int(round(window_s / motion.frame_time_s)))
+    return steady_from_positions(pos[:, [0, 2]], motion.frame_time_s, window_s=window_s,
+                                 min_speed_fraction=min_speed_fraction,
+                                 max_turn_deg_s=max_turn_deg_s, min_duration_s=min_duration_s,
+                                 turn_window_s=turn_window_s, trim_fraction=trim_fraction)
+
+
+def steady_from_positions(p, frame_time_s, *, window_s=0.5, min_speed_fraction=0.75,
+                          max_turn_deg_s=30.0, min_duration_s=0.5, turn_window_s=1.0,
+                          trim_fraction=0.9) -> tuple[int, int]:
+    """:func:`steady_segment` of the pelvis's ground-plane track ``p [F, 2]`` (world X, Z)."""
+    F = len(p)
+    w = max(1, int(round(window_s / frame_time_s)))
     idx = np.arange(F)
     hi, lo = np.minimum(idx + w, F - 1), np.maximum(idx - w, 0)
-    span = np.maximum(hi - lo, 1) * motion.frame_time_s
+    span = np.maximum(hi - lo, 1) * frame_time_s
     v = (p[hi] - p[lo]) / span[:, None]
     speed = np.hypot(v[:, 0], v[:, 1])
-    wt = max(w, int(round(turn_window_s / motion.frame_time_s)))
+    wt = max(w, int(round(turn_window_s / frame_time_s)))
     thi, tlo = np.minimum(idx + wt, F - 1), np.maximum(idx - wt, 0)
     vt = p[thi] - p[tlo]
     heading = np.unwrap(np.arctan2(vt[:, 0], vt[:, 1]))
-    turn = np.abs(np.gradient(heading, motion.frame_time_s)) if F > 1 else np.zeros(F)
+    turn = np.abs(np.gradient(heading, frame_time_s)) if F > 1 else np.zeros(F)
     ref = np.percentile(speed, 90)
     if ref <= 0:
         return 0, F
@@ -142,7 +151,7 @@ def steady_segment(
     if starts.size:
         i = int(np.argmax(stops - starts))
         best = (int(starts[i]), int(stops[i]))
-    if (best[1] - best[0]) * motion.frame_time_s < min_duration_s:
+    if (best[1] - best[0]) * frame_time_s < min_duration_s:
         return 0, F
     a, b = best
     med = np.median(speed[a:b])
@@ -150,7 +159,7 @@ def steady_segment(
         a += 1
     while b - 1 > a and speed[b - 1] < trim_fraction * med:
         b -= 1
-    if (b - a) * motion.frame_time_s < min_duration_s:
+    if (b - a) * frame_time_s < min_duration_s:
         return best
     return a, b
 

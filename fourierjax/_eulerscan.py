@@ -1,0 +1,109 @@
+"""Continuous Euler angles over time as array ops: a parallel prefix over frames (NumPy)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+_TWO_PI = 2 * np.pi
+
+
+def continuous(flat: np.ndarray, twins: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """`features.make_euler_continuous` of ``flat [F, K, 3]`` without a loop over frames.
+
+    Each frame takes, of its two Euler triples (``flat`` and ``twins``, each shifted by 2 pi
+    per angle towards its reference frame), the one closest to that reference: the previous
+    frame, or for a valid frame the last valid one before it (``ok [F, K]``). Which triple is
+    taken at a frame depends only on which was taken at its reference (the shifts drop out of
+    the distance), so every frame's choice is a map of two states, and its 2 pi shift an offset
+    per state. Maps and offsets compose along the reference chain by pointer jumping:
+    ``ceil(log2 F)`` rounds of array ops over all frames and columns at once.
+
+    Arguments:
+        flat: ``[F, K, 3]`` radians (K columns: joints, clips); twins: the other triple of each
+            (``rotations.euler_twin``); ok: ``bool [F, K]`` valid frames.
+
+    Returns:
+        ``[F, K, 3]``: the same values as the frame loop, frame 0 kept.
+    """
+    F, K, _ = flat.shape
+    out = np.empty_like(flat)
+    chain = ok[1:].all(axis=0)  # columns where every frame follows the frame before
+    cols = np.flatnonzero(chain)
+    for b in range(0, cols.size, _BLOCK):  # blocks of columns stay in cache
+        c = cols[b:b + _BLOCK]
+        f, w = flat[:, c], twins[:, c]
+        state, shift = _transitions(f, w, f[:-1], w[:-1])
+        out[:, c] = _apply(f, w, *_along_chain(state, shift))
+    cols = np.flatnonzero(~chain)
+    if cols.size:
+        f, w, o = flat[:, cols], twins[:, cols], ok[:, cols]
+        t = np.arange(F)[:, None]
+        last = np.maximum.accumulate(np.where(o, t, -1), axis=0)
+        ref = np.where(last >= 0, last, t)  # the last valid frame <= t, or t before any
+        parent = np.zeros(o.shape, np.int64)
+        parent[1:] = np.where(o[1:], ref[:-1], t[:-1])
+        k = np.arange(cols.size)[None, :]
+        state, shift = _transitions(f, w, f[parent[1:], k], w[parent[1:], k])
+        out[:, cols] = _apply(f, w, *_jumping(state, shift, parent))
+    return out
+
+
+#: Columns per block of the chain case.
+_BLOCK = 256
+
+
+def _transitions(flat, twins, prev0, prev1):
+    """For frames 1.. and each state of their reference (``prev0``: its raw triple,
+    ``prev1``: its twin, ``[F - 1, K, 3]``): the state taken (``[2, F, K]`` int8) and the 2 pi
+    shifts relative to the reference's (``[2, F, K, 3]``); frame 0 maps to itself."""
+    F, K, _ = flat.shape
+    state = np.zeros((2, F, K), np.int8)
+    shift = np.zeros((2, F, K, 3), np.int64)
+    cur, alt = flat[1:], twins[1:]
+    for s, prev in ((0, prev0), (1, prev1)):
+        k0 = np.round((prev - cur) / _TWO_PI)
+        k1 = np.round((prev - alt) / _TWO_PI)
+        d0 = np.sum((cur + _TWO_PI * k0 - prev) ** 2, axis=-1)
+        d1 = np.sum((alt + _TWO_PI * k1 - prev) ** 2, axis=-1)
+        pick = d1 < d0 - 1e-12
+        state[s, 1:] = pick
+        shift[s, 1:] = np.where(pick[..., None], k1, k0)
+    state[1, 0] = 1
+    return state, shift
+
+
+def _apply(flat, twins, s, k):
+    return np.where(s[..., None] == 1, twins, flat) + _TWO_PI * k.astype(np.float64)
+
+
+def _along_chain(state, shift):
+    """States and accumulated shifts where each frame's reference is the frame before: a map
+    of two states is constant, the identity or a flip, so the state is the last constant's
+    value flipped by the parity of the flips since; the shifts are a cumulative sum."""
+    F = state.shape[1]
+    t = np.arange(F)[:, None]
+    const = state[0] == state[1]
+    const[0] = True  # frame 0: state 0
+    flip = (state[0] == 1) & (state[1] == 0)
+    last = np.maximum.accumulate(np.where(const, t, 0), axis=0)
+    value = np.take_along_axis(state[0], last, axis=0)
+    flips = np.cumsum(flip, axis=0)
+    s = value ^ ((flips - np.take_along_axis(flips, last, axis=0)) & 1).astype(np.int8)
+    prev = np.concatenate([np.zeros_like(s[:1]), s[:-1]])  # the parent's state
+    step = np.where((prev == 1)[..., None], shift[1], shift[0])
+    return s, np.cumsum(step, axis=0)
+
+
+def _jumping(state, shift, parent):
+    """States and accumulated shifts along any reference chains (glitches skip frames):
+    pointer jumping, composing each frame's maps with its ancestor's, ``ceil(log2 F)``
+    rounds."""
+    _, F, K = state.shape
+    cols = np.arange(K)[None, :]
+    idx = (parent * K + cols).reshape(-1)
+    st, sh = state.reshape(2, -1), shift.reshape(2, -1, 3)
+    for _ in range(max(1, int(np.ceil(np.log2(max(F, 2)))))):
+        a_st, a_sh = st[:, idx], sh[:, idx]  # the ancestor's, per state of its own ancestor
+        st, sh = np.where(a_st == 1, st[1], st[0]), a_sh + np.where((a_st == 1)[..., None], sh[1], sh[0])
+        idx = idx[idx]
+    return st[0].reshape(F, K), sh[0].reshape(F, K, 3)

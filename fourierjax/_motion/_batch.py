@@ -1,0 +1,300 @@
+"""The stages before the fit for a whole chunk of clips at once: one concatenated pass per skeleton."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from fourierjax._fourier._buckets import length_bucket
+from fourierjax._fourier._layout import ancestors, local_transform, rot, rotation_joints, world_pose, yaw_quat
+from fourierjax._motion._segment import feature_mask, steady_from_positions
+from fourierjax.features import ROOT_CHANNELS, channel_names_for, check_static_above
+
+#: A pelvis-frame facing within this angle of a local axis is taken as that axis exactly (as
+#: `features.root_joints`).
+_SNAP_DEG = 15.0
+
+
+@dataclasses.dataclass
+class _Item:
+    """A clip of the chunk on its way: frames ``[lo, hi)`` of ``motion`` (``clip``), the steady
+    segment ``[a, b)`` of ``clip`` once found."""
+
+    index: int
+    motion: object
+    lo: int
+    clip: object
+    body_map: object
+    a: int = 0
+    b: int = 0
+
+
+def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame, stop_frame,
+                  timings, passes="longest") -> list:
+    """`_pipeline._prepare` of every ``(index, motion or path, body map or None)`` of
+    ``entries``, with the same results: clips that share a skeleton (topology and offsets) go
+    through the steady segment, glitch masks, features and contacts together, as array ops
+    over their concatenated frames (one call per rotation function and one FK per chunk, not
+    per clip). Clips the batched path does not cover (no body map, not Y up, a trajectory joint
+    off the pelvis's chain, expmap features, ``passes="auto"``, under 3 frames) take the
+    per-clip path."""
+    from fourierjax._motion._clip import _frame_range
+    from fourierjax._motion._pipeline import _Clock, _prepare
+    from fourierjax.body import BodyMapError, infer_body_map
+    from fourierjax.io.bvh import read_bvh
+
+    clock = _Clock(timings)
+    opts = dict(representation=representation, segment=segment, use_contacts=use_contacts,
+                start_frame=start_frame, stop_frame=stop_frame, timings=timings, passes=passes)
+    done: dict[int, object] = {}
+    groups: dict[tuple, list[_Item]] = {}
+    for index, m, bm in entries:
+        if isinstance(m, (str, os.PathLike)):
+            m = read_bvh(m)
+            clock("read")
+        lo, hi = _frame_range(m, start_frame, stop_frame)
+        clip = m[lo:hi]
+        given = bm
+        if bm is None:
+            try:
+                bm = infer_body_map(clip)
+            except BodyMapError:
+                bm = None
+        clock("body_map")
+        if not _batchable(clip, bm, representation, passes, segment):
+            done[index] = _prepare(index, m, bm if bm is not None else given, **opts)
+            clock = _Clock(timings)
+            continue
+        key = (clip.topology, clip.offsets.tobytes(), clip.end_site_offsets.tobytes(), bm.pelvis)
+        groups.setdefault(key, []).append(_Item(index, m, lo, clip, bm))
+    for items in groups.values():
+        for c in _prepare_group(items, segment=segment, use_contacts=use_contacts,
+                                timings=timings):
+            done[c.index] = c
+    return [done[index] for index, _, _ in entries]
+
+
+def _batchable(clip, bm, representation, passes, segment) -> bool:
+    if bm is None or representation != "euler" or (segment and passes == "auto"):
+        return False
+    if (bm.up_axis, bm.up_sign) != (1, 1) or clip.num_frames < 3:
+        return False
+    return bm.trajectory == bm.pelvis or bm.trajectory in ancestors(clip.topology, bm.pelvis)
+
+
+def _concat(motions):
+    """One Motion of all the frames of ``motions`` (one skeleton) and each one's first frame."""
+    starts = np.cumsum([0] + [m.num_frames for m in motions])
+    cat = dataclasses.replace(motions[0], channels=np.concatenate([m.channels for m in motions]))
+    return cat, starts
+
+
+def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> list:
+    from fourierjax._motion._clip import _steps
+    from fourierjax._motion._pipeline import _Clip, _Clock
+
+    clock = _Clock(timings)
+    topo = items[0].clip.topology
+    pelvis = items[0].body_map.pelvis
+    dts = np.array([it.clip.frame_time_s for it in items])
+    # -- steady segment: the pelvis's world track of every clip from one pass
+    if segment:
+        cat, starts = _concat([it.clip for it in items])
+        pos, _ = world_pose(cat, pelvis)
+        for k, it in enumerate(items):
+            it.a, it.b = steady_from_positions(pos[starts[k]:starts[k + 1]][:, [0, 2]], dts[k])
+    else:
+        for it in items:
+            it.a, it.b = 0, it.clip.num_frames
+    subs = [it.clip[it.a:it.b] for it in items]
+    clock("segment")
+    cat, starts = _concat(subs)
+    n = np.diff(starts)
+    dt_f = np.repeat(dts, n)  # per frame
+    glitch = _glitch_joints(cat, starts, dt_f, dts)
+    clock("glitch")
+    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis)
+    mask = feature_mask(glitch, topo, pelvis)
+    names = channel_names_for(topo, "euler")
+    clock("features")
+    contacts = _contacts(cat, starts, dts, items) if use_contacts else [None] * len(items)
+    out = []
+    for k, it in enumerate(items):
+        left, right, om = _steps(contacts[k], dts[k])
+        s = slice(starts[k], starts[k + 1])
+        out.append(_Clip(it.index, it.motion, it.a + it.lo, it.b + it.lo, subs[k], x[s],
+                         names, mask[s], left, right, om, it.body_map))
+    clock("contacts")
+    return out
+
+
+def _dilate(flags, starts, pad):
+    """`_segment._dilate` of each clip's rows of ``flags [N, J]`` (clip k: rows
+    ``[starts[k], starts[k + 1])``, ``pad`` frames per row), in one pass."""
+    N = flags.shape[0]
+    c = np.concatenate([np.zeros((1, flags.shape[1]), np.int64), np.cumsum(flags, axis=0)])
+    t = np.arange(N)
+    clip = np.searchsorted(starts, t, side="right") - 1
+    hi = np.minimum(t + pad + 1, starts[clip + 1])
+    lo = np.maximum(t - pad, starts[clip])
+    return (c[hi] - c[lo]) > 0
+
+
+def _glitch_joints(cat, starts, dt_f, dts, max_joint_speed_deg_s=5000.0, pad_s=0.1):
+    """`_segment.glitch_joints` of every clip of the concatenation ``cat``."""
+    N, J = cat.num_frames, len(cat.topology.names)
+    fast = np.zeros((N, J), bool)
+    joints = rotation_joints(cat.topology)
+    first = np.zeros(N, bool)
+    first[starts[:-1]] = True  # no speed across two clips
+    for order in dict.fromkeys(o for _, o, _ in joints):
+        group = [(j, i) for j, o, i in joints if o == order]
+        q = rot("quat_from_euler", np.radians(cat.channels[:, np.array([i for _, i in group])]),
+                order=order)
+        dot = np.clip(np.abs(np.sum(q[1:] * q[:-1], axis=-1)), 0.0, 1.0)
+        f = np.degrees(2 * np.arccos(dot)) / dt_f[1:, None] > max_joint_speed_deg_s
+        fast[1:, [j for j, _ in group]] = f & ~first[1:, None]
+    pad = np.repeat(np.maximum(1, np.round(pad_s / dts).astype(int)), np.diff(starts))
+    return _dilate(fast, starts, pad)
+
+
+def _segment_sums(v, starts):
+    return np.stack([v[starts[k]:starts[k + 1]].sum(axis=0) for k in range(len(starts) - 1)])
+
+
+def _relative_position(cat, base: int, joint: int) -> np.ndarray:
+    """Position of ``joint`` in the frame of its ancestor ``base``, every frame."""
+    chain = []
+    j = joint
+    while j != base:
+        chain.append(j)
+        j = cat.topology.parents[j]
+    pos = quat = None
+    for j in chain[::-1]:
+        t, q = local_transform(cat, j)
+        if pos is None:
+            pos, quat = t, q
+        else:
+            pos = pos + rot("quat_apply", quat, t)
+            quat = rot("quat_multiply", quat, q)
+    return pos
+
+
+def _facing_locals(cat, starts, q, items) -> np.ndarray:
+    """`RootJoints.facing_local` of each clip (`_fourier._layout.root_joints`): ``(left hip -
+    right hip) x up`` in the pelvis's frame averaged over the clip's frames, snapped to an
+    axis within `_SNAP_DEG`; ``[B, 3]``."""
+    pelvis = items[0].body_map.pelvis
+    hips = {(it.body_map.left.hip, it.body_map.right.hip) for it in items}
+    lat = np.zeros((cat.num_frames, 3))
+    for lh, rh in hips:
+        rows = np.concatenate([np.arange(starts[k], starts[k + 1]) for k, it in enumerate(items)
+                               if (it.body_map.left.hip, it.body_map.right.hip) == (lh, rh)])
+        d = _relative_position(cat, pelvis, lh) - _relative_position(cat, pelvis, rh)
+        lat[rows] = d[rows]
+    conj = q * np.array([1.0, -1.0, -1.0, -1.0])
+    up = rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
+    cross = np.cross(lat, up)
+    out = np.zeros((len(items), 3))
+    for k in range(len(items)):
+        f = cross[starts[k]:starts[k + 1]].mean(axis=0)
+        nrm = np.linalg.norm(f)
+        if not np.isfinite(nrm) or nrm < 1e-12:
+            out[k] = (0.0, 0.0, 1.0)
+            continue
+        f = f / nrm
+        a = int(np.argmax(np.abs(f)))
+        if np.abs(f[a]) >= np.cos(np.radians(_SNAP_DEG)):
+            snapped = np.zeros(3)
+            snapped[a] = np.sign(f[a])
+            f = snapped
+        out[k] = f
+    return out
+
+
+def _gradient(v, starts, dt_f):
+    """`np.gradient(v_k, dt_k)` of each clip's rows of ``v [N]`` (at least 2 per clip)."""
+    g = np.empty_like(v)
+    g[1:-1] = (v[2:] - v[:-2]) / (2.0 * dt_f[1:-1])
+    first, last = starts[:-1], starts[1:] - 1
+    g[first] = (v[first + 1] - v[first]) / dt_f[first]
+    g[last] = (v[last] - v[last - 1]) / dt_f[last]
+    return g
+
+
+def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
+    """`features_from_motion(sub, "euler", valid=~glitch, body_map=bm)` of every clip, rows
+    concatenated ``[N, C]``."""
+    from fourierjax import rotations
+    from fourierjax._eulerscan import continuous
+
+    topo = cat.topology
+    B = len(items)
+    pos, q_root = world_pose(cat, pelvis)
+    facing = _facing_locals(cat, starts, q_root, items)
+    for it, sub in zip(items, subs, strict=True):
+        check_static_above(sub, _RJ(it.body_map.trajectory))
+    n = np.diff(starts)
+    f = rot("quat_apply", q_root, np.repeat(facing, n, axis=0))
+    s, c = _segment_sums(f[:, 0], starts), _segment_sums(f[:, 2], starts)
+    psi = np.array([0.0 if np.hypot(s[k], c[k]) < 1e-9 * n[k] else float(np.arctan2(s[k], c[k]))
+                    for k in range(B)])
+    cf, sf = np.repeat(np.cos(psi), n), np.repeat(np.sin(psi), n)
+    x_h = cf * pos[:, 0] - sf * pos[:, 2]
+    z_h = sf * pos[:, 0] + cf * pos[:, 2]
+    q_rel = rot("quat_multiply", yaw_quat(np.repeat(-psi, n)), q_root)
+    cols = [_gradient(x_h, starts, dt_f), _gradient(z_h, starts, dt_f), pos[:, 1]]
+    joints = rotation_joints(topo)
+    blocks = {}
+    T = int(n.max())
+    rows = np.arange(T)[:, None]
+    index = np.minimum(rows, n[None, :] - 1) + starts[None, :-1]  # [T, B]: padded with the last
+    for order in dict.fromkeys(o for _, o, _ in joints):
+        group = [(j, idx) for j, o, idx in joints if o == order]
+        members = [j for j, _ in group]
+        e = np.radians(cat.channels[:, np.array([idx for _, idx in group])])
+        if pelvis in members:
+            e[:, members.index(pelvis)] = rot("euler_from_quat", q_rel, order=order)
+        # [T, B * J_g, 3]: every clip's frames side by side; frames after a clip's end repeat
+        # its last and come after it, so they never serve as a reference.
+        padded = e[index].reshape(T, -1, 3)
+        ok = (~glitch[:, members])[index].reshape(T, -1)
+        ang = continuous(padded, rotations.euler_twin(padded.copy(), order), ok)
+        ang = ang.reshape(T, B, len(members), 3).transpose(1, 0, 2, 3)
+        flat = ang[(rows < n[None, :]).T]  # [N, J_g, 3]: back in clip order
+        for k, (j, _) in enumerate(group):
+            blocks[j] = flat[:, k]
+    for j, _, _ in joints:
+        cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
+    assert len(cols) == len(ROOT_CHANNELS) + 3 * len(joints)
+    return np.stack(cols, axis=1)
+
+
+@dataclasses.dataclass(frozen=True)
+class _RJ:
+    """The part of `RootJoints` that `features.check_static_above` reads."""
+
+    trajectory: int
+
+
+def _contacts(cat, starts, dts, items) -> list:
+    """`foot_contacts_of(sub, body_map=bm)` of every clip: one FK of all the frames (padded to a
+    length bucket), then `contacts.foot_contacts_many`."""
+    import jax.numpy as jnp
+
+    from fourierjax import contacts
+    from fourierjax.kinematics import fk_frames
+
+    N = cat.num_frames
+    ch = np.concatenate([cat.channels, np.repeat(cat.channels[-1:], length_bucket(N) - N, 0)])
+    fk = fk_frames(cat.skeleton(), jnp.asarray(ch))
+    allp = np.concatenate([np.asarray(fk.positions), np.asarray(fk.end_site_positions)], 1)[:N]
+    ps = []
+    for k, it in enumerate(items):
+        pts = contacts.foot_points(cat.topology, it.body_map)
+        ps.append(allp[starts[k]:starts[k + 1]][:, np.asarray([pts.left, pts.right])])
+    ups = {it.body_map.up_axis for it in items}
+    assert len(ups) == 1  # Y up: checked by `_batchable`
+    return contacts.foot_contacts_many(ps, list(dts), up_axis=ups.pop())
