@@ -81,6 +81,7 @@ def foot_positions_of(motion, points=None, *, body_map=None) -> Float[np.ndarray
         ``contacts.estimate_ground``.
     """
     from fourierjax import contacts
+    from fourierjax._host import as_default_float
     from fourierjax.body import infer_body_map
     from fourierjax.kinematics import fk_frames
 
@@ -88,9 +89,10 @@ def foot_positions_of(motion, points=None, *, body_map=None) -> Float[np.ndarray
         points = contacts.foot_points(motion.topology, body_map or infer_body_map(motion))
     F = motion.num_frames
     ch = np.concatenate([motion.channels, np.repeat(motion.channels[-1:], _bucket(F) - F, 0)])
-    fk = fk_frames(motion.skeleton(), jnp.asarray(ch))
-    return np.asarray(contacts.gather_foot_positions(fk.positions, fk.end_site_positions,
-                                                     points))[:F]
+    fk = fk_frames(motion.skeleton(), as_default_float(ch))
+    # The gather on the host: eager JAX ops would compile a program for every new clip length.
+    allp = np.concatenate([np.asarray(fk.positions), np.asarray(fk.end_site_positions)], -2)[:F]
+    return allp[:, np.asarray([points.left, points.right])]
 
 
 def foot_contacts_of(motion, *, body_map=None) -> Bool[np.ndarray, "F 2"] | None:
