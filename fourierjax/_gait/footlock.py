@@ -24,6 +24,9 @@ TWO_PI = 2.0 * math.pi
 REACH_KNEE, REACH_LIMIT = 0.9, 0.99
 #: Default blend of the stance weights, radians of the cycle on each side of a contact (6%).
 BLEND_RAD = 0.06 * TWO_PI
+#: A foot point is still (planted) below this fraction of the mean root move per frame (easing
+#: out at twice it), and a sliding point is lifted to `LIFT_BANDS` contact bands over its floor.
+STILL_FRACTION, LIFT_BANDS = 0.15, 1.2
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
 
@@ -336,6 +339,27 @@ def init_hold_state(points: Float[Array, "*B 2 P 3"]) -> tuple[Float[Array, "*B 
     return jnp.zeros_like(points), jnp.zeros(points.shape[:-1], points.dtype)
 
 
+def stillness(
+    points: Float[Array, "T 2 P 3"], root_position: Float[Array, "T 3"], *, horizontal: Float[Array, " 3"]
+) -> Float[Array, "T 2 P"]:
+    """How still each foot point is in the world: 1 below `STILL_FRACTION` of the mean root move
+    per frame, easing to 0 at twice that (horizontal moves, central differences).
+
+    Arguments:
+        points: `[T, 2, P, 3]` world foot points; root_position: `[T, 3]` the root path.
+        horizontal: `[3]` 1 on the ground-plane axes, 0 on the up axis.
+
+    Returns:
+        `[T, 2, P]` weights in [0, 1].
+    """
+    d = (points[1:] - points[:-1]) * horizontal
+    move = safe_norm(d)  # [T-1, 2, P]
+    move = jnp.concatenate([move[:1], 0.5 * (move[1:] + move[:-1]), move[-1:]], axis=0)
+    ref = STILL_FRACTION * jnp.mean(safe_norm((root_position[1:] - root_position[:-1]) * horizontal))
+    ref = jnp.maximum(ref, 1e-6)
+    return _smoothstep((2.0 * ref - move) / ref)
+
+
 def _next(mask, idx, T):
     return jax.lax.cummin(jnp.where(mask, idx, T), axis=0, reverse=True)
 
@@ -397,15 +421,26 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     upv = jnp.zeros(3, features.dtype).at[up].set(1.0)
     feet_pts = pts[:, foot_idx]  # [T, 2, P, 3]
     rel = sign * feet_pts[..., up] - ground - clearance[None]  # [T, 2, P] above each point's floor
-    lam = hold_weights(rel, contact, band)
+    # Only a still point is planted. A low-harmonic model smooths the foot's sharp stop at heel
+    # strike and its start at toe-off: the point is already (still) low while it slides at up
+    # to the root's speed (CMU 07_01, N = 3: 77 units/s at 0.46 units over the floor, 9 units in
+    # all). Held where it landed, the leg could not reach it (the foot lifted, the knee jumped);
+    # held where it stops, the landing leg could not. A sliding point is lifted clear of the
+    # band instead (it is not in contact), and the foot is planted where its points are still.
+    still = stillness(feet_pts, root_position, horizontal=1.0 - upv)
+    lam = hold_weights(rel, contact, band) * still
     # Down: within the band; in stance (the phase's weight) also a foot that hovers under twice it.
     low = (rel <= band) | ((contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True))
+    low = low & (still > 0.5)
     shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f]) for f in range(2)], 1)
     shift = shift * (1.0 - upv)[None, None]
     # Vertically: the foot's lowest point onto the floor while held, never below it.
     gap = jnp.min(rel, axis=-1)  # [T, 2]
     W = jnp.max(lam, axis=-1)
     dy = -gap * jnp.where(gap > 0, W, 1.0)
+    # A sliding point is lifted to LIFT_BANDS bands over its floor, as far as the foot is not held.
+    need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still), axis=-1)  # [T, 2]
+    dy = jnp.maximum(dy, need * (1.0 - W))
     shift = shift + (sign * dy)[..., None] * upv[None, None]
     out = features
     feet_out = []
