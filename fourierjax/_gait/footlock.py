@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from fourierjax import rotations
+from fourierjax._checks import integer
 from fourierjax._legik import quat_between, safe_norm, soft_reach, sphere_circle_point
 from fourierjax.errors import UserError
 
@@ -27,6 +28,8 @@ BLEND_RAD = 0.06 * TWO_PI
 #: A foot point is still (planted) below this fraction of the mean root move per frame (easing
 #: out at twice it), and a sliding point is lifted to `LIFT_BANDS` contact bands over its floor.
 STILL_FRACTION, LIFT_BANDS = 0.15, 1.2
+#: `synthesize_gait` eases the feet's shifts over this many seconds on each side (`lock_feet`).
+SMOOTH_S = 0.04
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
 
@@ -401,8 +404,17 @@ def _plant(points, lam, low):
     return jnp.where(on[:, None], held, air)
 
 
+def _smooth(x, half):
+    """A triangular moving average over the first axis, `half` frames each side (edges held)."""
+    w = jnp.asarray([half + 1.0 - abs(k) for k in range(-half, half + 1)], x.dtype)
+    w = w / jnp.sum(w)
+    T = x.shape[0]
+    xp = jnp.concatenate([jnp.repeat(x[:1], half, 0), x, jnp.repeat(x[-1:], half, 0)], axis=0)
+    return sum(w[k] * xp[k:k + T] for k in range(2 * half + 1))
+
+
 def _lock(features, skeleton, contact, root_position, clearance, ground, band, *, representation,
-          body_map, legs):
+          body_map, legs, smooth_frames=0):
     from fourierjax.features import local_pose_from_features
     from fourierjax.kinematics import forward_kinematics
 
@@ -442,6 +454,15 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still), axis=-1)  # [T, 2]
     dy = jnp.maximum(dy, need * (1.0 - W))
     shift = shift + (sign * dy)[..., None] * upv[None, None]
+    if smooth_frames > 0:
+        # The knee follows the shift: eased over a few frames it never pops (the capture's largest
+        # knee step is the bound); the foot's lowest point stays on or over the floor.
+        # The lowest point stays on or over the floor. (Easing the lift too costs skating where
+        # the eased lift dips into the band: 07_01 0.17x against 0.08x unsmoothed, 09_01 1.04x
+        # against 0.36x; lifting at once pops the knee: 10.3 and 9.3 deg against 4.7 and 6.8.)
+        shift = _smooth(shift, smooth_frames)
+        dy = jnp.maximum(sign * jnp.sum(shift * upv, -1), -gap)
+        shift = shift * (1.0 - upv) + (sign * dy)[..., None] * upv
     out = features
     feet_out = []
     for f, ((hip, c_hip, o_hip), (knee, c_knee, o_knee), (ankle, c_ankle, o_ankle)) in enumerate(legs):
@@ -488,6 +509,7 @@ def lock_feet(
     ground: Float[ArrayLike, ""] = 0.0,
     contact_band: Float[ArrayLike, ""] | None = None,
     return_feet: bool = False,
+    smooth_frames: int = 0,
 ) -> Float[Array, "T C"] | tuple[Float[Array, "T C"], Float[Array, "T 2 P 3"]]:
     """Planted feet for synthesized feature frames: a post-process by two-bone leg IK.
 
@@ -516,6 +538,9 @@ def lock_feet(
             is held as in contact (weight 1, easing to 0 at twice the height); default 2% of
             the body height (the skating metric's band).
         return_feet: also return the locked world foot points `[T, 2, P, 3]`.
+        smooth_frames: ease the feet's shifts over this many frames on each side (a triangular
+            moving average; static), so the knee never pops; 0 (default) keeps them as held.
+            `synthesize_gait` uses `SMOOTH_S` seconds of frames.
 
     Returns:
         `[T, C]` features (and the foot points with `return_feet`). Pure: jit, vmap over
@@ -549,7 +574,8 @@ def lock_feet(
     out, feet, _ = _lock(features, skeleton, contact, root_position, clearance,
                          jnp.asarray(ground, features.dtype),
                          jnp.asarray(contact_band, features.dtype),
-                         representation=representation, body_map=body_map, legs=legs)
+                         representation=representation, body_map=body_map, legs=legs,
+                         smooth_frames=integer(smooth_frames, "lock_feet: `smooth_frames`", 0))
     return (out, feet) if return_feet else out
 
 

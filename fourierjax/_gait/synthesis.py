@@ -275,7 +275,7 @@ def synthesize_gait(
             return _world_feet(result, skeleton, body_map=body_map, representation=model.representation)
     if not foot_lock:
         return result
-    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals)
+    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt)
 
 
 def _path_body_map(where, model, skeleton, body_map):
@@ -312,9 +312,9 @@ def _world_feet(result, skeleton, *, body_map, representation):
     return eqx.tree_at(lambda r: (r.foot_positions, r.lowest), result, (feet, lowest))
 
 
-def _foot_lock(where, result, model, skeleton, body_map, contact_intervals):
+def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, frame_time_s):
     from fourierjax._gait.common import model_body_map
-    from fourierjax._gait.footlock import contact_weights, intervals_from_model
+    from fourierjax._gait.footlock import SMOOTH_S, contact_weights, intervals_from_model
 
     traced = isinstance(jnp.asarray(model.offset), jax.core.Tracer)
     if body_map is None:
@@ -330,15 +330,17 @@ def _foot_lock(where, result, model, skeleton, body_map, contact_intervals):
     if iv.shape != (2, 2):
         raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
     return _locked_result(result, skeleton, contact_weights(result.phase, iv), body_map=body_map,
-                          representation=model.representation)
+                          representation=model.representation,
+                          smooth_frames=int(round(SMOOTH_S / frame_time_s)))
 
 
 @filter_jit
-def _locked_result(result, skeleton, weights, *, body_map, representation):
+def _locked_result(result, skeleton, weights, *, body_map, representation, smooth_frames):
     from fourierjax._gait.footlock import lock_feet
 
     feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
-                            root_position=result.root_position, clearance=result.clearance, return_feet=True)
+                            root_position=result.root_position, clearance=result.clearance, return_feet=True,
+                            smooth_frames=smooth_frames)
     lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
     return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
 
