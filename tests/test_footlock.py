@@ -94,27 +94,21 @@ def measure(mot, fit, *, foot_lock=True, seconds=SECONDS):
             np.radians(m["knee_step_capture_deg"]), np.radians(m["straightest_knee_deg"]))
 
 
-# Not met yet (measured 2026-12-01, 5 s at the clip's rate, N = 4; skating synthesized vs captured,
-# largest frame-to-frame knee change synthesized vs captured). Strict: a clip that starts meeting
-# the bounds fails here until it is moved out of this table.
+# Not met yet (measured 2026-12-02 with still-point planting and 0.04 s easing, 5 s at the clip's
+# rate, N = 4; skating synthesized vs captured, largest frame-to-frame knee change synthesized vs
+# captured; `python -m experiments.footlock_bounds`). Strict: a clip that starts meeting the bounds
+# fails here until it is moved out of this table.
 NOT_MET = {
-    "02_01": "skating 5.34 vs 4.76 units/s (1.12x); knee step 8.8 vs 3.5 deg",
-    "02_03": "skating 2.42 vs 7.17 units/s (0.34x); knee step 14.0 vs 5.3 deg",
-    "07_04": "skating 6.00 vs 5.78 units/s (1.04x); knee step 7.5 vs 7.6 deg (met)",
-    "09_01": "skating 4.15 vs 7.23 units/s (0.57x); knee step 16.8 vs 8.2 deg",
-    "09_02": "skating 6.41 vs 9.76 units/s (0.66x); knee step 17.3 vs 5.7 deg",
+    "02_01": "skating 1.05 vs 4.76 units/s (0.22x, met); knee step 4.2 vs 3.5 deg",
+    "02_03": "skating 5.26 vs 7.17 units/s (0.73x); knee step 4.7 vs 5.3 deg (met)",
+    "09_01": "skating 7.49 vs 7.23 units/s (1.04x); knee step 6.8 vs 8.2 deg (met)",
+    "09_02": "skating 6.62 vs 9.76 units/s (0.68x); knee step 6.4 vs 5.7 deg",
 }
-# Met on the footlock branch (skating 0.12x, knee step 11.7 vs 13.0 deg); fails since the root-speed
-# fix (the carrying point must be still in the model's world) was merged under it. Not strict:
-# not re-measured after the merge (issue 21 note).
-AFTER_MERGE = ("07_12",)
 
 
 @pytest.mark.parametrize("name", [
     pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=f"issue 21 bounds not met: {NOT_MET[n]}"))
-    if n in NOT_MET else
-    pytest.param(n, marks=pytest.mark.xfail(strict=False, reason="issue 21: met before the root-speed fix merged"))
-    if n in AFTER_MERGE else n for n in WALKS_AND_RUNS])
+    if n in NOT_MET else n for n in WALKS_AND_RUNS])
 def test_locked_synthesis_meets_the_issue_bounds_on_bundled_clips(name):
     mot, fit = _fits()[name]
     s_syn, s_cap, depth_m, k_syn, k_cap, straightest = measure(mot, fit)
