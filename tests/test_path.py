@@ -3,6 +3,7 @@
 import functools
 import json
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -156,3 +157,56 @@ def test_synth_path_circle_3(walk, tmp_path, capsys):
     for bad, msg in (("circle:x", "circle:R"), ("circle:0", "non-zero"), (str(tmp_path / "none.toml"), "no such")):
         assert main(["synth", str(src), "--seconds", "1", "--path", bad, "--out", str(tmp_path / "b.bvh")]) == 2
         assert msg in capsys.readouterr().err
+
+
+def _skating_on_the_circle(walk, result):
+    """(skating of the written bent walk, skating of the captured fitted frames, largest distance
+    of the root from the circle in m, world foot points), through an independent FK of the
+    written motion."""
+    from fourierjax import data
+    from fourierjax.io.gait_bvh import grounded_motion
+    from fourierjax.motion import foot_positions_of
+
+    mf, t, bmap, r = walk
+    mot = grounded_motion(t, result.features, result.root_position, mf.model.channel_names, mf.frame_time_s,
+                          body_map=bmap)
+    dt = mf.frame_time_s
+    feet = foot_positions_of(mot, body_map=bmap)
+    ours = float(gait.contact_skating(feet, dt, body_map=bmap).mean_speed)
+    clip = data.load(CLIP)
+    prov = mf.provenance
+    clip = clip[prov["frame_start"]:prov["frame_stop"]]
+    theirs = float(gait.contact_skating(foot_positions_of(clip, body_map=bmap), dt, body_map=bmap).mean_speed)
+    R = 3.0 / bmap.metres_per_unit
+    root = motion_joint_positions(mot)[:, bmap.pelvis]
+    centre = root[0, [0, 2]] + [R, 0.0]
+    off = np.abs(np.linalg.norm(root[:, [0, 2]] - centre, axis=1) - R) * bmap.metres_per_unit
+    return ours, theirs, float(off.max()), feet
+
+
+def test_feet_stay_planted_on_a_circle(walk):
+    """Issue #21 item 3: locked after bending (`synthesize_gait(path=...)`), the feet stay planted
+    through the turns (skating <= 0.25x the capture's) and the root within 2 cm of the circle;
+    bending the already-locked straight walk slides them more."""
+    mf, t, bmap, r = walk
+    R = 3.0 / bmap.metres_per_unit
+    iv = mf.contact_intervals
+    on_path = gait.synthesize_gait(mf.model, t.skeleton(), 480, mf.frame_time_s, body_map=bmap,
+                                   contact_intervals=iv, path=gait.circle_path(R))
+    ours, theirs, off, feet = _skating_on_the_circle(walk, on_path)
+    # The walk fixture is the locked straight synthesis: bent after locking.
+    feats, root, _ = _bend(walk, gait.circle_path(R), smoothing=0.25 * float(bmap.leg_length))
+    bent_after = _skating_on_the_circle(walk, eqx.tree_at(lambda x: (x.features, x.root_position), r,
+                                                          (feats, root)))[0]
+    print(f"\ncircle:3 skating {ours:.2f} (locked after bending) vs {bent_after:.2f} (bent after locking) vs "
+          f"captured {theirs:.2f} units/s; root off the circle {100 * off:.2f} cm")
+    assert ours <= 0.25 * theirs
+    assert ours < bent_after
+    assert off <= 0.02
+    # The result's own feet are the bent, locked ones (what `synth`'s summary measures).
+    np.testing.assert_allclose(np.asarray(on_path.foot_positions), feet, atol=2e-3 * R)
+    straight_off = gait.synthesize_gait(mf.model, t.skeleton(), 480, mf.frame_time_s, body_map=bmap,
+                                        foot_lock=False, path=gait.circle_path(R))
+    np.testing.assert_allclose(np.asarray(straight_off.root_position), np.asarray(on_path.root_position), atol=1e-4)
+    with pytest.raises(UserError, match="GroundPath"):
+        gait.synthesize_gait(mf.model, t.skeleton(), 20, mf.frame_time_s, body_map=bmap, path=[[0, 0], [1, 1]])

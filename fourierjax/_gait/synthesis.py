@@ -26,6 +26,7 @@ from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
+    from fourierjax._gait.path import GroundPath
     from fourierjax.body import BodyMap
     from fourierjax.contacts import FootPoints
     from fourierjax.fourier import FourierModel
@@ -153,6 +154,8 @@ def synthesize_gait(
     up_axis: int | None = None,
     foot_lock: bool = True,
     contact_intervals: Float[ArrayLike, "2 2"] | None = None,
+    path: GroundPath | None = None,
+    path_smoothing: Float[ArrayLike, ""] | None = None,
 ) -> GaitResult:
     """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
 
@@ -194,6 +197,11 @@ def synthesize_gait(
         contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
             with the model by `fourierjax fit`); default estimated from the model's cycle
             (a concrete model; under vmap or grad pass them, and `body_map`).
+        path: a `GroundPath` (file units) to walk along (`follow_path`, no sideways sway): the
+            straight gait is bent onto it first and the feet are locked after, so they stay
+            planted through the turns. The result's features, root and feet are the bent ones.
+        path_smoothing: `follow_path`'s tangent half-chord (file units); default a quarter of
+            the leg length (as `synth --path`).
 
     Returns:
         A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
@@ -260,14 +268,53 @@ def synthesize_gait(
         # leaves them traced, and `hip_rule` checks them with `eqx.error_if`.
         check_traced=any(isinstance(v, jax.core.Tracer) for v in (gait, jump, width, temperature)),
     )
+    if path is not None:
+        body_map = _path_body_map(where, model, skeleton, body_map)
+        result = _bend(result, model, path, path_smoothing, dt, body_map)
+        if not foot_lock:
+            return _world_feet(result, skeleton, body_map=body_map, representation=model.representation)
     if not foot_lock:
         return result
-    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals)
+    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt)
 
 
-def _foot_lock(where, result, model, skeleton, body_map, contact_intervals):
+def _path_body_map(where, model, skeleton, body_map):
     from fourierjax._gait.common import model_body_map
-    from fourierjax._gait.footlock import contact_weights, intervals_from_model
+
+    if body_map is not None:
+        return body_map
+    if isinstance(jnp.asarray(model.offset), jax.core.Tracer):
+        raise UserError(f"{where}: a path under jit, vmap or grad needs `body_map=`")
+    return model_body_map(model, skeleton)
+
+
+def _bend(result, model, path, smoothing, frame_time_s, body_map):
+    """The unlocked straight result bent onto `path` (features and root; feet are recomputed)."""
+    from fourierjax._gait.path import GroundPath, follow_path
+
+    if not isinstance(path, GroundPath):
+        raise UserError(f"synthesize_gait: `path` must be a gait.GroundPath, got {type(path).__name__}")
+    if smoothing is None:
+        smoothing = 0.25 * float(body_map.leg_length)
+    feats, root, _ = follow_path(result.features, result.root_position, path, model.channel_names,
+                                 body_map.name(body_map.pelvis), frame_time_s, up_axis=int(body_map.up_axis),
+                                 smoothing=smoothing)
+    return eqx.tree_at(lambda r: (r.features, r.root_position), result, (feats, root))
+
+
+@filter_jit
+def _world_feet(result, skeleton, *, body_map, representation):
+    idx = jnp.asarray([body_map.left.foot_points, body_map.right.foot_points])
+    foot_local, _ = jax.vmap(lambda f: pose_points(skeleton, representation, idx, (body_map.pelvis,), f,
+                                                   body_map.pelvis))(result.features)
+    feet = foot_local + result.root_position[:, None, None, :]
+    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
+    return eqx.tree_at(lambda r: (r.foot_positions, r.lowest), result, (feet, lowest))
+
+
+def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, frame_time_s):
+    from fourierjax._gait.common import model_body_map
+    from fourierjax._gait.footlock import SMOOTH_S, contact_weights, intervals_from_model
 
     traced = isinstance(jnp.asarray(model.offset), jax.core.Tracer)
     if body_map is None:
@@ -283,15 +330,17 @@ def _foot_lock(where, result, model, skeleton, body_map, contact_intervals):
     if iv.shape != (2, 2):
         raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
     return _locked_result(result, skeleton, contact_weights(result.phase, iv), body_map=body_map,
-                          representation=model.representation)
+                          representation=model.representation,
+                          smooth_frames=int(round(SMOOTH_S / frame_time_s)))
 
 
 @filter_jit
-def _locked_result(result, skeleton, weights, *, body_map, representation):
+def _locked_result(result, skeleton, weights, *, body_map, representation, smooth_frames):
     from fourierjax._gait.footlock import lock_feet
 
     feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
-                            root_position=result.root_position, clearance=result.clearance, return_feet=True)
+                            root_position=result.root_position, clearance=result.clearance, return_feet=True,
+                            smooth_frames=smooth_frames)
     lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
     return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
 

@@ -1,0 +1,134 @@
+"""Issue #21 foot-lock bounds on walks and runs: skating ratio, depth below the floor, knee steps.
+
+Fits each clip (N = 4, Euler), synthesizes 5 s with foot locking, writes it as a BVH motion and
+measures it with an independent FK of that motion (`motion_joint_positions`): skating of the
+synthesized motion against the captured clip's (`gait.contact_skating`, target <= 0.25x), the
+depth of the lowest foot point below the floor (target <= 0.5 cm) and the largest
+frame-to-frame knee change (target <= the capture's). Usage:
+``python -m experiments.footlock_bounds [--bandai] [--path circle:3] [CLIP ...]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import time
+
+import numpy as np
+
+BUNDLED = ("02_01", "02_03", "07_01", "07_04", "07_12", "09_01", "09_02")
+BANDAI = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+STYLES = ("active", "angry", "childish", "chimpira", "feminine", "giant", "happy", "masculinity", "musical",
+          "normal", "not-confident", "old", "proud", "sad", "tired")
+
+
+def knee_angles(positions, body_map):
+    """`[T, 2]` knee angles (radians, pi = straight) from joint positions `[T, J, 3]`."""
+    out = []
+    for leg in (body_map.left, body_map.right):
+        a = positions[:, leg.hip] - positions[:, leg.knee]
+        b = positions[:, leg.ankle] - positions[:, leg.knee]
+        cos = (a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
+        out.append(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return np.stack(out, -1)
+
+
+def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
+    """dict: skating synthesized and captured (units/s), depth below the floor (m), largest knee
+    step synthesized and captured (degrees) and the most straight knee (degrees) of a clip's
+    locked synthesis, through an independent FK of the written motion. `path` (a `GroundPath`)
+    walks it along the path (`gait.synthesize_gait(path=...)`)."""
+    from fourierjax import gait
+    from fourierjax import motion as M
+    from fourierjax.io.gait_bvh import gait_motion, grounded_motion
+
+    bm, dt = fit.body_map, mot.frame_time_s
+    sub = mot[fit.frame_start:fit.frame_stop]
+    iv = gait.contact_intervals(fit.model, mot.skeleton(), body_map=bm, contacts=M.foot_contacts_of(sub, body_map=bm),
+                                frame_time_s=dt, phase_shift=fit.phase_shift)
+    T = int(round(seconds / dt))
+    kw = {} if path is None else {"path": path}
+    r = gait.synthesize_gait(fit.model, mot.skeleton(), T, dt, body_map=bm, contact_intervals=iv,
+                             foot_lock=foot_lock, **kw)
+    if path is None:
+        out = gait_motion(mot, r, fit.model.channel_names, dt, body_map=bm)
+    else:
+        out = grounded_motion(mot, r.features, r.root_position, fit.model.channel_names, dt, body_map=bm)
+    p_syn = M.foot_positions_of(out, body_map=bm)
+    p_cap = M.foot_positions_of(sub, body_map=bm)
+    s_syn = float(gait.contact_skating(p_syn, dt, body_map=bm).mean_speed)
+    s_cap = float(gait.contact_skating(p_cap, dt, body_map=bm).mean_speed)
+    low = p_syn[..., bm.up_axis] - np.asarray(r.clearance)[None]
+    depth_m = max(0.0, -float(low.min())) * bm.metres_per_unit
+    ka_syn = knee_angles(M.motion_joint_positions(out), bm)
+    k_syn = np.abs(np.diff(ka_syn, axis=0)).max()
+    k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()
+    return {"skating_synth": s_syn, "skating_capture": s_cap, "ratio": s_syn / s_cap, "depth_m": depth_m,
+            "knee_step_synth_deg": float(np.degrees(k_syn)), "knee_step_capture_deg": float(np.degrees(k_cap)),
+            "straightest_knee_deg": float(np.degrees(ka_syn.max())), "result": r, "motion": out}
+
+
+def met(row) -> bool:
+    return (row["ratio"] <= 0.25 and row["depth_m"] <= 0.005
+            and row["knee_step_synth_deg"] <= row["knee_step_capture_deg"])
+
+
+def fits_of(names, harmonics=4, cache=None):
+    """(motions, fits) of the clips; `cache` a folder for pickled fits (development)."""
+    import pickle
+
+    from fourierjax import data
+    from fourierjax import motion as M
+    from fourierjax.io.bvh import read_bvh
+
+    motions = [read_bvh(n) if str(n).endswith(".bvh") else data.load(n) for n in names]
+    if cache is None:
+        return motions, M.fit_motions(motions, harmonics)
+    files = [pathlib.Path(cache) / f"{pathlib.Path(n).stem}_N{harmonics}.pkl" for n in names]
+    todo = [i for i, f in enumerate(files) if not f.is_file()]
+    if todo:
+        for i, fit in zip(todo, M.fit_motions([motions[i] for i in todo], harmonics), strict=True):
+            files[i].write_bytes(pickle.dumps(fit))
+    return motions, [pickle.loads(f.read_bytes()) for f in files]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("clips", nargs="*")
+    ap.add_argument("--bandai", action="store_true", help="the 15 walk and 15 run _001 clips of Bandai-1")
+    ap.add_argument("--path", default=None, help="e.g. circle:3 (metres)")
+    ap.add_argument("--out", default=None, help="JSON file")
+    ap.add_argument("--cache", default=None, help="folder of pickled fits (development)")
+    args = ap.parse_args(argv)
+    names = list(args.clips)
+    if args.bandai:
+        names += [str(BANDAI / f"dataset-1_{k}_{s}_001.bvh") for k in ("walk", "run") for s in STYLES]
+    if not names:
+        names = list(BUNDLED)
+    t0 = time.perf_counter()
+    motions, fits = fits_of(names, cache=args.cache)
+    rows = []
+    for n, m, f in zip(names, motions, fits, strict=True):
+        path = None
+        if args.path:
+            from fourierjax.cli._gait_args import parse_path
+
+            path = parse_path(args.path, f.body_map.metres_per_unit)
+        row = measure(m, f, path=path)
+        row.pop("result"), row.pop("motion")
+        row["clip"] = pathlib.Path(n).stem.replace("dataset-1_", "")
+        row["met"] = met(row)
+        rows.append(row)
+        print(f"{row['clip']:28s} skating {row['skating_synth']:7.2f} vs {row['skating_capture']:7.2f} "
+              f"({row['ratio']:.3f}x)  below {100 * row['depth_m']:.3f} cm  knee step "
+              f"{row['knee_step_synth_deg']:5.1f} vs {row['knee_step_capture_deg']:5.1f} deg  "
+              f"{'met' if row['met'] else 'NOT met'}", flush=True)
+    print(f"{sum(r['met'] for r in rows)}/{len(rows)} met, {time.perf_counter() - t0:.0f} s")
+    if args.out:
+        pathlib.Path(args.out).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
