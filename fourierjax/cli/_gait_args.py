@@ -106,20 +106,6 @@ def parse_path(text: str, metres_per_unit: float):
     return gait.polyline_path(pts * scale, closed=bool(spec.get("closed", False)))
 
 
-def path_motion(args, template, result, channel_names, frame_time_s, bmap):
-    """The synthesized gait bent onto `--path` as a `Motion`, or None without `--path`."""
-    if getattr(args, "path", None) is None:
-        return None
-    from fourierjax import gait
-    from fourierjax.io.gait_bvh import grounded_motion
-
-    path = parse_path(args.path, bmap.metres_per_unit)
-    feats, root, _ = gait.follow_path(result.features, result.root_position, path, channel_names,
-                                      bmap.name(bmap.pelvis), frame_time_s, up_axis=int(bmap.up_axis),
-                                      smoothing=0.25 * float(bmap.leg_length))
-    return grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
-
-
 def add_foot_lock_arguments(group, default: bool = True, why: str = "") -> None:
     """Add `--foot-lock/--no-foot-lock` (issue 21) to a group; `default` on unless said."""
     group.add_argument("--foot-lock", action=argparse.BooleanOptionalAction, default=default,
@@ -202,11 +188,11 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
         root_motion=args.root_motion, foot_lock=getattr(args, "foot_lock", True),
         contact_intervals=contact_intervals,
+        path=None if getattr(args, "path", None) is None else parse_path(args.path, bmap.metres_per_unit),
     )
-    # The summary's numbers all come from the one GaitResult (no second pass through the model).
+    # The summary's numbers all come from the one GaitResult (no second pass through the model):
+    # on a path, the walk is bent onto it before the feet are locked, and measured after both.
     motion = gait_motion(template, result, model.channel_names, frame_time_s, body_map=bmap)
-    bent = path_motion(args, template, result, model.channel_names, frame_time_s, bmap)
-    motion = motion if bent is None else bent
     advance = np.array(result.root_position[-1] - result.root_position[0])
     advance[bmap.up_axis] = 0.0
     if args.root_motion:
