@@ -48,7 +48,8 @@ def _plot_decomposition(st: _State) -> None:
         raise _Skip("needs the spectrum step (07_01 expmap features)")
     x, names, dt = st.extra["expmap_07_01"]
     f = st.fits["07_01"]
-    idx = [names.index(f"LeftLeg.expmap{k}") for k in range(3)]
+    knee = f.body_map.name(f.body_map.left.knee)  # the rig's left knee (LeftLeg on CMU rigs)
+    idx = [names.index(f"{knee}.expmap{k}") for k in range(3)]
     T = x.shape[0]
     t = np.arange(T) * dt
     # Tilmanne's second-order model (N = 2) at the fitted fundamental, for the left knee.

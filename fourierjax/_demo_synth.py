@@ -95,16 +95,21 @@ def _fit(st: _State) -> None:
 
 
 def _ground_of(st: _State, clip: str):
-    """(foot points, groin joints, sole clearance [2, P]) of a clip's skeleton."""
+    """(foot points, groin joints, sole clearance [2, P]) of a clip's skeleton, from its body map."""
     if clip in st.ground:
         return st.ground[clip]
     from fourierjax import contacts, gait
     from fourierjax.motion import foot_positions_of
 
     m = st.motions[clip]
-    pts = contacts.foot_points(m.topology)
+    bm = st.fits[clip].body_map if clip in st.fits else None
+    if bm is None:
+        from fourierjax.body import infer_body_map
+
+        bm = infer_body_map(m)
+    pts = contacts.foot_points(m.topology, bm)
     g = contacts.estimate_ground(foot_positions_of(m, pts), m.frame_time_s)
-    st.ground[clip] = (pts, gait.groin_joints(m.topology), contacts.sole_clearance(g))
+    st.ground[clip] = (pts, gait.groin_joints(m.topology, body_map=bm), contacts.sole_clearance(g))
     return st.ground[clip]
 
 

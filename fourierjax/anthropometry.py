@@ -68,33 +68,14 @@ class SegmentModel:
         return float(sum(self.mass_fraction))
 
 
-# Segment -> (proximal joint, distal joint or "<joint>/end" for that joint's End Site).
-# For the CMU naming (31 joints; cmu_mb and cmu_stylized files).
-_CMU_SEGMENTS = {
-    "head": ("Neck", "Head/end"),
-    "trunk": ("Neck", "Hips"),
-    "left_upper_arm": ("LeftArm", "LeftForeArm"),
-    "left_forearm": ("LeftForeArm", "LeftHand"),
-    "left_hand": ("LeftHand", "LeftFingerBase"),
-    "right_upper_arm": ("RightArm", "RightForeArm"),
-    "right_forearm": ("RightForeArm", "RightHand"),
-    "right_hand": ("RightHand", "RightFingerBase"),
-    "left_thigh": ("LeftUpLeg", "LeftLeg"),
-    "left_shank": ("LeftLeg", "LeftFoot"),
-    "left_foot": ("LeftFoot", "LeftToeBase"),
-    "right_thigh": ("RightUpLeg", "RightLeg"),
-    "right_shank": ("RightLeg", "RightFoot"),
-    "right_foot": ("RightFoot", "RightToeBase"),
-}
-
-
 def segments_from_body_map(body_map: BodyMap, topology: Topology) -> dict[str, tuple[str, str]]:
     """The `segment_model` end points of a skeleton from its body map (any naming).
 
     Head: neck to the head's End Site (the vertex); trunk: neck to pelvis; arms: shoulder,
     elbow, wrist and the wrist's first child (the finger base) or its End Site; legs: hip, knee,
     ankle, toe (or the ankle's End Site). A part the map does not have is left out (the centre
-    of mass normalises by the masses present). On CMU rigs this is `_CMU_SEGMENTS`.
+    of mass normalises by the masses present). On a CMU rig: head `Neck`-`Head/end`, trunk
+    `Neck`-`Hips`, e.g. left thigh `LeftUpLeg`-`LeftLeg`, left hand `LeftHand`-`LeftFingerBase`.
 
     Arguments:
         body_map: a `body.BodyMap` of `topology`.
@@ -148,19 +129,32 @@ def segment_model(
         segments: segment name -> (proximal joint, distal joint), where the distal point may be
             `"<joint>/end"` for that joint's End Site. Segment names end in one of the de Leva
             segments (`head`, `trunk`, `upper_arm`, `forearm`, `hand`, `thigh`, `shank`, `foot`).
-            Defaults to the body map's segments (`segments_from_body_map`) when `body_map` is
-            given, else the CMU skeleton's naming.
+            Defaults to the body map's segments (`segments_from_body_map`): of `body_map`
+            when given, else of the map the joint names decide (`body.body_map_from_names`:
+            CMU, Mixamo, Daz, 3ds Max, Bandai, SMPL, LAFAN names).
         sex: which de Leva table (only `"male"` is transcribed).
-        body_map: a `body.BodyMap` of `topology` (`body.infer_body_map`), for any naming.
+        body_map: a `body.BodyMap` of `topology` (`body.infer_body_map`), for any rig,
+            whatever its names.
 
     Returns:
-        a `SegmentModel`; raises `ValueError` naming a missing joint.
+        a `SegmentModel`; raises `ValueError` naming a missing joint, or when no segments are
+        given and names do not decide the body parts.
     """
     if sex not in DE_LEVA_1996:
         raise ValueError(f"segment_model: `sex` must be one of {list(DE_LEVA_1996)}, got {sex!r}")
     table = DE_LEVA_1996[sex]
     if segments is None:
-        segments = _CMU_SEGMENTS if body_map is None else segments_from_body_map(body_map, topology)
+        if body_map is None:
+            from fourierjax.body import BodyMapError, body_map_from_names
+
+            try:
+                body_map = body_map_from_names(topology)
+            except BodyMapError as err:
+                raise ValueError(
+                    "segment_model: the joint names are not in the skeleton name table, so they do not "
+                    "decide the body segments; pass body_map=fourierjax.body.infer_body_map(motion) "
+                    f"or `segments`. ({err})") from None
+        segments = segments_from_body_map(body_map, topology)
     j = topology.num_joints
 
     def point(name: str) -> int:

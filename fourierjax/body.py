@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from jaxtyping import Float
 
+from fourierjax._body._infer import from_names as _from_names
 from fourierjax._body._infer import from_stored as _from_stored
 from fourierjax._body._infer import infer as _infer
 from fourierjax._body._map import (
@@ -19,7 +22,7 @@ from fourierjax._body._map import (
 from fourierjax.skeleton import Topology
 
 __all__ = ["BODY_MAP_VERSION", "UNITS", "Arm", "BodyMap", "BodyMapError", "Leg", "body_map_from_dict",
-           "body_map_from_toml", "infer_body_map", "infer_body_map_from_positions"]
+           "body_map_from_names", "body_map_from_toml", "infer_body_map", "infer_body_map_from_positions"]
 
 #: Frames of a clip that inference poses (evenly spaced): enough for a mean pose and its travel.
 MAX_FRAMES = 240
@@ -74,6 +77,7 @@ def infer_body_map_from_positions(
     *,
     up=None,
     overrides=None,
+    moving: Sequence[int] | None = None,
 ) -> BodyMap:
     """`infer_body_map` from world joint positions (e.g. a motion converted from another format).
 
@@ -84,9 +88,13 @@ def infer_body_map_from_positions(
         rotations: `[F, J, 4]` world joint orientations (wxyz), or None; with them the mean pose
             is taken in the pelvis's frame, which a clip that turns around needs.
         up, overrides: as for `infer_body_map`.
+        moving: the joints whose position channels move, in file order; None to judge from
+            `positions`. `()` says that none does (a model's cycle, root at the origin: then the
+            trajectory is the pelvis, or its nearest ancestor with position channels).
 
     Returns:
-        A `BodyMap`; the trajectory is joint 0 when it moves, else the first joint that does.
+        A `BodyMap`; the trajectory is joint 0 when it moves, else the first joint that does,
+        else the pelvis (or its nearest ancestor with position channels).
     """
     positions = np.asarray(positions, np.float64)
     if positions.ndim != 3 or positions.shape[1:] != (topology.num_joints, 3):
@@ -98,7 +106,8 @@ def infer_body_map_from_positions(
     else:
         ends = np.asarray(end_site_positions, np.float64)
     rots = None if rotations is None else np.asarray(rotations, np.float64)
-    return _infer(topology, positions, ends, rots, None, up=up, overrides=overrides)
+    moving = None if moving is None else [int(j) for j in moving]
+    return _infer(topology, positions, ends, rots, moving, up=up, overrides=overrides)
 
 
 def body_map_from_dict(d: dict, topology: Topology) -> BodyMap:
@@ -116,3 +125,25 @@ def body_map_from_dict(d: dict, topology: Topology) -> BodyMap:
 def body_map_from_toml(text_or_path, topology: Topology) -> BodyMap:
     """The map a complete TOML file (as written by `BodyMap.to_toml`) describes, for `topology`."""
     return _from_stored(parse_overrides(text_or_path), topology, "file")
+
+
+def body_map_from_names(topology: Topology, *, up=None) -> BodyMap:
+    """The body map that joint names alone decide: for a bare topology, which has no poses.
+
+    Legs, arms, pelvis, spine, neck and head come from the same name table as
+    `infer_body_map` (CMU, Mixamo, Daz, 3ds Max, Bandai, SMPL, LAFAN, ...), so on a named rig the
+    joints equal those of the clip's inferred map. The geometric fields cannot be known without
+    poses: they are placeholders, marked `"default"` in `sources` (up +Y unless `up` is given,
+    forward and facing along the next axis, leg length and height 0, units `"custom"`).
+
+    Arguments:
+        topology: the skeleton's `Topology` (names, parents, channels, End Sites).
+        up: the up axis, as for `infer_body_map`; None for +Y.
+
+    Returns:
+        A `BodyMap` whose joint fields come from the names.
+
+    Raises:
+        BodyMapError: names do not decide the legs (infer the map of a clip instead).
+    """
+    return _from_names(topology, up)

@@ -481,7 +481,8 @@ def step_intervals(contacts: Bool[ArrayLike, "T F"]) -> Integer[np.ndarray, " st
 STEP_STATISTICS = ("mean", "median")
 
 
-def step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float, *, statistic: str = "mean") -> float:
+def step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float, *, statistic: str = "mean",
+                  loop: bool = False) -> float:
     """Step duration, heel strike to the other foot's heel strike (Tilmanne §2.2).
 
     The gait cycle is two steps: `omega = 2π / (2 · step_period_s)`. When each foot has at
@@ -490,10 +491,16 @@ def step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float, *, stat
     (`step_intervals`) are used. `statistic="median"` resists a spurious extra strike (a
     stumble, CMU 142_02), which would pull the mean down.
 
+    A clip that is one closed loop (`loop=True`: its last frame repeats its first, as in
+    Bandai's short loops) repeats every `T - 1` frames, so each strike recurs one loop later:
+    the steps across the seam count too. A 24-frame run loop (Bandai run_normal_001) holds one
+    strike per foot and one step of 11 frames; its other step, across the seam, is 12.
+
     Arguments:
         contacts: `bool [T, F]`.
         frame_time_s: seconds per frame.
         statistic: `"mean"` or `"median"` of the intervals.
+        loop: the clip is a closed loop (see above).
 
     Returns:
         Seconds. Raises `UserError` when the clip holds fewer than two alternating
@@ -503,6 +510,9 @@ def step_period_s(contacts: Bool[ArrayLike, "T F"], frame_time_s: float, *, stat
         raise UserError(f"statistic: {statistic!r} is not one of {STEP_STATISTICS}")
     frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
     reduce = np.mean if statistic == "mean" else np.median
+    if loop:
+        c = np.asarray(contacts, bool)
+        contacts = np.concatenate([c, c[1:]]) if len(c) > 2 else c  # frame T - 1 is frame 0
     ev = step_events(contacts)
     cycles = [np.diff(e) for e in ev if len(e) >= 2]
     if len(ev) >= 2 and len(cycles) == len(ev):

@@ -10,7 +10,7 @@ import warnings
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from fourierjax._gait.common import CMU_GROINS, RULES, feet_of, groin_joints, model_body_map
+from fourierjax._gait.common import RULES, deprecated_cmu_groins, feet_of, groin_joints, model_body_map
 from fourierjax._gait.crowdlock import lock_crowd
 from fourierjax._gait.fit import HipFit, fit_hip_rule
 from fourierjax._gait.footlock import (
@@ -50,7 +50,6 @@ if TYPE_CHECKING:
     from fourierjax.io.bvh import Motion
 
 __all__ = [
-    "CMU_GROINS",
     "RULES",
     "GaitResult",
     "GroundPath",
@@ -114,3 +113,10 @@ def gait_motion(template: Motion, result: GaitResult, channel_names: Sequence[st
     from fourierjax.io.gait_bvh import gait_motion as _gait_motion
 
     return _gait_motion(template, result, channel_names, frame_time_s)
+
+
+def __getattr__(name: str):
+    # `CMU_GROINS` (deprecated): the groins come from the body map, whatever the rig's names.
+    if name == "CMU_GROINS":
+        return deprecated_cmu_groins(__name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

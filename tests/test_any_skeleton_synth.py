@@ -68,8 +68,9 @@ def test_groin_joints_from_the_map(cmu):
     assert gait.groin_joints(topo, body_map=bmap) == bmap.groins == gait.groin_joints(topo)
     m = convert(t, "mixamo")
     assert gait.groin_joints(m, body_map=None) == bmap.groins  # a Motion: its own map
+    assert gait.groin_joints(m.topology) == bmap.groins  # a bare topology: its names' body map
     with pytest.raises(UserError, match="body_map="):
-        gait.groin_joints(m.topology)  # a bare topology without CMU names
+        gait.groin_joints(convert(t, "scrambled").topology)  # names that decide nothing
     assert gait.groin_joints(m.topology, ("mixamorig:LeftUpLeg", "mixamorig:RightUpLeg")) == bmap.groins
     # The map of the model's poses gives the CMU feet the old defaults named.
     assert gait.feet_of(bmap)[:2] == contacts.foot_points(topo)[:2]
@@ -321,8 +322,9 @@ def test_segment_model_from_the_body_map():
     ref = anthropometry.segment_model(motion.topology)
     assert anthropometry.segment_model(motion.topology, body_map=body.infer_body_map(motion)) == ref
     renamed = convert(motion, "mixamo")
+    assert anthropometry.segment_model(renamed.topology).proximal == ref.proximal  # the names' body map
     with pytest.raises(ValueError, match="not in the skeleton"):
-        anthropometry.segment_model(renamed.topology)
+        anthropometry.segment_model(convert(motion, "scrambled").topology)
     got = anthropometry.segment_model(renamed.topology, body_map=body.infer_body_map(renamed))
     assert (got.proximal, got.distal, got.mass_fraction) == (ref.proximal, ref.distal, ref.mass_fraction)
     fk = fk_frames(motion.skeleton(), motion.channels[:3])

@@ -277,3 +277,77 @@ def test_bandai_by_geometry(bandai_clips):
         assert bm.source("legs") == "geometry"
         assert _parts(bm) == _parts(named), path.name
         assert (bm.units, bm.up_axis, bm.up_sign) == ("cm", 1, 1), path.name
+
+
+# -- the CMU-named defaults, replaced by the names' body map (issue 20 residual, item 3) -------
+
+#: The table `anthropometry._CMU_SEGMENTS` held (the default of a bare CMU topology until the
+#: names' body map replaced it); the new default must give it back on CMU rigs.
+OLD_CMU_SEGMENTS = {
+    "head": ("Neck", "Head/end"), "trunk": ("Neck", "Hips"),
+    "left_upper_arm": ("LeftArm", "LeftForeArm"), "left_forearm": ("LeftForeArm", "LeftHand"),
+    "left_hand": ("LeftHand", "LeftFingerBase"), "right_upper_arm": ("RightArm", "RightForeArm"),
+    "right_forearm": ("RightForeArm", "RightHand"), "right_hand": ("RightHand", "RightFingerBase"),
+    "left_thigh": ("LeftUpLeg", "LeftLeg"), "left_shank": ("LeftLeg", "LeftFoot"),
+    "left_foot": ("LeftFoot", "LeftToeBase"), "right_thigh": ("RightUpLeg", "RightLeg"),
+    "right_shank": ("RightLeg", "RightFoot"), "right_foot": ("RightFoot", "RightToeBase"),
+}
+NAMED = tuple(c for c in CONVENTIONS if c != "scrambled")
+
+
+def _joints(bm: BodyMap):
+    arms = tuple((a.collar, a.shoulder, a.elbow, a.wrist) for a in (bm.left_arm, bm.right_arm))
+    return _parts(bm) + (bm.pelvis, bm.trajectory, bm.spine, bm.neck, bm.head, arms)
+
+
+def test_names_body_map_of_a_bare_topology(maps):
+    """`body_map_from_names` names the joints the clip's inferred map names, on CMU and on every
+    renamed rig; geometry is marked "default"; names that decide nothing are refused."""
+    from fourierjax.body import body_map_from_names
+
+    m = fourierjax.data.load("07_01")
+    ref = body_map_from_names(m.topology)
+    assert _joints(ref) == _joints(maps["07_01"])
+    assert ref.source("up") == "default" and ref.up_axis == 1 and ref.source("legs") == "names"
+    for c in NAMED:
+        assert _joints(body_map_from_names(convert(m, c).topology)) == _joints(ref), c
+    with pytest.raises(BodyMapError, match="names do not decide"):
+        body_map_from_names(convert(m, "scrambled").topology)
+
+
+def test_groins_and_segments_of_renamed_bare_topologies():
+    """`gait.groin_joints` and `anthropometry.segment_model` of a bare topology come from its
+    names' body map: the CMU results (the old CMU-name defaults) on every renamed rig."""
+    from fourierjax import anthropometry, gait
+
+    m = fourierjax.data.load("07_01")
+    topo = m.topology
+    groins = gait.groin_joints(topo)
+    assert groins == (topo.names.index("LeftUpLeg"), topo.names.index("RightUpLeg"))
+    ref = anthropometry.segment_model(topo)
+    assert ref == anthropometry.segment_model(topo, OLD_CMU_SEGMENTS)
+    for c in NAMED:
+        t = convert(m, c).topology
+        assert gait.groin_joints(t) == groins, c
+        got = anthropometry.segment_model(t)
+        assert (got.names, got.proximal, got.distal, got.mass_fraction) == (
+            ref.names, ref.proximal, ref.distal, ref.mass_fraction), c
+    with pytest.raises(UserError, match="do not decide its legs"):
+        gait.groin_joints(convert(m, "scrambled").topology)
+    with pytest.warns(DeprecationWarning, match="CMU_GROINS"):
+        assert gait.CMU_GROINS == ("LeftUpLeg", "RightUpLeg")
+
+
+def test_rest_frames_of_a_z_up_export():
+    """`data.detect_rest_frames` finds the T-pose of a Z-up export (whose root holds the 90 degree
+    turn, off a whole degree by round-off) as in the original, and in metres."""
+    from fourierjax.io.axes import to_y_up
+
+    for name in ("07_01", "07_12", "142_08"):  # 1, 2 and 0 rest frames
+        m = read_bvh(fourierjax.data.path(name))
+        n = fourierjax.data.detect_rest_frames(m)
+        assert n == {"07_01": 1, "07_12": 2, "142_08": 0}[name]
+        z = convert(m, "zup")
+        assert fourierjax.data.detect_rest_frames(z) == n, name
+        assert fourierjax.data.detect_rest_frames(to_y_up(z, "z")) == n, name
+        assert fourierjax.data.detect_rest_frames(convert(m, "metres")) == n, name

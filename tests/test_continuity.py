@@ -150,3 +150,60 @@ def test_bandai_winding_joint_still_needs_leaving_out_of_the_omega_search():
     x, names = M.features_from_motion(m[default.frame_start:default.frame_stop])
     every = M.fit_motions([m], 3, channel_weights=jnp.asarray(fourier.angle_channel_mask(names), float))[0]
     assert abs(every.omega_fit / every.omega_steps - 1) > 0.1
+
+
+def _euler_blocks(motion):
+    """`{order: [F, K, 3]}` radians: every joint's file Euler angles grouped by order, as
+    `features._joint_rotations` hands them to the continuity repair."""
+    t = motion.topology
+    groups: dict[str, list[list[int]]] = {}
+    for j, chans in enumerate(t.channels):
+        rot = [k for k, c in enumerate(chans) if c.endswith("rotation")]
+        if len(rot) == 3:
+            groups.setdefault("".join(chans[k][0] for k in rot), []).append([t.channel_offsets[j] + k for k in rot])
+    return {o: np.radians(motion.channels[:, np.array(idx)]) for o, idx in groups.items()}
+
+
+def _padded_jax(block, order, valid=None):
+    """The JAX repair on `block` padded to a length bucket and 32 joints (one program per bucket:
+    the scan is causal, so padding after the clip changes nothing before it)."""
+    from fourierjax._fourier._buckets import length_bucket
+
+    F, K, _ = block.shape
+    Fp = length_bucket(F)
+    pad = np.concatenate([block, np.repeat(block[-1:], Fp - F, axis=0)])
+    pad = np.concatenate([pad, np.zeros((Fp, 32 - K, 3))], axis=1)
+    ok = np.ones((Fp, 32), bool)
+    if valid is not None:
+        ok[:F, :K] = valid
+    return np.asarray(_EULER_F64(pad, order, ok))[:F, :K]
+
+
+_EULER_F64 = _jit.filter_jit(rotations.make_euler_continuous)
+
+
+def test_jax_repair_matches_the_numpy_one_on_real_clips(x64):
+    """Item 6 of issue 20's residual: `rotations.make_euler_continuous` (JAX) equals
+    `features.make_euler_continuous` (NumPy float64, the fit's) on every bundled clip and 4
+    Bandai clips, every joint, all frames, and with a per-joint glitch mask; so `features` can
+    hand off to it. (They differ only at exact gimbal lock, where the JAX one splits the first
+    and third angle and the NumPy one keeps the file's split: no frame of these clips is there.)"""
+    from fourierjax import data
+    from fourierjax.io.bvh import read_bvh
+
+    clips = [data.load(n) for n in data.list()]
+    names = ["walk_proud_001", "walk-back_musical_001", "run_normal_001", "dash_old_001"]
+    if BANDAI.is_dir():
+        clips += [read_bvh(BANDAI / f"dataset-1_{n}.bvh") for n in names]
+    rng = np.random.default_rng(3)
+    checked = 0
+    for m in clips:
+        for order, block in _euler_blocks(m).items():
+            assert block.shape[1] <= 32
+            np.testing.assert_allclose(_padded_jax(block, order), per_angle_unwrap(block, order), atol=1e-8,
+                                       err_msg=f"{m.source} {order}")
+            valid = rng.random(block.shape[:2]) > 0.02  # 2% of (frame, joint) entries glitch
+            np.testing.assert_allclose(_padded_jax(block, order, valid), per_angle_unwrap(block, order, valid),
+                                       atol=1e-8, err_msg=f"{m.source} {order} masked")
+            checked += 1
+    assert checked >= len(data.list())

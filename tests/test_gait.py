@@ -243,7 +243,7 @@ def clip_pose(name: str):
     fp = C.foot_points(NamesTopology(b["names"], b["es_par"]))
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
     root = pos[:, 0]
-    gi = [b["names"].index(n) for n in G.CMU_GROINS]
+    gi = [b["names"].index(n) for n in ("LeftUpLeg", "RightUpLeg")]
     return feet, feet - root[:, None, None], pos[:, gi] - root[:, None], root, b["frame_time"]
 
 

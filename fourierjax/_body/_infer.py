@@ -114,7 +114,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     # -- facing, forward, trajectory -----------------------------------------------------
     facing_local = _facing_local(local, u_local, left_leg, right_leg)
     facing = _world_facing(rotations, pelvis, facing_local, u)
-    trajectory, sources["trajectory"] = _trajectory(ov, names, positions, moving)
+    trajectory, sources["trajectory"] = _trajectory(ov, topology, positions, moving, pelvis)
     seg = np.linalg.norm(positions[:, left_leg.knee] - positions[:, left_leg.hip], axis=-1) + np.linalg.norm(
         positions[:, left_leg.ankle] - positions[:, left_leg.knee], axis=-1)
     leg_length = float(ov.get("leg_length", np.median(seg)))
@@ -362,15 +362,24 @@ def _world_facing(rotations, pelvis: int, facing_local, u) -> np.ndarray:
     return _unit(f - u * (u @ f))
 
 
-def _trajectory(ov, names, positions, moving) -> tuple[int, str]:
+def _trajectory(ov, topology, positions, moving, pelvis: int) -> tuple[int, str]:
+    """Joint 0 when it moves, else the first joint that moves; when none does (a clip standing
+    still, or a model's cycle with its root at the origin) the pelvis, or its nearest ancestor
+    with position channels (the joint a BVH writer puts the travel on)."""
+    names = topology.names
     if "trajectory" in ov:
         return resolve_joint(names, ov["trajectory"], "trajectory"), "file"
     if moving is None:
         span = np.ptp(positions, axis=0).max(axis=-1)  # [J]
         moving = [j for j in range(len(names)) if span[j] > 1e-6 * (1.0 + np.abs(positions).max())]
-    if 0 in moving or not moving:
+    if 0 in moving:
         return 0, "geometry"
-    return moving[0], "geometry"
+    if moving:
+        return int(moving[0]), "geometry"
+    j = pelvis
+    while j >= 0 and not any(c.endswith("position") for c in topology.channels[j]):
+        j = topology.parents[j]
+    return (pelvis if j < 0 else j), "geometry"
 
 
 def _leg(chain, names, esp, ov, side) -> Leg:
@@ -470,4 +479,50 @@ def from_stored(d: dict, topology, how: str) -> BodyMap:
         leg_length=float(d["leg_length"]), height=float(d["height"]), units=units,
         metres_per_unit=float(d["metres_per_unit"]),
         sources=tuple(sorted((k, stored.get(k, how) if how == "stored" else how) for k in stored)),
+    )
+
+
+def from_names(topology, up=None) -> BodyMap:
+    """The map that joint names alone decide, for a bare topology (no poses, so no geometry).
+
+    Legs, arms, pelvis, spine, neck and head come from the name table as in `infer`; the
+    trajectory is the pelvis or its nearest ancestor with position channels. The geometric
+    fields are the library's defaults, marked "default" in `sources`: `up` (Y unless given),
+    forward and facing along the next axis after up (+Z for Y up), leg length and height 0,
+    units "custom" at 1 metre per unit.
+    """
+    names, parents, esp = topology.names, topology.parents, topology.end_site_parents
+    sources = {k: "default" for k in ("up", "forward", "facing", "leg_length", "height", "units")}
+    legs = {s: _names.match_chain(names, parents, s, _names.LEG_ROLES, ("toe",)) for s in ("left", "right")}
+    if not all(legs.values()) or set(_present(legs["left"])) & set(_present(legs["right"])):
+        raise BodyMapError(missing_legs_message(
+            "joint names do not decide the legs (and a bare topology has no poses to find them from)", names))
+    sources.update(legs="names", trajectory="names")
+    pelvis = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
+    if pelvis < 0:
+        raise BodyMapError(missing_legs_message("the two hips have no common ancestor", names))
+    sources["pelvis"] = "names" if pelvis in _names.match_centre(names, "pelvis") else "hierarchy"
+    leg_joints = set(_present(legs["left"])) | set(_present(legs["right"]))
+    below = [j for j in range(len(names)) if j != pelvis and _path(parents, pelvis, j) and j not in leg_joints]
+    heads = [j for j in _names.match_centre(names, "head") if j in below]
+    head = heads[0] if heads else -1
+    route = _path(parents, pelvis, head)[1:-1] if head >= 0 else []
+    necks = [j for j in _names.match_centre(names, "neck") if j in route]
+    neck = min(necks, key=route.index) if necks else (route[-1] if route else -1)
+    sources.update(head="names", neck="names" if necks else "hierarchy")
+    stop = neck if neck >= 0 else head
+    spine = tuple(_path(parents, pelvis, stop)[1:-1]) if stop >= 0 else ()
+    left_arm, right_arm = _arms({}, names, parents, sources)
+    up_axis, up_sign = parse_up("y" if up is None else up)
+    if up is not None:
+        sources["up"] = "argument"
+    facing = [0.0, 0.0, 0.0]
+    facing[(up_axis + 1) % 3] = 1.0
+    trajectory, _ = _trajectory({}, topology, None, [], pelvis)
+    return BodyMap(
+        joint_names=names, left=_leg(legs["left"], names, esp, {}, "left"),
+        right=_leg(legs["right"], names, esp, {}, "right"), trajectory=trajectory, pelvis=pelvis, spine=spine,
+        neck=neck, head=head, left_arm=left_arm, right_arm=right_arm, up_axis=up_axis, up_sign=up_sign,
+        forward=_tuple3(facing), facing=_tuple3(facing), leg_length=0.0, height=0.0, units="custom",
+        metres_per_unit=1.0, sources=tuple(sorted(sources.items())),
     )

@@ -22,7 +22,24 @@ if TYPE_CHECKING:
     from fourierjax.skeleton import Skeleton
 
 RULES = ("unuma1995", "continuous", "smooth")
-CMU_GROINS = ("LeftUpLeg", "RightUpLeg")
+#: The CMU groin names, the old default of a bare topology (now its names' body map): deprecated.
+_CMU_GROINS = ("LeftUpLeg", "RightUpLeg")
+
+
+def deprecated_cmu_groins(module: str) -> tuple[str, str]:
+    """`CMU_GROINS`, with its DeprecationWarning (for the module `__getattr__`s)."""
+    import warnings
+
+    warnings.warn(f"{module}.CMU_GROINS is deprecated: groins come from the body map "
+                  "(`groin_joints(topology)` reads the names of any rig, `body_map.groins`); it will be "
+                  "removed in the next release", DeprecationWarning, stacklevel=3)
+    return _CMU_GROINS
+
+
+def __getattr__(name: str):
+    if name == "CMU_GROINS":
+        return deprecated_cmu_groins(__name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def check_finite(where: str, name: str, value: ArrayLike) -> None:
@@ -95,15 +112,16 @@ def groin_joints(
     """Indices of the left and right groin (hip) joints, from the body map.
 
     Arguments:
-        topology: a `Topology` (anything with `names`), or a `Motion` (then its body map is
-            inferred, `body.infer_body_map`).
+        topology: a `Topology`, or a `Motion` (then its body map is inferred,
+            `body.infer_body_map`).
         names: `(left, right)` joint names; given, they win.
         body_map: a `body.BodyMap`; its `groins` win over the defaults.
 
     Returns:
         `(left, right)` joint indices. With neither `names` nor `body_map`: the map of a
-        `Motion`, or the CMU names (`CMU_GROINS`) of a bare topology. Raises `UserError` naming
-        the skeleton's joints when a name is missing.
+        `Motion`, or of a bare topology's joint names (`body.body_map_from_names`: CMU, Mixamo,
+        Daz, 3ds Max, Bandai, SMPL and LAFAN names). Raises `UserError` naming the skeleton's
+        joints when a name is missing or names do not decide the legs.
     """
     if names is None and body_map is not None:
         return tuple(int(g) for g in body_map.groins)
@@ -112,16 +130,26 @@ def groin_joints(
 
         return tuple(int(g) for g in infer_body_map(topology).groins)
     topology = getattr(topology, "topology", topology)
-    given = names is not None
-    names = CMU_GROINS if names is None else names
     joints = tuple(topology.names)
+    if names is None:
+        from fourierjax.body import BodyMapError, body_map_from_names
+
+        try:
+            if not hasattr(topology, "parents"):
+                raise BodyMapError("no parents")
+            return tuple(int(g) for g in body_map_from_names(topology).groins)
+        except BodyMapError:
+            raise UserError(
+                f"groin_joints: the joint names of this skeleton do not decide its legs (no left and right "
+                f"hip, knee and ankle named as a known rig names them, e.g. CMU's LeftUpLeg / RightUpLeg, "
+                f"LeftLeg / RightLeg, LeftFoot / RightFoot); its joints are {list(joints)}. Pass the clip "
+                "itself, body_map=fourierjax.body.infer_body_map(motion) or names=(left, right)"
+            ) from None
     missing = [n for n in names if n not in joints]
     if missing:
-        hint = ("" if given else " (the CMU names are the default of a bare topology: pass the "
-                "clip itself, or body_map=fourierjax.body.infer_body_map(motion))")
         raise UserError(
             f"groin_joints: the skeleton has no joint(s) {missing}; its joints are {list(joints)}."
-            f" Pass names=(left, right) or body_map= for a skeleton that does not use the CMU names{hint}"
+            " Pass names=(left, right) that it has, or body_map="
         )
     return joints.index(names[0]), joints.index(names[1])
 
@@ -150,6 +178,9 @@ def _cycle_fk(model, skeleton, num_samples):
 def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 64, *, overrides=None) -> BodyMap:
     """The body map of a model's own cycle (`num_samples` poses, root at the origin).
 
+    Nothing travels in these poses, so the trajectory joint is the pelvis (or its nearest
+    ancestor with position channels), never a joint that sways about the origin.
+
     `overrides` (a dict, TOML text or path; `body.infer_body_map`) set fields by joint name.
 
     A model file's template is the rest pose, which on rigs with joint orients (Bandai: bones
@@ -165,7 +196,8 @@ def model_body_map(model: FourierModel, skeleton: Skeleton, num_samples: int = 6
     fk = _cycle_fk(model, skeleton, num_samples)
     return infer_body_map_from_positions(skeleton.topology, np.asarray(fk.positions, np.float64),
                                          np.asarray(fk.end_site_positions, np.float64),
-                                         np.asarray(fk.rotations, np.float64), overrides=overrides)
+                                         np.asarray(fk.rotations, np.float64), overrides=overrides,
+                                         moving=())  # the root sits at the origin: nothing travels
 
 
 def resolve_body(

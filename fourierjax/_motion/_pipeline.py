@@ -23,6 +23,7 @@ from fourierjax._motion._clip import (
     _hip_flexion_phase,
     _search_weights,
     _steps,
+    closed_loop,
 )
 from fourierjax._motion._poses import _position_ve, _position_ve_impl, foot_contacts_of
 from fourierjax._motion._segment import feature_mask, glitch_joints, steady_segment
@@ -90,7 +91,7 @@ def _prepare(index, m, bm, *, representation, segment, use_contacts, start_frame
     mask = feature_mask(glitch, sub.topology, 0 if bm is None else bm.pelvis)
     clock("features")
     c = foot_contacts_of(sub, body_map=bm) if use_contacts and bm is not None else None
-    left, right, om = _steps(c, sub.frame_time_s)
+    left, right, om = _steps(c, sub.frame_time_s, closed_loop(sub))
     clock("contacts")
     return _Clip(index, m, a, b, sub, x, names, mask, left, right, om, bm)
 

@@ -105,7 +105,8 @@ _LOCK = {"float32": 1e-4, "float64": 1e-8}
 
 
 def make_euler_continuous(
-    angles: Float[Array, "F *joints 3"], order: str, valid: Bool[Array, " F"] | None = None
+    angles: Float[Array, "F *joints 3"], order: str,
+    valid: Bool[Array, " F"] | Bool[Array, " F *joints"] | None = None,
 ) -> Float[Array, "F *joints 3"]:
     """Continuous Euler angles over time, repaired through the rotation (radians).
 
@@ -127,7 +128,8 @@ def make_euler_continuous(
     Arguments:
         angles: ``[F, ..., 3]`` radians, time first.
         order: one of ``EULER_ORDERS`` (BVH intrinsic order).
-        valid: optional ``bool [F]``.
+        valid: optional ``bool [F]``, or ``bool [F, ...]`` per joint (a glitch of one joint),
+            as ``features.make_euler_continuous`` takes it.
 
     Returns:
         ``[F, ..., 3]``: the same rotations, continuous over the first axis.
@@ -142,8 +144,11 @@ def make_euler_continuous(
         raise UserError(f"{fn}: `angles` must have shape [F, ..., 3], got {tuple(angles.shape)}")
     F = angles.shape[0]
     ok = jnp.ones((F,), bool) if valid is None else jnp.asarray(valid, bool)
-    if ok.shape != (F,):
-        raise UserError(f"{fn}: `valid` must have shape ({F},), got {tuple(ok.shape)}")
+    if ok.shape == (F,):
+        ok = ok.reshape((F,) + (1,) * (angles.ndim - 2))
+    elif ok.shape != angles.shape[:-1]:
+        raise UserError(f"{fn}: `valid` must have shape ({F},) or {tuple(angles.shape[:-1])}, got "
+                        f"{tuple(ok.shape)}")
     proper = order[0] == order[2]
     lock_tol = _LOCK.get(str(angles.dtype), 1e-4)
     principal = euler_from_quat(quat_from_euler(angles, order), order)
@@ -158,7 +163,7 @@ def make_euler_continuous(
     def step(carry, inp):
         ref, prev, ref_ok = carry
         e, s, good = inp
-        target = jnp.where(good & ref_ok, ref, prev)
+        target = jnp.where((good & ref_ok)[..., None], ref, prev)
         c1, c2 = nearest(target, e), nearest(target, euler_twin(e, order))
         d1 = jnp.sum((c1 - target) ** 2, -1)
         d2 = jnp.sum((c2 - target) ** 2, -1)
@@ -170,7 +175,7 @@ def make_euler_continuous(
         split = jnp.stack([target[..., 0] + 0.5 * d, best[..., 1], target[..., 2] - 0.5 * s * d], -1)
         at_lock = jnp.abs(jnp.sin(e[..., 1]) if proper else jnp.cos(e[..., 1])) < lock_tol
         out = jnp.where(at_lock[..., None], split, best)
-        new_ref = jnp.where(good | ~ref_ok, out, ref)
+        new_ref = jnp.where((good | ~ref_ok)[..., None], out, ref)
         return (new_ref, out, ref_ok | good), out
 
     carry0 = (first, first, ok[0])

@@ -167,14 +167,21 @@ def load(name: str, *, raw: bool = False) -> Motion:
     return motion if raw else motion[entry["rest_frames"] :]
 
 
+#: Degrees of round-off within which `detect_rest_frames` reads an angle as zero or whole (a
+#: captured frame of the bundled clips has an angle 0.45° or more off a whole degree).
+REST_TOLERANCE_DEG = 1e-6
+
+
 def detect_rest_frames(motion: Motion) -> int:
     """Number of leading frames that are synthetic rest poses rather than captured motion.
 
-    A frame counts as synthetic if all its rotation angles are exactly zero, or if they are
-    all whole degrees with at least half of them zero: the signature of the T-pose that BVH
-    converters (cgspeed's CMU release) insert as frame 0. Captured angles are never all whole
-    numbers. Counting stops at the first captured frame; a clip made only of such frames
-    returns `motion.num_frames`.
+    A frame counts as synthetic if all its rotation angles are zero, or if they are all whole
+    degrees with at least half of them zero: the signature of the T-pose that BVH converters
+    (cgspeed's CMU release) insert as frame 0. Captured angles are never all whole numbers.
+    "Zero" and "whole" allow `REST_TOLERANCE_DEG` of round-off: a clip turned to another up
+    axis in memory (a Z-up export's root holds the 90° turn) carries 1e-15° of it. Counting
+    stops at the first captured frame; a clip made only of such frames returns
+    `motion.num_frames`.
 
     Arguments:
         motion: a `Motion` with at least one rotation channel.
@@ -189,9 +196,10 @@ def detect_rest_frames(motion: Motion) -> int:
     ]
     if not rotation:
         return 0
-    angles = motion.channels[:, rotation]
-    zero = angles == 0.0
+    angles = np.asarray(motion.channels)[:, rotation]
+    zero = np.abs(angles) <= REST_TOLERANCE_DEG
     all_zero = zero.all(axis=1)
-    synthetic = (angles == np.round(angles)).all(axis=1) & (2 * zero.sum(axis=1) >= len(rotation))
+    whole = np.abs(angles - np.round(angles)) <= REST_TOLERANCE_DEG
+    synthetic = whole.all(axis=1) & (2 * zero.sum(axis=1) >= len(rotation))
     rest = all_zero | synthetic
     return int(motion.num_frames if rest.all() else np.argmin(rest))
