@@ -167,4 +167,6 @@ def test_prepare_chunk_equals_the_per_clip_path(chunk):
         np.testing.assert_allclose(g.features, r.features, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(g.omega_steps, r.omega_steps, rtol=1e-6)
         assert g.body_map == r.body_map
-    assert any(len(g.left) for g in got) and any((~g.mask).any() for g in got)
+    # The chunk holds heel strikes. (Its 142_02 cut holds no glitch frame once segmented: the
+    # glitch path of the continuity is tested on 142_02[1000:1300] above.)
+    assert any(len(g.left) for g in got)

@@ -12,8 +12,7 @@ from fourierjax._memory import check_bytes
 
 #: Batch sizes of the compiled fit programs: a batch is cut into chunks of `LARGE_BATCH` clips
 #: and a remainder in chunks of `SMALL_BATCH` (padded with copies of the last clip), so any
-#: batch size of two or more runs at most these two programs per clip-length bucket (a single
-#: clip runs a program of its own: padded to 16 it would cost 16 clips' time).
+#: batch size runs at most these two programs per clip-length bucket.
 SMALL_BATCH = 16
 LARGE_BATCH = 128
 
@@ -33,8 +32,7 @@ def length_bucket(num_frames: int) -> int:
 def batch_plan(total: int, bytes_per_clip: int, limit: int, *, name: str = "fit") -> list[tuple[int, int]]:
     """Chunks of a batch of `total` clips, each of a bucketed size: ``[(start, size), ...]``.
 
-    One clip is a chunk of one. Otherwise whole chunks of `LARGE_BATCH` clips, then the
-    remainder in chunks of `SMALL_BATCH` (one more
+    Whole chunks of `LARGE_BATCH` clips, then the remainder in chunks of `SMALL_BATCH` (one more
     large chunk instead when the remainder is over half of one). The last chunk of each size may
     reach past `total`: its clips are padded with copies of the last one. When a large chunk does
     not fit the memory `limit`, only small chunks are used; when a small one does not either,
@@ -51,8 +49,6 @@ def batch_plan(total: int, bytes_per_clip: int, limit: int, *, name: str = "fit"
         UserError: when one clip alone needs more than `limit`.
     """
     check_bytes(name, bytes_per_clip, limit, hint="raise max_memory or make the clips shorter")
-    if total == 1:  # one clip (a command on one file): its own program, not 16 copies of it
-        return [(0, 1)]
     fits = max(1, int(limit // max(bytes_per_clip, 1)))
     large = LARGE_BATCH if fits >= LARGE_BATCH else 0
     small = SMALL_BATCH if fits >= SMALL_BATCH else fits
