@@ -92,7 +92,7 @@ def _concat(motions):
 
 
 def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> list:
-    from fourierjax._motion._clip import _steps
+    from fourierjax._motion._clip import _steps, closed_loop
     from fourierjax._motion._pipeline import _Clip, _Clock
 
     clock = _Clock(timings)
@@ -122,7 +122,7 @@ def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> lis
     contacts = _contacts(cat, starts, dts, items) if use_contacts else [None] * len(items)
     out = []
     for k, it in enumerate(items):
-        left, right, om = _steps(contacts[k], dts[k])
+        left, right, om = _steps(contacts[k], dts[k], closed_loop(subs[k]))  # as _prepare
         s = slice(starts[k], starts[k + 1])
         out.append(_Clip(it.index, it.motion, it.a + it.lo, it.b + it.lo, subs[k], x[s],
                          names, mask[s], left, right, om, it.body_map))
