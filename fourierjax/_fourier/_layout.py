@@ -194,7 +194,7 @@ def root_joints(motion, body_map=None) -> RootJoints:
         return RootJoints(traj, pelvis, _facing_local(motion, bm))
 
 
-def _relative_position(motion, base: int, joint: int) -> np.ndarray:
+def relative_position(motion, base: int, joint: int) -> np.ndarray:
     """Position [F, 3] of ``joint`` in the frame of its ancestor ``base``."""
     chain = []
     j = joint
@@ -216,7 +216,7 @@ def _facing_local(motion, bm) -> tuple[float, float, float]:
     """Where the body faces in the pelvis's frame: ``(left hip - right hip) x up``, averaged over
     frames, snapped to a local axis within ``_SNAP_DEG`` (CMU: exactly +Z)."""
     _, q = world_pose(motion, bm.pelvis)
-    lat = _relative_position(motion, bm.pelvis, bm.left.hip) - _relative_position(motion, bm.pelvis, bm.right.hip)
+    lat = relative_position(motion, bm.pelvis, bm.left.hip) - relative_position(motion, bm.pelvis, bm.right.hip)
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])
     up = rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
     f = np.cross(lat, up).mean(axis=0)

@@ -8,7 +8,14 @@ import os
 import numpy as np
 
 from fourierjax._fourier._buckets import length_bucket
-from fourierjax._fourier._layout import ancestors, local_transform, rot, rotation_joints, world_pose, yaw_quat
+from fourierjax._fourier._layout import (
+    ancestors,
+    relative_position,
+    rot,
+    rotation_joints,
+    world_pose,
+    yaw_quat,
+)
 from fourierjax._motion._segment import feature_mask, steady_from_positions
 from fourierjax.features import ROOT_CHANNELS, channel_names_for, check_static_above
 
@@ -164,24 +171,6 @@ def _segment_sums(v, starts):
     return np.stack([v[starts[k]:starts[k + 1]].sum(axis=0) for k in range(len(starts) - 1)])
 
 
-def _relative_position(cat, base: int, joint: int) -> np.ndarray:
-    """Position of ``joint`` in the frame of its ancestor ``base``, every frame."""
-    chain = []
-    j = joint
-    while j != base:
-        chain.append(j)
-        j = cat.topology.parents[j]
-    pos = quat = None
-    for j in chain[::-1]:
-        t, q = local_transform(cat, j)
-        if pos is None:
-            pos, quat = t, q
-        else:
-            pos = pos + rot("quat_apply", quat, t)
-            quat = rot("quat_multiply", quat, q)
-    return pos
-
-
 def _facing_locals(cat, starts, q, items) -> np.ndarray:
     """`RootJoints.facing_local` of each clip (`_fourier._layout.root_joints`): ``(left hip -
     right hip) x up`` in the pelvis's frame averaged over the clip's frames, snapped to an
@@ -192,7 +181,7 @@ def _facing_locals(cat, starts, q, items) -> np.ndarray:
     for lh, rh in hips:
         rows = np.concatenate([np.arange(starts[k], starts[k + 1]) for k, it in enumerate(items)
                                if (it.body_map.left.hip, it.body_map.right.hip) == (lh, rh)])
-        d = _relative_position(cat, pelvis, lh) - _relative_position(cat, pelvis, rh)
+        d = relative_position(cat, pelvis, lh) - relative_position(cat, pelvis, rh)
         lat[rows] = d[rows]
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])
     up = rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
