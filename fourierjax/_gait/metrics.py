@@ -87,7 +87,10 @@ def ground_penetration(
 
 
 def flight_fraction(lowest: Float[ArrayLike, "T 2"], *, tolerance: float = 1e-3) -> Float[Array, ""]:
-    """Fraction of frames with both feet off the ground.
+    """Fraction of frames with both feet off the ground (any height above `tolerance`).
+
+    Flight as issue 21 measures it, within the contact band of the floor, the same for a capture
+    and a synthesis, is `contact_flight_fraction`.
 
     Arguments:
         lowest: `[T, 2]` heights of each foot's lowest point above the ground.
