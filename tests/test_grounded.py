@@ -265,6 +265,10 @@ def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
         jax.jit(lambda a: style.grounded_transition(a, fits[1].model, sk, 8, dt, 0.0, 0.1, body_map=bm,
                                                      foot_lock=True).features)(
             fits[0].model)
+    ivs = tuple(gait.contact_intervals(f.model, sk, body_map=bm) for f in fits)
+    with pytest.raises(UserError, match="concrete `frame_time_s`"):  # it sets the easing's frames
+        jax.jit(lambda d: style.grounded_transition(fits[0].model, fits[1].model, sk, 8, d, 0.0, 0.1, body_map=bm,
+                                                     contact_intervals=ivs).features)(dt)
 
 
 @pytest.mark.slow
