@@ -36,6 +36,7 @@ from fourierjax._gait.hip import (
 )
 from fourierjax._gait.metrics import (
     SkatingStats,
+    contact_flight_fraction,
     contact_skating,
     estimate_sole_clearance,
     flight_fraction,
@@ -58,6 +59,7 @@ __all__ = [
     "SkatingStats",
     "apply_step",
     "circle_path",
+    "contact_flight_fraction",
     "contact_height",
     "contact_intervals",
     "contact_skating",

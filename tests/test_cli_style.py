@@ -222,8 +222,7 @@ def _leg_and_other_channels(motion):
 @pytest.mark.parametrize("command", ["transition", "interpolate"])
 def test_foot_lock_flags(files, command, monkeypatch):
     """`--foot-lock` plants the feet: only the leg joints' angles change against `--no-foot-lock`;
-    the flag reaches both commands (issue 21). On by default in interpolate, off in transition
-    (its knee moves break a walk <-> run transition's no-pop bound)."""
+    the flag reaches both commands (issue 21). On by default in both."""
     from fourierjax import _compile_cache
     from fourierjax.cli import main
 
@@ -237,8 +236,7 @@ def test_foot_lock_flags(files, command, monkeypatch):
         name = f"{command}{flag or ''}.bvh"
         assert main([*args, "--out", name, *([flag] if flag else [])]) == 0
         out[flag] = read_bvh(d / name)
-    default = "--foot-lock" if command == "interpolate" else "--no-foot-lock"
-    np.testing.assert_array_equal(out[None].channels, out[default].channels)
+    np.testing.assert_array_equal(out[None].channels, out["--foot-lock"].channels)
     legs, other, _ = _leg_and_other_channels(out[None])
     on, off = out["--foot-lock"].channels, out["--no-foot-lock"].channels
     np.testing.assert_allclose(on[:, other], off[:, other], atol=1e-3)

@@ -838,3 +838,33 @@ def test_cli_apply_gait_in_process():
     off = parser.parse_args(["--no-root-motion"])
     _, summary_off = apply_gait(off, model, mot, 60, mot.frame_time_s)
     assert "flight not measured" in summary_off
+
+
+def test_contact_flight_fraction_is_the_skating_metrics_contact():
+    """Flight (issue 21): the frames on which no foot point is within 2% of the body height of its
+    floor, as `contact_skating` counts contact; a sloped floor given as `floor` is followed."""
+    from types import SimpleNamespace
+
+    bm = SimpleNamespace(left=SimpleNamespace(foot_points=(0, 1)), right=SimpleNamespace(foot_points=(2, 3)),
+                         up_axis=1, up_sign=1.0, height=50.0)  # band: 1 unit
+    T = 40
+    k = np.arange(T)
+    p = np.zeros((T, 2, 2, 3))
+    p[..., 1] = 5.0  # both feet up ...
+    p[k % 4 == 0, 0, 1, 1] = 0.5  # ... but the left toe within the band on every 4th frame
+    p[k % 4 == 1, 1, 0, 1] = 0.99  # ... the right heel just inside it on the next
+    p[k % 4 == 2, 1, 0, 1] = 1.01  # ... just outside on the one after
+    got = float(G.contact_flight_fraction(p, body_map=bm, floor=0.0))
+    assert got == pytest.approx(0.5)
+    assert float(G.contact_skating(p, 0.01, body_map=bm, floor=0.0).contact_fraction) == pytest.approx(1 / 8)
+    # (2 of 16 point-frames in contact.) A floor rising 3 units over the clip, the feet on it: no
+    # flight against it, most frames in flight against a level one.
+    slope = np.linspace(0.0, 3.0, T)[:, None, None]
+    climb = np.zeros((T, 2, 2, 3))
+    climb[..., 1] = slope + 0.2
+    assert float(G.contact_flight_fraction(climb, body_map=bm, floor=slope)) == 0.0
+    assert float(G.contact_flight_fraction(climb, body_map=bm, floor=0.0)) > 0.6
+    # [T, J + E, 3] positions take the body map's foot points; a wrong shape is refused.
+    np.testing.assert_allclose(float(G.contact_flight_fraction(p.reshape(T, 4, 3), body_map=bm, floor=0.0)), got)
+    with pytest.raises(UserError, match="contact_flight_fraction"):
+        G.contact_flight_fraction(np.zeros((T, 3, 2, 3)), body_map=bm)

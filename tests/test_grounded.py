@@ -143,17 +143,23 @@ def _foot_points(motion, bm):
     return feet, np.asarray(fk.positions)
 
 
-def _flight_and_pop(motion, bm, clearance):
-    """(flight fraction: no foot within 2% of the body height of the floor, the floor the 20%
-    quantile of the lowest point; largest per-frame joint position change) of a motion."""
+def _flight_and_pop(motion, bm):
+    """(flight fraction, largest per-frame joint position change) of a captured motion. Flight is
+    `gait.contact_flight_fraction`: no foot point within 2% of the body height of its floor, the
+    floor the clip's fitted ground plane (`contacts.estimate_ground`). CMU subject 02's floor
+    rises 1.6% along z, 1.1 units (6 cm) over 02_03's steady run: against one level floor its
+    late stance read as flight (53% of the frames, or 46% with the floor at the 20% quantile of
+    the lowest point) where the plane gives 16%."""
+    from fourierjax import contacts
+
     feet, P = _foot_points(motion, bm)
-    low = (feet[..., bm.up_axis] - np.asarray(clearance)[None]).min(-1)
-    floor = np.quantile(low.min(-1), 0.2)
-    flight = float(np.mean((low - floor).min(-1) > 0.02 * bm.height))
+    ground = contacts.estimate_ground(feet, motion.frame_time_s, up_axis=bm.up_axis)
+    floor = contacts.floor_heights(ground, feet, up_axis=bm.up_axis)
+    flight = float(gait.contact_flight_fraction(feet, body_map=bm, floor=floor))
     return flight, float(np.linalg.norm(np.diff(P, axis=0), axis=-1).max())
 
 
-def _check_transition(walk_name, run_name, harmonics=5, seconds=6.0, start=2.0, duration=1.5, foot_lock=False):
+def _check_transition(walk_name, run_name, harmonics=5, seconds=6.0, start=2.0, duration=1.5, foot_lock=True):
     """The issue's acceptance figures for walk -> run and run -> walk, as a dict per direction."""
     motions, fits = _fits((walk_name, run_name), harmonics)
     bm, dt = fits[0].body_map, fits[0].frame_time_s
@@ -171,14 +177,17 @@ def _check_transition(walk_name, run_name, harmonics=5, seconds=6.0, start=2.0, 
                          np.asarray(r.root_position, np.float64), body_map=bm)
         _, P = _foot_points(mot, bm)
         jumps = np.linalg.norm(np.diff(P, axis=0), axis=-1).max()
-        fl_run, pop_run = _flight_and_pop(motions[1][fits[1].frame_start:fits[1].frame_stop], bm, r.clearance)
-        _, pop_walk = _flight_and_pop(motions[0][fits[0].frame_start:fits[0].frame_stop], bm, r.clearance)
+        fl_run, pop_run = _flight_and_pop(motions[1][fits[1].frame_start:fits[1].frame_stop], bm)
+        _, pop_walk = _flight_and_pop(motions[0][fits[0].frame_start:fits[0].frame_stop], bm)
         own = style.grounded_transition(run, run, sk, T, dt, start, duration, body_map=bm, foot_lock=foot_lock)
+        feet = np.asarray(r.foot_positions)
+        floor = float(r.floor) + np.asarray(r.clearance)[None]  # each point's floor
         out[direction] = dict(
             on_floor=float(np.mean(low[walk_part].min(-1) <= tol)),
-            flight=float(np.mean(low[run_part].min(-1) > tol)),
+            flight=float(gait.contact_flight_fraction(feet[run_part], body_map=bm, floor=floor)),
             flight_captured=fl_run,
-            flight_model=float(np.mean(np.asarray(own.lowest).min(-1) > tol)),
+            flight_model=float(gait.contact_flight_fraction(np.asarray(own.foot_positions), body_map=bm,
+                                                            floor=float(own.floor) + np.asarray(own.clearance)[None])),
             below_cm=float(-low.min() * bm.metres_per_unit * 100),
             pop=float(jumps), pop_sources=max(pop_run, pop_walk),
             speed=float(np.linalg.norm(np.diff(np.asarray(r.root_position)[:, [0, 2]], axis=0), axis=1).max()),
@@ -202,12 +211,24 @@ def cmu_transition():
 
 
 def test_cmu_walk_run_transitions_are_grounded(cmu_transition):
+    """Feet locked (the default): a foot on the floor in every walk frame, none below it, no pop
+    (measured 0.923 walk -> run and 0.899 run -> walk against the sources' 1.016; 1.049 before
+    the feet's shifts were eased)."""
     _assert_grounded(cmu_transition)
 
 
-@pytest.mark.xfail(strict=True, reason="the fitted 02_03 model flies less than the capture: 28% of the "
-                   "grounded run's frames against 46% captured (the model's own synthesis: 26% at N = 5, "
-                   "25% at N = 8; its lowest foot rises 1.1 units in flight against 1.7)")
+def test_cmu_unlocked_run_flies_as_the_capture():
+    """Flight by one definition (`gait.contact_flight_fraction`, the capture on its fitted floor
+    plane): the unlocked run part flies 22-23% of its frames against the captured 16%. (It read
+    46% against 28% when the capture's sloped floor was taken as level.)"""
+    for direction, m in _check_transition("02_01", "02_03", foot_lock=False).items():
+        assert abs(m["flight"] - m["flight_captured"]) <= 0.10, (direction, m)
+        assert m["on_floor"] >= 0.95 and m["below_cm"] <= 1.0 and m["pop"] <= m["pop_sources"], (direction, m)
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError, reason="locked, the run part flies 34-35% of its frames "
+                   "against the captured 16% (unlocked 22-23%): lock_feet lifts a low point that still slides "
+                   "(the low-harmonic model's landing and toe-off) to 1.2 contact bands, out of contact")
 def test_cmu_run_flight_matches_the_capture(cmu_transition):
     for direction, m in cmu_transition.items():
         assert abs(m["flight"] - m["flight_captured"]) <= 0.10, (direction, m)
@@ -216,7 +237,7 @@ def test_cmu_run_flight_matches_the_capture(cmu_transition):
 def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
     """Without locking only the root channels change; the root travels as fast as the blend's
     own root velocity. Foot locking (the default) changes the legs' angles only, keeps the root
-    path, and needs contact intervals under a trace. (Off by default: see `grounded_transition`.)"""
+    path, and needs contact intervals under a trace."""
     motions, fits = _fits(("02_01", "02_03"), 5)
     bm, dt = fits[0].body_map, fits[0].frame_time_s
     T = int(round(4.0 / dt))
@@ -244,6 +265,10 @@ def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
         jax.jit(lambda a: style.grounded_transition(a, fits[1].model, sk, 8, dt, 0.0, 0.1, body_map=bm,
                                                      foot_lock=True).features)(
             fits[0].model)
+    ivs = tuple(gait.contact_intervals(f.model, sk, body_map=bm) for f in fits)
+    with pytest.raises(UserError, match="concrete `frame_time_s`"):  # it sets the easing's frames
+        jax.jit(lambda d: style.grounded_transition(fits[0].model, fits[1].model, sk, 8, d, 0.0, 0.1, body_map=bm,
+                                                     contact_intervals=ivs).features)(dt)
 
 
 @pytest.mark.slow

@@ -139,13 +139,45 @@ def test_fit_every_pass_of_142_08(clips):
     assert len(auto.left_heel_strikes) >= 7  # the strikes of every pass
 
 
-@pytest.mark.xfail(strict=True, reason="142_02 (clumsy): every pass used, but position VE -0.80 "
-                   "(euler) with N = 4; its longest pass alone gives -0.07 (see the issue-21 note)")
+def test_runs_of_passes_share_one_euler_branch():
+    """A run of kept rows that continuity carried onto a joint's twin branch (across a gimbal lock
+    in a masked glitch) is moved back, as a whole: the same rotations, next to the other runs."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(0)
+    t = np.arange(300)
+    base = np.stack([0.3 * np.sin(0.1 * t), 0.2 + 0.3 * np.cos(0.1 * t), 0.5 * np.sin(0.1 * t + 1)], -1)
+    block = base[:, None, :].repeat(2, 1) + 0.01 * rng.standard_normal((300, 2, 3))
+    keep = np.ones(300, bool)
+    keep[100:120] = keep[200:210] = False
+    moved = block.copy()
+    twin = np.stack([moved[120:, 0, 0] + np.pi, np.pi - moved[120:, 0, 1], moved[120:, 0, 2] + np.pi], -1)
+    moved[120:, 0] = twin  # joint 0 on its twin after the first glitch
+    moved[210:, 1] += 2 * np.pi  # joint 1 a turn off after the second
+    got = P._runs_on_one_branch(moved, "ZYX", keep)
+    np.testing.assert_allclose(got[keep], block[keep], atol=1e-9)
+    same = Rotation.from_euler("ZYX", got[120:, 0]).inv() * Rotation.from_euler("ZYX", moved[120:, 0])
+    assert np.degrees(same.magnitude()).max() < 1e-6  # the same rotations
+    np.testing.assert_array_equal(P._runs_on_one_branch(block, "ZYX", np.ones(300, bool)), block)
+
+
 def test_fit_every_pass_of_142_02(clips):
+    """Every pass used, and the left arm on one Euler branch: continuity crossed its gimbal lock in
+    a masked glitch of the second pass, and one model through two branches gave position VE
+    -0.80 (N = 4). The 0.9 bound is the clip's, not the fit's (see the xfail below)."""
     m = clips["142_02"]
     auto = M.fit_motions([m], 4, passes="auto")[0]
     assert (auto.frame_start, auto.frame_stop) == (P.straight_passes(m)[0][0], P.straight_passes(m)[-1][1])
-    assert auto.variance_explained_positions >= 0.9, auto.summary()
+    assert auto.variance_explained_positions > 0.0, auto.summary()  # -0.80 on one branch per pass
+    got = P.prepare_passes(m, 0, "euler", infer_body_map(m))
+    layout, _, _, _, x, names, _, _, _, keep = got
+    col = names.index("LeftArm.Zrotation")
+    means = [x[o:o + b - a][keep[o:o + b - a], col:col + 3].mean(0) for (a, b), o in zip(layout.passes, layout.offsets)]
+    assert max(np.abs(u - v).max() for u in means for v in means) < 1.0, means  # was 3.2 rad (the twin)
+    if auto.variance_explained_positions < 0.9:
+        pytest.xfail(f"142_02 (clumsy) position VE {auto.variance_explained_positions:.2f} at N = 4: its strides "
+                     "last 67-102 frames (a stumble of 32), and each pass fitted alone explains 0.20 / 0.09 / "
+                     "0.34 of its positions; 72% of the variance is the arms'")
 
 
 def test_straight_walks_fit_as_before(clips):

@@ -87,7 +87,10 @@ def ground_penetration(
 
 
 def flight_fraction(lowest: Float[ArrayLike, "T 2"], *, tolerance: float = 1e-3) -> Float[Array, ""]:
-    """Fraction of frames with both feet off the ground.
+    """Fraction of frames with both feet off the ground (any height above `tolerance`).
+
+    Flight as issue 21 measures it, within the contact band of the floor, the same for a capture
+    and a synthesis, is `contact_flight_fraction`.
 
     Arguments:
         lowest: `[T, 2]` heights of each foot's lowest point above the ground.
@@ -153,20 +156,58 @@ def contact_skating(
     """
     from fourierjax.contacts import point_speeds
 
+    p, on = _contact_points("contact_skating", positions, body_map, floor, height_fraction)
+    v = point_speeds(p, frame_time_s, up_axis=int(body_map.up_axis))
+    n = jnp.maximum(jnp.sum(on), 1)
+    mean = jnp.sum(jnp.where(on, v, 0.0)) / n
+    return SkatingStats(mean_speed=mean, mean_per_frame=mean * frame_time_s,
+                        max_speed=jnp.max(jnp.where(on, v, 0.0)), contact_fraction=jnp.mean(on))
+
+
+def _contact_points(where, positions, body_map, floor, height_fraction):
+    """`(p [T, 2, P, 3], on bool [T, 2, P])`: the foot points and issue 21's contact rule, shared
+    by `contact_skating` and `contact_flight_fraction` (see there)."""
     p = jnp.asarray(positions)
     if p.ndim == 3:
         p = p[:, jnp.asarray([body_map.left.foot_points, body_map.right.foot_points])]
     if p.ndim != 4 or p.shape[1] != 2 or p.shape[-1] != 3 or p.shape[0] < 2:
         from fourierjax.errors import UserError
 
-        raise UserError(f"contact_skating: `positions` must be [T >= 2, 2, P, 3] or [T, J + E, 3], got {p.shape}")
+        raise UserError(f"{where}: `positions` must be [T >= 2, 2, P, 3] or [T, J + E, 3], got {p.shape}")
     up = int(body_map.up_axis)
     y = p[..., up] * body_map.up_sign
     base = jnp.percentile(y, 5.0, axis=0)[None] if floor is None else jnp.asarray(floor, y.dtype)
     base = jnp.broadcast_to(base, y.shape)
-    on = (y - base) < height_fraction * float(body_map.height)
-    v = point_speeds(p, frame_time_s, up_axis=up)
-    n = jnp.maximum(jnp.sum(on), 1)
-    mean = jnp.sum(jnp.where(on, v, 0.0)) / n
-    return SkatingStats(mean_speed=mean, mean_per_frame=mean * frame_time_s,
-                        max_speed=jnp.max(jnp.where(on, v, 0.0)), contact_fraction=jnp.mean(on))
+    return p, (y - base) < height_fraction * float(body_map.height)
+
+
+def contact_flight_fraction(
+    positions: Float[ArrayLike, "T 2 P 3"],
+    *,
+    body_map,
+    floor: Float[ArrayLike, "*#T #2 #P"] | None = None,
+    height_fraction: float = 0.02,
+) -> Float[Array, ""]:
+    """Flight as issue 21 defines it: the fraction of frames on which no foot point is in contact.
+
+    Contact is `contact_skating`'s: a foot point within `height_fraction` of the body height of
+    its floor (both feet, every point). The one definition of flight for a capture and a
+    synthesis alike. Give a capture its fitted floor (`contacts.floor_heights` of
+    `contacts.estimate_ground`): CMU subject 02's floor rises 1.6% along z, and 02_03's steady run
+    reads 16% flight on that plane but 53% on a level floor (its late stance sits 6 cm higher).
+    (`motion.foot_contacts_of`, which also asks for a still foot, reads 31% there.)
+
+    Arguments:
+        positions: `[T, 2, P, 3]` world foot points (left, right), or `[T, J + E, 3]` joint then
+            End-Site positions (the body map's foot points are taken).
+        body_map: the skeleton's `body.BodyMap` (feet, up axis, height).
+        floor: floor height under each point, broadcastable to `[T, 2, P]`; default each point's
+            own 5th-percentile height over the frames (as `contact_skating`). Give it when the
+            frames are not a whole gait (the run part of a transition: its floor and clearance).
+        height_fraction: the contact band, a fraction of the body height.
+
+    Returns:
+        Scalar in [0, 1].
+    """
+    _, on = _contact_points("contact_flight_fraction", positions, body_map, floor, height_fraction)
+    return jnp.mean(~jnp.any(on, axis=(1, 2)))

@@ -252,6 +252,8 @@ class GroundedTransition(eqx.Module):
     - `lowest`: `[T, 2]` height of each foot's lowest point above the floor (clearance off).
     - `s`, `theta`: `[T]` blend weight and integrated phase (`transition_schedule`).
     - `clearance`: `[2, P]` sole clearances.
+    - `floor`: the floor's height (file units, up axis; a's captured floor): each foot point's
+      floor is `floor + clearance` (`gait.contact_flight_fraction(foot_positions, floor=...)`).
     """
 
     features: Array
@@ -261,6 +263,7 @@ class GroundedTransition(eqx.Module):
     s: Array
     theta: Array
     clearance: Array
+    floor: Array
 
 
 def _lowest_local(feet, root, clearance, up):
@@ -297,7 +300,7 @@ def grounded_transition(
     ease: Ease = "smoothstep",
     method: Method = "polar",
     omega_mode: OmegaMode = "geometric",
-    foot_lock: bool = False,
+    foot_lock: bool = True,
     contact_intervals: tuple[Float[ArrayLike, "2 2"], Float[ArrayLike, "2 2"]] | None = None,
 ) -> GroundedTransition:
     """A walk ↔ run transition that stands on the floor: `transition`, grounded.
@@ -317,10 +320,12 @@ def grounded_transition(
         body_map: the `body.BodyMap` of the skeleton; default the map of `a`'s own cycle
             (`gait.model_body_map`, a concrete model).
         clearance: `[2, P]` sole clearances; default estimated from the frames.
-        foot_lock: plant the feet with leg IK (`gait.lock_feet`), with stance weights from both
-            models' contact intervals at the integrated phase, blended by s. Off by default:
-            on 02_01 <-> 02_03 (N = 5) the locked run -> walk moves a joint 1.166 units in one
-            frame against the sources' 1.016 (walk -> run 0.964), which breaks the no-pop bound.
+        foot_lock: plant the feet with leg IK (`gait.lock_feet`; on by default), with stance
+            weights from both models' contact intervals at the integrated phase, blended by s,
+            and the feet's shifts eased over `SMOOTH_S` on each side, as `synthesize_gait` does.
+            Unsmoothed, the locked walk -> run moved a joint 1.049 units in one frame on
+            02_01 <-> 02_03 (N = 5) against the sources' 1.016 (a pop); eased: 0.923 (run -> walk
+            0.899 either way).
         contact_intervals: `(A's, B's)` `[2, 2]` contact phases (`gait.contact_intervals`, stored
             with a model by `fourierjax fit`); default estimated from each model's cycle.
 
@@ -329,6 +334,7 @@ def grounded_transition(
     """
     from fourierjax import gait
     from fourierjax._checks import integer
+    from fourierjax._gait.footlock import SMOOTH_S
 
     num_frames = integer(num_frames, "grounded_transition: `num_frames`", 2)
     # NumPy float64 leaves (a model file) as JAX holds them (float32 without x64).
@@ -355,11 +361,15 @@ def grounded_transition(
     root = root.at[:, up].set(height)
     feet = feet.at[..., up].add(lift[:, None, None])
     if foot_lock:
+        if isinstance(frame_time_s, jax.core.Tracer):
+            raise UserError("grounded_transition: foot locking needs a concrete `frame_time_s` (it sets "
+                            "the easing's frame count), or foot_lock=False")
         weights = _transition_contacts(a, on_branch_of(a, b), skeleton, body_map, s, theta, contact_intervals)
         feats, feet = gait.lock_feet(feats, skeleton, weights, body_map=body_map, representation=rep,
-                                     root_position=root, clearance=clearance, ground=floor_a, return_feet=True)
+                                     root_position=root, clearance=clearance, ground=floor_a, return_feet=True,
+                                     smooth_frames=int(round(SMOOTH_S / float(frame_time_s))))
     lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
-    return GroundedTransition(feats, root, feet, lowest, s, theta, clearance)
+    return GroundedTransition(feats, root, feet, lowest, s, theta, clearance, jnp.asarray(floor_a))
 
 
 def _transition_contacts(a, b, skeleton, body_map, s, theta, contact_intervals):

@@ -47,8 +47,7 @@ def add_grounding_arguments(parser: argparse.ArgumentParser) -> None:
                    help="root path from the stance feet and the lowest foot on the captured floor, "
                    "flying only where the run does (default on); --no-root-motion keeps the "
                    "blended models' own root channels (and no foot lock)")
-    add_foot_lock_arguments(g, default=False, why=": locking's knee moves break the no-pop bound of a "
-                            "walk <-> run transition")
+    add_foot_lock_arguments(g)
 
 
 def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: float, duration: float):
@@ -59,7 +58,7 @@ def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: 
     bmap = gait.model_body_map(a.model, template.skeleton())
     r = style.grounded_transition(a.model, b.model, template.skeleton(), num_frames, dt, start, duration,
                                   body_map=bmap, ease=args.ease, method=args.method,
-                                  foot_lock=getattr(args, "foot_lock", False))
+                                  foot_lock=getattr(args, "foot_lock", True))
     return grounded_motion(template, r.features, r.root_position, a.model.channel_names, dt, body_map=bmap)
 
 
