@@ -197,6 +197,8 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     """
     if not isinstance(models, FourierModel):
         raise UserError(f"synthesize_batch: `models` must be a FourierModel, got {type(models).__name__}")
-    if not isinstance(t_s, jax.Array | np.ndarray):  # lists, numbers: as NumPy (no device program)
+    if not isinstance(t_s, jax.Array):  # lists, numbers: as NumPy (no device program)
         t_s = np.asarray(t_s)
+        if t_s.dtype.kind not in "biuf":
+            raise UserError(f"synthesize_batch: `t_s` must be real times in seconds, got dtype {t_s.dtype}")
     return _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s)
