@@ -359,7 +359,7 @@ def _eq1_batch(models, t):
     return off[:, None] + np.sum(amp[:, None] * np.sin(arg), axis=-1)
 
 
-@pytest.mark.parametrize("B, C, N", [(1, 1, 1), (3, 57, 3), (5, 13, 1), (8, 8, 7), (2, 6, 4)])
+@pytest.mark.parametrize("B, C, N", [(1, 1, 1), (1, 57, 3), (3, 57, 3), (5, 13, 1), (8, 8, 7), (2, 6, 4)])
 def test_synthesize_batch_equals_vmap_and_closed_form(B, C, N):
     rng = np.random.default_rng(B * 100 + C * 10 + N)
     models = _batch(rng, B, C, N)
@@ -419,7 +419,7 @@ def test_synthesize_batch_bad_shapes_name_the_argument():
         F.synthesize_batch(one, jnp.zeros(5))
     with pytest.raises(ValueError, match="`models` must be a FourierModel"):
         F.synthesize_batch(np.zeros((4, 3)), jnp.zeros(5))
-    for bad in (jnp.zeros(()), jnp.zeros((3, 5)), jnp.zeros((4, 5, 1))):
+    for bad in (jnp.zeros(()), jnp.zeros((3, 5)), jnp.zeros((4, 5, 1)), "0.5", [None]):
         with pytest.raises(ValueError, match="`t_s`"):
             F.synthesize_batch(models, bad)
     # A non-finite time spoils only its own frame (the runtime 1 inside stays 1).

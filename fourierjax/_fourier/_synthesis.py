@@ -116,24 +116,62 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
     return synthesize_phase(model, model.omega * t_s)
 
 
-def _synthesize_batch(offset, amplitude, phase, omega, t_s, dtype):
+def _synthesize_one_product(model: FourierModel, theta: Float[Array, " T"]) -> Float[Array, "T C"]:
+    """One character on CPU: a `[T, 2N + 1]` basis (one shared-reduction sincos per frame, then
+    the recurrence) against `[2N + 1, C]` coefficients whose first row is the offset.
+
+    Three fusions (coefficients, basis, one product): a single-character call is bound by
+    dispatch and per-fusion overhead, not arithmetic (57 x 240, N = 3: ~80 kflop).
+    """
+    a, b = model.sin_cos()
+    s1, c1 = _sincos(theta)
+    sines, cosines = [s1], [c1]
+    for _ in range(model.num_harmonics - 1):
+        s, c = sines[-1], cosines[-1]
+        sines.append(s * c1 + c * s1)
+        cosines.append(c * c1 - s * s1)
+    basis = jnp.stack([jnp.ones_like(theta), *sines, *cosines], axis=1)  # [T, 2N + 1]
+    coef = jnp.concatenate([model.offset[:, None], a, b], axis=1)  # [C, 2N + 1]
+    return _mm(basis, coef.T)
+
+
+def _check_batch_shapes(offset, t_s) -> None:
+    """The static checks of `synthesize_batch` (run once per shape, when the call is traced)."""
+    if jnp.ndim(offset) != 2:
+        raise UserError(
+            "synthesize_batch: `models` need exactly one leading character axis (stack_models): "
+            f"offset [B, C], got offset shape {jnp.shape(offset)}"
+        )
+    num_chars, shape = jnp.shape(offset)[0], jnp.shape(t_s)
+    if len(shape) not in (1, 2) or (len(shape) == 2 and shape[0] != num_chars):
+        raise UserError(
+            f"synthesize_batch: `t_s` must be [T] (shared) or [{num_chars}, T] (one row per "
+            f"character), got shape {shape}"
+        )
+
+
+def _synthesize_batch(offset, amplitude, phase, omega, t_s):
+    _check_batch_shapes(offset, t_s)
+    dtype = jnp.result_type(offset, amplitude, phase, omega, float)
     models = FourierModel(*(jnp.asarray(x, dtype) for x in (offset, amplitude, phase, omega)))
     t_s = jnp.asarray(t_s, dtype)
     theta = models.omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
     # XLA:GPU runs the vmapped product well and fuses the elementwise form worse (measured on
     # an H100 at 1024 x 57 x 240: 54 G channel-samples/s against 18 G, 0.71 and 0.22 of the
     # output-write bound): the layout above is XLA:CPU's.
-    # One character on CPU: the product form runs in 4 small XLA programs' worth of fusions
-    # instead of 9 (46 against 65 us at 57 x 240, N = 3; each fusion costs ~5-10 us on 2 cores).
-    cpu_batch = jax.default_backend() == "cpu" and models.offset.shape[0] > 1
-    form = _synthesize_phase_elementwise if cpu_batch else synthesize_phase
+    cpu = jax.default_backend() == "cpu"
+    if cpu and models.offset.shape[0] == 1:
+        return _synthesize_one_product(jax.tree.map(lambda x: x[0], models), theta[0])[None]
+    form = _synthesize_phase_elementwise if cpu else synthesize_phase
     return jax.vmap(form)(models, theta)
 
 
 # Arrays, not the Module, through jit, and `_jit.jit` (jax's C++ dispatch) rather than
 # `filter_jit`: equinox's argument filtering and a Module rebuild cost ~0.4 ms per call, more
-# than the whole synthesis of one character (57 channels x 240 frames: NumPy takes ~50 us).
-_synthesize_batch_jit = _jit.jit(_synthesize_batch, static_argnames=("dtype",))
+# than the whole synthesis of one character (57 channels x 240 frames: NumPy takes ~25 us).
+# The shape checks and the dtype run at trace time, inside the call: in Python per call,
+# `jnp.result_type` alone took 9-22 us (2-core machine, loaded).
+_synthesize_batch_jit = _jit.jit(_synthesize_batch)
 
 
 def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[Array, "B T C"]:
@@ -143,7 +181,8 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     about 2x faster on 2 CPU cores at 1024 x 57 x 240 (0.8 of the speed of merely writing the
     output, against 0.45 for the vmap): one elementwise loop over the ``[B, T, C]`` output with
     a basis of one sin and one cos per character and frame (harmonics by the angle-addition
-    recurrence). On other backends it is that vmap, which XLA:GPU runs 3x faster than the
+    recurrence). A single character on CPU is one small product instead (dispatch-bound: three
+    fusions). On other backends it is that vmap, which XLA:GPU runs 3x faster than the
     elementwise loop. Jitted; differentiable in every model leaf and in ``t_s``; also fine
     inside jit, vmap and grad.
 
@@ -158,18 +197,8 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     """
     if not isinstance(models, FourierModel):
         raise UserError(f"synthesize_batch: `models` must be a FourierModel, got {type(models).__name__}")
-    if models.offset.ndim != 2:
-        raise UserError(
-            "synthesize_batch: `models` need exactly one leading character axis (stack_models): "
-            f"offset [B, C], got offset shape {models.offset.shape}"
-        )
-    num_chars = models.offset.shape[0]
-    shape = np.shape(t_s)
-    if len(shape) not in (1, 2) or (len(shape) == 2 and shape[0] != num_chars):
-        raise UserError(
-            f"synthesize_batch: `t_s` must be [T] (shared) or [{num_chars}, T] (one row per "
-            f"character), got shape {shape}"
-        )
-    dtype = jnp.result_type(models.offset, models.amplitude, models.phase, models.omega, float)
-    return _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s,
-                                 dtype=np.dtype(dtype).name)
+    if not isinstance(t_s, jax.Array):  # lists, numbers: as NumPy (no device program)
+        t_s = np.asarray(t_s)
+        if t_s.dtype.kind not in "biuf":
+            raise UserError(f"synthesize_batch: `t_s` must be real times in seconds, got dtype {t_s.dtype}")
+    return _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s)
