@@ -232,6 +232,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
     trows, flips, wrows, gain_omega, ftrows = [], [], [], [], []
+    fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
     harm = None
     for src, dst in cfg["transfers"]:
         sty = [s for s in styles if (src, s) in first_take and (dst, s) in first_take]
@@ -255,6 +256,18 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         xp_real, cwp = feature_matrix(fx_real, FEATURE_SETS[PREVIOUS_FEATURES])
         x_src, _ = feature_matrix([features(models[g[(src, x)]], skels[g[(src, x)]], maps[g[(src, x)]])
                                    for x in sty], FEATURE_SETS[MAIN_FEATURES])
+        # a second scorer that reads neither content: every real clip of the OTHER contents (all
+        # takes, uncentred, as in the across-contents table), several per style
+        oc = [i for i, c in enumerate(clips) if c["content"] not in (src, dst) and c["style"] in sty]
+        for i in set(oc) - set(fx_all):
+            fx_all[i] = features(models[i], skels[i], maps[i])
+        x_oc = feature_matrix([fx_all[i] for i in oc], FEATURE_SETS[MAIN_FEATURES])[0] if oc else None
+        if oc:
+            rec_real = classify("ncm", x_oc, y[oc], x_real, column_weights=cw)
+            summary.setdefault("other_contents_scorer", []).append(
+                {"representation": representation, "transfer": f"{src}->{dst}",
+                 "contents": sorted({clips[i]["content"] for i in oc}),
+                 "real_target_recognised_ncm": float(np.mean(rec_real == y[real])), "n": len(real)})
         for s in sty:
             if s == normal:
                 continue
@@ -307,6 +320,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             fx = [features(cand[m], skel, maps[i_t]) for m in names]
             x_c, _ = feature_matrix(fx, FEATURE_SETS[MAIN_FEATURES])
             rec = {c: classify(c, x_real, y[real], x_c, column_weights=cw, **kw) for c in CLASSIFIERS}
+            rec_oc = {c: (classify(c, x_oc, y[oc], x_c, column_weights=cw, **kw) if oc else np.full(len(x_c), None))
+                      for c in CLASSIFIERS}
             rec_prev = classify("ncm", xp_real, y[real], feature_matrix(fx, FEATURE_SETS[PREVIOUS_FEATURES])[0],
                                 column_weights=cwp)
             # ideal points of transfers made in the scorer's own (z-scored) feature space, maps fitted
@@ -326,19 +341,22 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             x_s, _ = feature_matrix([features(m, skel, maps[i_t]) for m in sweep.values()],
                                     FEATURE_SETS[MAIN_FEATURES])
             rec_s = {c: classify(c, x_real, y[real], x_s, column_weights=cw, **kw) for c in CLASSIFIERS}
+            rec_s_oc = classify("ncm", x_oc, y[oc], x_s, column_weights=cw) if oc else np.full(len(x_s), None)
             for k, ((mth, w), m) in enumerate(sweep.items()):
                 wrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "weight": w,
                               "ratio": float(style.cycle_distance(m, target, skel, num_samples=ns, body_map=bm)) / d0,
                               "jump_ratio": max_jump(m, skel, fts, body_map=bm) / ref_sweep,
-                              **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS}})
+                              **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS},
+                              "recognised_oc_ncm": bool(rec_s_oc[k] == s)})
             for k, mth in enumerate(names):
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
                               "weight": w_cv if mth.endswith("_cv") else None,
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
-                              "recognised_previous_ncm": bool(rec_prev[k] == s)})
+                              "recognised_previous_ncm": bool(rec_prev[k] == s),
+                              **{f"recognised_oc_{c}": bool(rec_oc[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
             # Reference: the largest jump of the clips a method reads, through the same fit ->
             # synthesize -> FK path: eq. 8 and its variants read three (the two neutral clips and
@@ -375,6 +393,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
                           "recognised_previous_ncm": float(np.mean([r["recognised_previous_ncm"] for r in rs])),
+                          **{f"recognised_oc_{c}": float(np.mean([r[f"recognised_oc_{c}"] for r in rs]))
+                             for c in CLASSIFIERS},
                           "flip_free": all(f["ok"] for f in fl) if fl else None,
                           "max_jump_ratio": max((f["ratio"] for f in fl), default=None),
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
@@ -388,6 +408,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                              "median_ratio": float(np.median([r["ratio"] for r in rs])),
                              **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                                 for c in CLASSIFIERS},
+                             "recognised_oc_ncm": float(np.mean([r["recognised_oc_ncm"] for r in rs])),
                              "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs)})
     for tname in dict.fromkeys(r["transfer"] for r in ftrows):
         for mth in dict.fromkeys(r["map"] for r in ftrows):
@@ -446,6 +467,8 @@ def body(argv=None) -> None:
     write_table(all_w, out, "transfer_weights", "Transfer by weight: median distance ratio, recognition by the "
                 "classifier of real target-content clips, largest joint jump per frame over the clips'")
     summary["transfer_weights"] = all_w
+    write_table(summary.get("other_contents_scorer", []), out, "other_contents_scorer",
+                "The other-contents scorer on the real target clips (nearest mean)")
     write_table(summary.get("feature_targets", []), out, "transfer_feature_targets",
                 "Ideal points of transfers in the scorer's feature space: share recognised as the intended style")
     write_table(rep_rows, out, "recognition_representations",
