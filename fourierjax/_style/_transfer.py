@@ -109,6 +109,9 @@ def transfer(
       styles) of the neutral run's distance to the real styled run, against 0.98 for eq. 8
       (`docs/findings.md`). With `gains=fit_transfer_gains(...)` and the cross-validated
       weight: 0.73, and no joint moves faster than in the clips at any weight up to 1.5.
+      What these transfers do not do is make the style recognisable: a classifier of the real
+      runs (one per style) names the intended style for at most 43 % of them (w = 1), where it
+      names a second real capture's style 83 % of the time (`docs/findings.md`, section 2b).
 
     Arguments:
         source: the styled source-content model (e.g. a happy walk), phase-aligned with the
