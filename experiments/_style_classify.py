@@ -38,7 +38,7 @@ def _logreg(xtr, ytr_idx, num_classes, xte, l2, iters=300):
 
 
 def classify(method: str, xtr, ytr, xte, *, k: int = 1, shrinkage: float = 0.5, l2: float = 1e-2,
-             column_weights=None):
+             column_weights=None, scatter=None):
     """Predicted labels of ``xte`` (rows) by a classifier trained on ``(xtr, ytr)`` (z-scored on xtr).
 
     Arguments:
@@ -50,14 +50,24 @@ def classify(method: str, xtr, ytr, xte, *, k: int = 1, shrinkage: float = 0.5, 
         xtr, ytr: training rows ``[M, D]`` and labels ``[M]``; xte: ``[n, D]``.
         k, shrinkage, l2: the classifiers' settings.
         column_weights: ``[D]`` multipliers applied after the z-scoring (feature-group weights).
+        scatter: ``"lda"`` only: extra within-class residual rows ``[R, D]`` (deviations of real
+            clips from their class mean, e.g. from other contents, `within_style_residuals`),
+            pooled with the training rows' own residuals into the covariance. With one training
+            row per class the plain LDA has no scatter and is the nearest mean; these rows give
+            it one without adding class examples.
 
     Returns:
         ``[n]`` predicted labels.
     """
     ytr = np.asarray(ytr)
-    xtr, xte = zscore(np.asarray(xtr, float), np.asarray(xte, float))
+    xtr = np.asarray(xtr, float)
+    if scatter is not None:  # residuals are differences: scaled by the training deviation, not shifted
+        sd = xtr.std(0)
+        scatter = np.asarray(scatter, float) / np.where(sd > 1e-9 * max(sd.max(), 1e-300), sd, 1.0)
+    xtr, xte = zscore(xtr, np.asarray(xte, float))
     if column_weights is not None:
         xtr, xte = xtr * column_weights, xte * column_weights
+        scatter = None if scatter is None else scatter * column_weights
     classes = sorted(set(ytr.tolist()))
     means = np.stack([xtr[ytr == c].mean(0) for c in classes])
     if method == "ncm":
@@ -78,6 +88,8 @@ def classify(method: str, xtr, ytr, xte, *, k: int = 1, shrinkage: float = 0.5, 
         return np.array(classes)[_logreg(xtr, idx, len(classes), xte, l2)]
     if method == "lda":
         r = xtr - means[[classes.index(c) for c in ytr]]  # within-class residuals [M, D]
+        if scatter is not None:
+            r = np.concatenate([r, scatter])
         m, dim = r.shape
         s = shrinkage
         alpha = s * float((r * r).sum()) / max(m, 1) / dim  # s tr(S) / D, S = R^T R / M
@@ -90,6 +102,20 @@ def classify(method: str, xtr, ytr, xte, *, k: int = 1, shrinkage: float = 0.5, 
         b = -0.5 * (w * means).sum(1)
         return np.array(classes)[(xte @ w.T + b).argmax(1)]
     raise ValueError(method)
+
+
+def within_style_residuals(x, y, content, contents):
+    """Within-style residual rows of the clips of ``contents``: each content centred on its own
+    mean, then every clip's deviation from its style's mean over those contents (styles seen
+    in at least two of them). For `classify(..., scatter=)`: the metric of a classifier whose
+    class means come from another content."""
+    keep = np.isin(content, list(contents))
+    xc = np.asarray(x, float)[keep].copy()
+    yk, ck = np.asarray(y)[keep], np.asarray(content)[keep]
+    for c in set(ck.tolist()):
+        xc[ck == c] -= xc[ck == c].mean(0)
+    rows = [xc[yk == s] - xc[yk == s].mean(0) for s in sorted(set(yk.tolist())) if (yk == s).sum() >= 2]
+    return np.concatenate(rows) if rows else np.zeros((0, xc.shape[1]))
 
 
 def pca_fit(x, k):

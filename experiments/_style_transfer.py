@@ -9,7 +9,7 @@ import numpy as np
 #: no limb-flip rows (their weights are swept directly, the ``transfer_weights`` rows).
 METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
            "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
-           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv")
+           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv")
 
 
 def branch_vectors(models, reference):

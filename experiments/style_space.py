@@ -17,6 +17,7 @@ import pathlib
 
 import numpy as np
 
+from experiments._style_ceiling import feature_targets, one_per_style
 from experiments._style_classify import CLASSIFIERS, classify, pca_fit
 from experiments._style_data import find_clips, fit_clips
 from experiments._style_features import feature_matrix, features
@@ -35,8 +36,15 @@ FEATURE_SETS = {"style_vector": ("vector",), "angles": ("angles",), "positions":
                 "angles+positions": ("angles", "positions"), "all": ("angles", "positions", "timing"),
                 "quat": ("quat",), "sixd": ("sixd",), "quat+positions": ("quat", "positions"),
                 "sixd+positions": ("sixd", "positions")}
-#: The feature set of the transfer's recognition check.
-MAIN_FEATURES = "angles+positions"
+#: The feature set of the transfer's recognition check (the classifier of real target-content clips,
+#: one per style): the best one-clip-per-style walk classifier of the ceiling search
+#: (`recognition_ceiling`, chosen on real takes only, never on transfers).
+MAIN_FEATURES = "quat+positions"
+#: The scorer of the previous tables (session 13), reported next to it: nearest mean on these.
+PREVIOUS_FEATURES = "angles+positions"
+#: Feature sets of the ceiling search.
+CEILING_SETS = ("style_vector", "angles", "positions", "angles+positions", "quat", "sixd", "quat+positions",
+                "sixd+positions", "all")
 
 
 def sweep_weights(cfg) -> list[float]:
@@ -164,7 +172,29 @@ def recognition(cfg, out, clips, feats, summary):
                              "accuracy": float(np.mean(p == y[te])), "n": len(te)})
     write_table(crow, out, "recognition_contents", "Across contents: trained on the other contents, tested on one")
     summary["across_contents"] = crow
+    summary["recognition_ceiling"] = ceiling(cfg, out, clips, feats)
     return best
+
+
+def ceiling(cfg, out, clips, feats) -> list[dict]:
+    """The ceiling of a classifier trained on ONE real clip per style: trained on one take of the
+    recognition content, tested on the other (both ways round), per feature set and setting
+    (`experiments._style_ceiling.SETTINGS`), without and with each take centred on its own mean."""
+    y = np.array([c["style"] for c in clips], object)
+    content = np.array([c["content"] for c in clips])
+    take = np.array([c["take"] for c in clips])
+    kw = {"k": cfg["knn"], "l2": cfg["l2"]}
+    rows = []
+    for name in CEILING_SETS:
+        x, cw = feature_matrix(feats, FEATURE_SETS[name])
+        for centre in (False, True):
+            for setting, (acc, n) in one_per_style(x, cw, y, content, take, cfg["recognition_content"], kw=kw,
+                                                   centre=centre).items():
+                rows.append({"features": name, "setting": setting, "centred": centre, "accuracy": acc, "n": n})
+    if rows and rows[0]["n"]:
+        write_table(rows, out, "recognition_ceiling", f"One real clip per style: trained on one take of "
+                    f"{cfg['recognition_content']}, tested on the other")
+    return rows
 
 
 def representation_recognition(cfg, clips, feats, representation) -> list[dict]:
@@ -201,7 +231,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         first_take.setdefault((c, s), i)
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
-    trows, flips, wrows, gain_omega = [], [], [], []
+    trows, flips, wrows, gain_omega, ftrows = [], [], [], [], []
+    fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
     harm = None
     for src, dst in cfg["transfers"]:
         sty = [s for s in styles if (src, s) in first_take and (dst, s) in first_take]
@@ -221,6 +252,22 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         real = [g[(dst, s)] for s in sty]
         jump: dict[int, float] = {}  # largest joint jump per frame of each clip's model
         fx_real = [features(models[i], skels[i], maps[i]) for i in real]
+        x_real, cw = feature_matrix(fx_real, FEATURE_SETS[MAIN_FEATURES])
+        xp_real, cwp = feature_matrix(fx_real, FEATURE_SETS[PREVIOUS_FEATURES])
+        x_src, _ = feature_matrix([features(models[g[(src, x)]], skels[g[(src, x)]], maps[g[(src, x)]])
+                                   for x in sty], FEATURE_SETS[MAIN_FEATURES])
+        # a second scorer that reads neither content: every real clip of the OTHER contents (all
+        # takes, uncentred, as in the across-contents table), several per style
+        oc = [i for i, c in enumerate(clips) if c["content"] not in (src, dst) and c["style"] in sty]
+        for i in set(oc) - set(fx_all):
+            fx_all[i] = features(models[i], skels[i], maps[i])
+        x_oc = feature_matrix([fx_all[i] for i in oc], FEATURE_SETS[MAIN_FEATURES])[0] if oc else None
+        if oc:
+            rec_real = classify("ncm", x_oc, y[oc], x_real, column_weights=cw)
+            summary.setdefault("other_contents_scorer", []).append(
+                {"representation": representation, "transfer": f"{src}->{dst}",
+                 "contents": sorted({clips[i]["content"] for i in oc}),
+                 "real_target_recognised_ncm": float(np.mean(rec_real == y[real])), "n": len(real)})
         for s in sty:
             if s == normal:
                 continue
@@ -254,6 +301,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             cand["content_mean_gains"] = style.transfer(a, others_src, others_dst, method="content_mean", gains=gains)
             cand["content_mean_gains_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                            gains=gains, weight=w_cv)
+            # the cadence gain alone (every channel's at 1): what made the limbs fast above w = 1
+            cadence = style.fit_transfer_gains(others_src, others_dst, cadence_only=True)
+            cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                             gains=cadence, weight=w_cv)
             # the weight sweep: recognition rises with w, the distance is best near 0.5
             sweep = {}
             for w in sweep_weights(cfg):
@@ -267,27 +318,45 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 cand["oracle_other_take"] = models[other[0]]
             names = list(cand)
             fx = [features(cand[m], skel, maps[i_t]) for m in names]
-            x_real, cw = feature_matrix(fx_real, FEATURE_SETS[MAIN_FEATURES])
             x_c, _ = feature_matrix(fx, FEATURE_SETS[MAIN_FEATURES])
             rec = {c: classify(c, x_real, y[real], x_c, column_weights=cw, **kw) for c in CLASSIFIERS}
+            rec_oc = {c: (classify(c, x_oc, y[oc], x_c, column_weights=cw, **kw) if oc else np.full(len(x_c), None))
+                      for c in CLASSIFIERS}
+            rec_prev = classify("ncm", xp_real, y[real], feature_matrix(fx, FEATURE_SETS[PREVIOUS_FEATURES])[0],
+                                column_weights=cwp)
+            # ideal points of transfers made in the scorer's own (z-scored) feature space, maps fitted
+            # on the other styles: the recognition any inversion of them back to a model could reach
+            k_s = sty.index(s)
+            rest_k = [k for k in range(len(sty)) if k != k_s]
+            pts = feature_targets(x_src[rest_k], x_real[rest_k], x_src[k_s] - x_src[rest_k].mean(0),
+                                  sd=x_real[rest_k].std(0) + 1e-12, column_weights=cw)
+            rec_pts = {c: classify(c, x_real, y[real], np.stack(list(pts.values())), column_weights=cw, **kw)
+                       for c in CLASSIFIERS}
+            for k, mth in enumerate(pts):
+                ftrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
+                               "map": mth, **{f"recognised_{c}": bool(rec_pts[c][k] == s) for c in CLASSIFIERS}})
             fts = motions[i_t].frame_time_s
             ref_sweep = max(max_jump(models[g[(c, x)]], skel, fts, body_map=bm)
                             for c in (src, dst) for x in sty if (c, x) != (dst, s))
             x_s, _ = feature_matrix([features(m, skel, maps[i_t]) for m in sweep.values()],
                                     FEATURE_SETS[MAIN_FEATURES])
             rec_s = {c: classify(c, x_real, y[real], x_s, column_weights=cw, **kw) for c in CLASSIFIERS}
+            rec_s_oc = classify("ncm", x_oc, y[oc], x_s, column_weights=cw) if oc else np.full(len(x_s), None)
             for k, ((mth, w), m) in enumerate(sweep.items()):
                 wrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "weight": w,
                               "ratio": float(style.cycle_distance(m, target, skel, num_samples=ns, body_map=bm)) / d0,
                               "jump_ratio": max_jump(m, skel, fts, body_map=bm) / ref_sweep,
-                              **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS}})
+                              **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS},
+                              "recognised_oc_ncm": bool(rec_s_oc[k] == s)})
             for k, mth in enumerate(names):
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
-                              "weight": w_cv if mth in ("content_mean_cv", "content_mean_gains_cv") else None,
-                              **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS}})
+                              "weight": w_cv if mth.endswith("_cv") else None,
+                              **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
+                              "recognised_previous_ncm": bool(rec_prev[k] == s),
+                              **{f"recognised_oc_{c}": bool(rec_oc[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
             # Reference: the largest jump of the clips a method reads, through the same fit ->
             # synthesize -> FK path: eq. 8 and its variants read three (the two neutral clips and
@@ -323,6 +392,9 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           "median_distance": float(np.median([r["distance"] for r in rs])),
                           **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
+                          "recognised_previous_ncm": float(np.mean([r["recognised_previous_ncm"] for r in rs])),
+                          **{f"recognised_oc_{c}": float(np.mean([r[f"recognised_oc_{c}"] for r in rs]))
+                             for c in CLASSIFIERS},
                           "flip_free": all(f["ok"] for f in fl) if fl else None,
                           "max_jump_ratio": max((f["ratio"] for f in fl), default=None),
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
@@ -336,7 +408,15 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                              "median_ratio": float(np.median([r["ratio"] for r in rs])),
                              **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                                 for c in CLASSIFIERS},
+                             "recognised_oc_ncm": float(np.mean([r["recognised_oc_ncm"] for r in rs])),
                              "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs)})
+    for tname in dict.fromkeys(r["transfer"] for r in ftrows):
+        for mth in dict.fromkeys(r["map"] for r in ftrows):
+            rs = [r for r in ftrows if r["transfer"] == tname and r["map"] == mth]
+            summary.setdefault("feature_targets", []).append(
+                {"representation": representation, "transfer": tname, "map": mth,
+                 **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs])) for c in CLASSIFIERS},
+                 "n": len(rs)})
     if gain_omega:
         summary.setdefault("gain_log_omega", {})[representation] = {
             "median": float(np.median(gain_omega)), "min": float(np.min(gain_omega)),
@@ -387,6 +467,10 @@ def body(argv=None) -> None:
     write_table(all_w, out, "transfer_weights", "Transfer by weight: median distance ratio, recognition by the "
                 "classifier of real target-content clips, largest joint jump per frame over the clips'")
     summary["transfer_weights"] = all_w
+    write_table(summary.get("other_contents_scorer", []), out, "other_contents_scorer",
+                "The other-contents scorer on the real target clips (nearest mean)")
+    write_table(summary.get("feature_targets", []), out, "transfer_feature_targets",
+                "Ideal points of transfers in the scorer's feature space: share recognised as the intended style")
     write_table(rep_rows, out, "recognition_representations",
                 "Walk recognition by rotation channels (leave one take out, + other contents, centred)")
     summary["recognition_representations"] = rep_rows

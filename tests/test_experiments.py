@@ -105,7 +105,8 @@ def test_style_space_runs_small(tmp_path):
     out = tmp_path / "style_space"
     for f in ("recognition.md", "recognition_pca.csv", "recognition_contents.csv", "transfer.csv",
               "transfer_summary.md", "flips.csv", "confusion_walk.png", "pca_accuracy.png", "transfer_ratios.png",
-              "transfer_weights.csv", "recognition_representations.md"):
+              "transfer_weights.csv", "recognition_representations.md", "recognition_ceiling.csv",
+              "transfer_feature_targets.csv"):
         assert (out / f).stat().st_size > 0, f
     assert list((tmp_path / "cache").glob("fits_euler_3_*.npz"))  # the fits are cached
     s = json.loads((out / "summary.json").read_text())
@@ -117,7 +118,8 @@ def test_style_space_runs_small(tmp_path):
     assert set(rows) >= {"eq8", "content_mean", "content_mean_w", "ridge_map", "ls_weights", "harmonic_weights",
                          "group_weights"}
     assert rows["content_mean_w"]["median_ratio"] < rows["baseline"]["median_ratio"]
-    assert {"content_mean_gains", "content_mean_gains_cv"} <= set(rows)
+    assert {"content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv"} <= set(rows)
+    assert {r["map"] for r in s["feature_targets"]} >= {"identity", "spread", "slope"}
     sweep = {(r["method"], r["weight"]) for r in s["transfer_weights"]}
     assert sweep == {(m, w) for m in ("content_mean", "content_mean_gains") for w in (1.5, 2.0)}
     reps = {r["features"] for r in s["recognition_representations"]}

@@ -155,6 +155,74 @@ def test_lda_uses_the_within_class_covariance():
     assert acc["lda"] > 0.95 and acc["lda"] > acc["ncm"] + 0.05
 
 
+def test_lda_scatter_from_other_rows_gives_one_example_classes_a_metric():
+    """One training row per class: plain LDA is the nearest mean, blind to a noisy axis; within-class
+    residual rows from elsewhere (`scatter=`) give it the covariance, without adding class examples."""
+    from experiments._style_classify import classify
+
+    rng = np.random.default_rng(2)
+    k = 12
+    means = np.stack([0.5 * np.arange(k), np.zeros(k)], 1)  # classes apart along axis 0 only
+
+    def noise(n):  # quiet along axis 0, loud along axis 1
+        return np.stack([0.05 * rng.normal(0, 1, n), 3.0 * rng.normal(0, 1, n)], 1)
+
+    xtr, xte = means + noise(k), means + noise(k)
+    y = np.array([f"s{i}" for i in range(k)], object)
+    plain = np.mean(classify("lda", xtr, y, xte) == y)
+    assert plain == np.mean(classify("ncm", xtr, y, xte) == y)  # no within-class scatter: the mean
+    # little shrinkage: its target, a multiple of the identity, is the plain mean's metric
+    metric = np.mean(classify("lda", xtr, y, xte, shrinkage=0.01, scatter=noise(200)) == y)
+    assert metric > 0.75 and metric > plain + 0.3
+
+
+def test_the_ceiling_trains_on_one_take_and_sees_nothing_of_the_other():
+    """`one_per_style`: trained on one take (one row per style), tested on the other; a test row
+    changed wildly changes no other prediction; the scatter comes from the other contents only."""
+    from experiments._style_ceiling import SETTINGS, one_per_style
+    from experiments._style_classify import within_style_residuals
+
+    rng = np.random.default_rng(4)
+    styles = list("abcdef")
+    rows, y, content, take = [], [], [], []
+    for c, t in (("walk", "1"), ("walk", "2"), ("run", "1"), ("dash", "1")):
+        for k, s in enumerate(styles):
+            rows.append({"walk": 0.0, "run": 4.0, "dash": -4.0}[c] + np.eye(6)[k] * 2 + rng.normal(0, 0.3, 6))
+            y.append(s)
+            content.append(c)
+            take.append(t)
+    x, y, content, take = np.array(rows), np.array(y, object), np.array(content), np.array(take)
+    kw = {"k": 1, "l2": 0.01}
+    r = one_per_style(x, np.ones(6), y, content, take, "walk", kw=kw)
+    assert set(r) == set(SETTINGS) and all(n == 12 for _, n in r.values())
+    assert all(acc >= 0.9 for acc, _ in r.values()), r
+    # the residuals of run and dash: centred per content, then per style; walks are not in them
+    res = within_style_residuals(x, y, content, ["run", "dash"])
+    assert res.shape == (12, 6) and abs(res.sum(0)).max() < 1e-9
+    x2 = x.copy()
+    x2[(content == "walk") & (take == "2")] += rng.normal(0, 50, (6, 6))  # take 2 ruined
+    r2 = one_per_style(x2, np.ones(6), y, content, take, "walk", kw=kw)
+    assert all(r2[s][0] <= 0.6 for s in r2)  # the ruined take fails both as test and as training set
+    r3 = one_per_style(x2, np.ones(6), y, content, take, "walk", kw=kw, centre=True)
+    assert r3.keys() == r2.keys()
+
+
+def test_feature_targets_recover_a_linear_map():
+    """Target-content rows that are the source rows' offsets times per-feature slopes: the
+    `slope` point is the held-out style's true target row; `identity` adds the offset as it is."""
+    from experiments._style_ceiling import feature_targets
+
+    rng = np.random.default_rng(6)
+    xs = rng.normal(0, 1, (9, 5))
+    slopes = np.array([0.5, 1.0, 2.0, -1.0, 0.0])
+    xt = 3.0 + xs * slopes
+    u = rng.normal(0, 1, 5)
+    pts = feature_targets(xs[1:], xt[1:], u, sd=xt[1:].std(0) + 1e-12, column_weights=np.ones(5))
+    np.testing.assert_allclose(pts["slope"], xt[1:].mean(0) + slopes * u, atol=1e-9)
+    np.testing.assert_allclose(pts["identity"], xt[1:].mean(0) + u)
+    assert {"spread", "ridge1", "ridge1_norm", "ridge10", "ridge10_norm"} <= set(pts)
+
+
 def test_find_clips_parses_labels(tmp_path):
     from experiments.style_space import find_clips
 

@@ -247,6 +247,9 @@ def test_fit_transfer_gains_recovers_per_channel_slopes(cmu):
     assert g[-1] == pytest.approx(0.5, abs=1e-3)
     g1 = np.asarray(style.fit_transfer_gains(src, dst, ridge=1.0))
     np.testing.assert_allclose(g1[3:-1], (slopes[3:] + 1) / 2, atol=1e-3)
+    gc = np.asarray(style.fit_transfer_gains(src, dst, ridge=0.0, cadence_only=True))
+    np.testing.assert_array_equal(gc[:-1], 1.0)  # every channel's gain 1: only the cadence is fitted
+    assert gc[-1] == pytest.approx(g[-1])
     with pytest.raises(UserError, match="paired"):
         style.fit_transfer_gains(src, dst[:3])
 

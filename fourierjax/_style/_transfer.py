@@ -109,6 +109,9 @@ def transfer(
       styles) of the neutral run's distance to the real styled run, against 0.98 for eq. 8
       (`docs/findings.md`). With `gains=fit_transfer_gains(...)` and the cross-validated
       weight: 0.73, and no joint moves faster than in the clips at any weight up to 1.5.
+      What these transfers do not do is make the style recognisable: a classifier of the real
+      runs (one per style) names the intended style for at most 43 % of them (w = 1), where it
+      names a second real capture's style 83 % of the time (`docs/findings.md`, section 2b).
 
     Arguments:
         source: the styled source-content model (e.g. a happy walk), phase-aligned with the
@@ -179,7 +182,7 @@ def _gain_transfer(source, ms, mt, gains, weight):
 
 def fit_transfer_gains(
     sources: Sequence[FourierModel], targets: Sequence[FourierModel], *, ridge: Float[ArrayLike, ""] = 0.25,
-    max_gain: float = 2.0,
+    max_gain: float = 2.0, cadence_only: bool = False,
 ) -> Float[Array, " C+1"]:
     """Per-channel gains of a content-mean transfer, fitted across styles.
 
@@ -199,6 +202,9 @@ def fit_transfer_gains(
             phase-aligned models of the two contents. Leave the style to transfer out.
         ridge: shrinkage toward a gain of 1 (>= 0; 0: the plain least-squares slope).
         max_gain: the largest gain.
+        cadence_only: fit the log-ω gain only and leave every channel's at 1: the cause of
+            the fast limbs above w = 1 without the channel gains' cost in distance (on
+            Bandai-1 run -> walk, the channel gains moved the median ratio from 0.74 to 0.82).
 
     Returns:
         `[C + 1]` gains: channels in order, then log ω; pass them as `transfer(..., gains=)`.
@@ -216,7 +222,10 @@ def fit_transfer_gains(
                          "fit_transfer_gains: `ridge` must be >= 0")
     models = list(common_harmonics(*sources, *targets))
     k = len(sources)
-    return _fit_gains(stack(models[:k]), stack(models[k:]), models[0], models[k], ridge, float(max_gain))
+    gains = _fit_gains(stack(models[:k]), stack(models[k:]), models[0], models[k], ridge, float(max_gain))
+    if cadence_only:
+        return jnp.ones_like(gains).at[-1].set(gains[-1])
+    return gains
 
 
 @filter_jit
