@@ -79,11 +79,16 @@ def saved(fun: Callable, *, cpu_compiler_options: dict | None = None) -> Callabl
         specs = [jax.ShapeDtypeStruct(x.shape, jax.dtypes.canonicalize_dtype(x.dtype),
                                       weak_type=bool(getattr(x, "weak_type", False)))
                  for x in arrays]
-        key = _key_text(name, treedef, static, specs)
-        if key is None or key in unexportable:
-            stats["plain"] += 1
-            return fun(*args, **kwargs)
-        entry = programs.get(key)
+        # A hashable key first (no text to build on a repeated call, e.g. the explorer's).
+        fast = _fast_key(treedef, static, specs)
+        entry = None if fast is None else programs.get(fast)
+        key = None
+        if entry is None:
+            key = _key_text(name, treedef, static, specs)
+            if key is None or key in unexportable:
+                stats["plain"] += 1
+                return fun(*args, **kwargs)
+            entry = programs.get(key)
         if entry is None:
             path = _path(name, key)
             entry = _load(path, key, specs, cpu_compiler_options)
@@ -100,6 +105,8 @@ def saved(fun: Callable, *, cpu_compiler_options: dict | None = None) -> Callabl
             else:
                 stats["loaded"] += 1
             programs[key] = entry
+        if fast is not None and key is not None:
+            programs[fast] = entry
         runner, out_skeleton = entry
         outs = runner(*arrays)
         out_leaves, out_tree = jax.tree.flatten(out_skeleton)
@@ -115,6 +122,19 @@ def _is_array(x) -> bool:
     import numpy as np
 
     return isinstance(x, (jax.Array, np.ndarray, np.generic))
+
+
+def _fast_key(treedef, static: list, specs: list):
+    """The in-memory key of a call (None when a static leaf is not hashable)."""
+    import jax
+
+    key = ("fast", treedef, tuple(static), tuple((s.shape, str(s.dtype), s.weak_type) for s in specs),
+           jax.default_backend(), jax.config.jax_enable_x64, jax.config.jax_default_matmul_precision)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
 
 
 #: An object's default repr names its address, which changes per process: such a key would
