@@ -10,6 +10,10 @@ import sys
 NO_CACHE_ENV = "FOURIERJAX_NO_CACHE"
 CACHE_DIR_ENV = "FOURIERJAX_CACHE_DIR"
 
+#: Whether `enable_compile_cache` turned the cache on in this process: saved programs
+#: (`fourierjax._saved`) are read and written only then.
+_enabled = False
+
 
 def cache_dir() -> str:
     """The cache folder: ``$FOURIERJAX_CACHE_DIR``, else ``~/.cache/fourierjax/jax``.
@@ -19,6 +23,26 @@ def cache_dir() -> str:
     """
     default = os.path.join(os.path.expanduser("~"), ".cache", "fourierjax", "jax")
     return os.environ.get(CACHE_DIR_ENV) or default
+
+
+def saved_dir() -> str:
+    """The folder of saved (exported) programs, `fourierjax._saved`: ``exported`` inside
+    `cache_dir()` (JAX's cache reads only its own ``*-cache`` files there).
+
+    Returns:
+        The folder's path (not created).
+    """
+    return os.path.join(cache_dir(), "exported")
+
+
+def saved_programs_on() -> bool:
+    """Whether saved programs are read and written: `enable_compile_cache` turned the cache on
+    in this process and ``$FOURIERJAX_NO_CACHE`` does not turn it off.
+
+    Returns:
+        True or False.
+    """
+    return _enabled and not cache_disabled()
 
 
 def cache_disabled() -> bool:
@@ -37,11 +61,13 @@ def enable_compile_cache() -> bool:
     default keeps only those over 1 s; a command compiles tens of smaller ones, and together
     they are most of a second call's time). A folder that cannot be created leaves caching off
     rather than failing the command. Used by every command of the command line, the demo and
-    the experiments; a user's script may call it once before its first jit.
+    the experiments; a user's script may call it once before its first jit. It also turns on
+    saved programs (`fourierjax._saved`: the largest programs' traces kept in `saved_dir()`).
 
     Returns:
         True when the cache is on; False when `cache_disabled()` or the folder cannot be made.
     """
+    global _enabled
     if cache_disabled():
         disable_compile_cache()
         return False
@@ -50,6 +76,7 @@ def enable_compile_cache() -> bool:
         os.makedirs(path, exist_ok=True)
     except OSError:
         return False
+    _enabled = True
     _set("jax_enable_compilation_cache", True)
     _set("jax_compilation_cache_dir", path)
     _set("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -63,6 +90,8 @@ def disable_compile_cache() -> None:
     Returns:
         None.
     """
+    global _enabled
+    _enabled = False
     os.environ[NO_CACHE_ENV] = "1"
     _set("jax_enable_compilation_cache", False)
 

@@ -32,6 +32,8 @@ class ProgramCount:
         seconds: `{"trace", "lower", "compile_or_load", "cache_read"}` totals.
         by_name: programs per traced function name (from the trace events).
         where: programs per innermost three fourierjax source lines that asked for them.
+        seconds_by_name: `{name: {phase: seconds}}` per traced, lowered or compiled function
+            name (the cache read has no name).
     """
 
     def __init__(self):
@@ -40,12 +42,15 @@ class ProgramCount:
         self.seconds: dict[str, float] = collections.defaultdict(float)
         self.by_name: collections.Counter = collections.Counter()
         self.where: collections.Counter = collections.Counter()
+        self.seconds_by_name: dict = collections.defaultdict(lambda: collections.defaultdict(float))
 
     def _listener(self, event: str, duration_secs: float, **kwargs) -> None:
         phase = _PHASES.get(event.rsplit("/", 1)[-1])
         if phase is None:
             return
         self.seconds[phase] += duration_secs
+        if "fun_name" in kwargs:
+            self.seconds_by_name[str(kwargs["fun_name"])][phase] += duration_secs
         if phase == "trace":
             self.traces += 1
             self.by_name[str(kwargs.get("fun_name"))] += 1
@@ -68,11 +73,14 @@ class ProgramCount:
         """The counts as a JSON-ready dict.
 
         Returns:
-            `{"programs", "traces", "seconds", "by_name", "where"}`.
+            `{"programs", "traces", "seconds", "by_name", "where", "seconds_by_name"}`
+            (``seconds_by_name`` sorted by total, largest first).
         """
+        by_name = sorted(self.seconds_by_name.items(), key=lambda kv: -sum(kv[1].values()))
         return {"programs": self.programs, "traces": self.traces,
                 "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
-                "by_name": dict(self.by_name.most_common()), "where": dict(self.where.most_common())}
+                "by_name": dict(self.by_name.most_common()), "where": dict(self.where.most_common()),
+                "seconds_by_name": {k: {p: round(t, 4) for p, t in v.items()} for k, v in by_name}}
 
     def write(self, path: str | os.PathLike) -> None:
         """Write `summary()` to `path` as JSON.

@@ -59,3 +59,30 @@ def test_no_cache_environment_wins_over_enable(monkeypatch, tmp_path):
     finally:
         jax.config.update("jax_enable_compilation_cache", before)
     assert _compile_cache.cache_dir() == str(tmp_path / "c")
+
+
+def test_a_second_stance_call_reads_its_saved_programs_instead_of_tracing(tmp_path):
+    """The first call saves the stance build and solve (`fourierjax._saved`); the second reads
+    them: neither function is traced again, and nothing is exported."""
+    import json
+
+    from tests.helpers import cli_env
+
+    env = cli_env(JAX_PLATFORMS="cpu")
+    # This run's shared folder (the first call may find the programs another test saved).
+    env.setdefault(_compile_cache.CACHE_DIR_ENV, str(tmp_path / "cache"))
+    env.pop(_compile_cache.NO_CACHE_ENV, None)
+    counts = []
+    for k in range(2):
+        log = tmp_path / f"programs{k}.json"
+        proc = subprocess.run([sys.executable, "-m", "fourierjax", "stance", "--shape-set", "posture",
+                               "--out", str(tmp_path / "p.bvh")], capture_output=True, text=True,
+                              timeout=600, env={**env, "FOURIERJAX_PROGRAM_LOG": str(log)})
+        assert proc.returncode == 0, proc.stderr
+        counts.append(json.loads(log.read_text()))
+    # Traced by name: the saved functions themselves, or `flat` (an export) on a first call.
+    assert not set(counts[1]["by_name"]) & {"solve_stance", "build", "flat"}, counts[1]["by_name"]
+    assert counts[1]["traces"] <= counts[0]["traces"]
+    folder = os.path.join(env[_compile_cache.CACHE_DIR_ENV], "exported")
+    names = {n.split("-")[0] for n in os.listdir(folder)}
+    assert {"build", "solve_stance"} <= names, names

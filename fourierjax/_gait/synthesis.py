@@ -23,6 +23,7 @@ from fourierjax._gait.hip import HipRule, contact_height, hip_rule, hip_rule_cur
 from fourierjax._gait.metrics import estimate_sole_clearance
 from fourierjax._gait.root import apply_step, root_trajectory
 from fourierjax._jit import filter_jit
+from fourierjax._saved import saved
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -61,6 +62,7 @@ def _integrate_trapezoid(v, dt):
     return jnp.concatenate([jnp.zeros((1,), v.dtype), jnp.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
 
 
+@saved
 @filter_jit
 def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
                      root_motion, frame_time_s, width, temperature, *,
@@ -314,7 +316,7 @@ def _world_feet(result, skeleton, *, body_map, representation):
 
 def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, frame_time_s):
     from fourierjax._gait.common import model_body_map
-    from fourierjax._gait.footlock import SMOOTH_S, contact_weights, intervals_from_model
+    from fourierjax._gait.footlock import SMOOTH_S, intervals_from_model
 
     traced = isinstance(jnp.asarray(model.offset), jax.core.Tracer)
     if body_map is None:
@@ -329,15 +331,17 @@ def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, fram
     iv = jnp.asarray(contact_intervals, result.features.dtype)
     if iv.shape != (2, 2):
         raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
-    return _locked_result(result, skeleton, contact_weights(result.phase, iv), body_map=body_map,
+    return _locked_result(result, skeleton, iv, body_map=body_map,
                           representation=model.representation,
                           smooth_frames=int(round(SMOOTH_S / frame_time_s)))
 
 
+@saved
 @filter_jit
-def _locked_result(result, skeleton, weights, *, body_map, representation, smooth_frames):
-    from fourierjax._gait.footlock import lock_feet
+def _locked_result(result, skeleton, intervals, *, body_map, representation, smooth_frames):
+    from fourierjax._gait.footlock import contact_weights, lock_feet
 
+    weights = contact_weights(result.phase, intervals)  # in the program: 15 eager ones outside
     feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
                             root_position=result.root_position, clearance=result.clearance, return_feet=True,
                             smooth_frames=smooth_frames)
@@ -396,6 +400,7 @@ def model_hip_curves(
     return out
 
 
+@saved
 @filter_jit
 def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis):
     idx = jnp.asarray([feet.left, feet.right])

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fourierjax import _jit, _passes
+from fourierjax import _jit, _passes, _saved
 from fourierjax._motion._batch import prepare_chunk
 from fourierjax._motion._clip import (
     ClipFit,
@@ -223,7 +223,7 @@ def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_ha
     return res, pve, (delta, shifted)
 
 
-_chunk_program = _jit.filter_jit(_chunk_impl)
+_chunk_program = _saved.saved(_jit.filter_jit(_chunk_impl))
 
 
 def _position_ves(chunk, representation, feats, res, dts, dtype) -> np.ndarray:

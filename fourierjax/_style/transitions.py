@@ -12,6 +12,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
 from fourierjax._jit import filter_jit
+from fourierjax._saved import saved
 from fourierjax._style._common import (
     EASES,
     METHODS,
@@ -162,6 +163,7 @@ def transition_schedule(
     return _schedule(f(t_s), f(omega_a), f(omega_b), f(start_s), f(duration_s), ease, omega_mode)
 
 
+@saved
 @filter_jit
 def _transition(a, b, t_s, start, duration, ease_kind: str, method: str, omega_mode: str):
     b = on_branch_of(a, b)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 
 #: `gait.RULES`, repeated so that building the parser does not import JAX (a test checks they agree).
@@ -141,20 +142,31 @@ def body_map_for(model, template, body_map=None, path=None):
     return gait.model_body_map(model, template.skeleton(), overrides=path)
 
 
+@functools.cache
+def _skating():
+    """`gait.contact_skating` as one saved program (`fourierjax._saved`): run eagerly, it was
+    about 25 small programs per call, each traced, lowered and read from the compile cache on
+    every call of the command."""
+    from fourierjax import gait
+    from fourierjax._jit import filter_jit
+    from fourierjax._saved import saved
+
+    return saved(filter_jit(gait.contact_skating))
+
+
 def skating_summary(result, frame_time_s: float, bmap, source=None) -> str:
     """The summary's foot skating (issue 21's metric: horizontal speed of foot points within 2% of
     the body height of the floor), of the synthesized motion and of `source` (the fitted frames of
     the source clip, a `Motion`, or None when it is not at hand), side by side."""
-    from fourierjax import gait
-
-    ours = float(gait.contact_skating(result.foot_positions, frame_time_s, body_map=bmap).mean_speed)
+    skating = _skating()
+    ours = float(skating(result.foot_positions, frame_time_s, body_map=bmap).mean_speed)
     text = f"foot skating {ours:.2f} units/s"
     if source is None:
         return text + " (source clip not found: not compared)"
     from fourierjax.motion import foot_positions_of
 
-    theirs = float(gait.contact_skating(foot_positions_of(source, body_map=bmap), source.frame_time_s,
-                                        body_map=bmap).mean_speed)
+    theirs = float(skating(foot_positions_of(source, body_map=bmap), source.frame_time_s,
+                           body_map=bmap).mean_speed)
     return text + f" against {theirs:.2f} units/s in the source clip"
 
 
@@ -193,7 +205,8 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
     # The summary's numbers all come from the one GaitResult (no second pass through the model):
     # on a path, the walk is bent onto it before the feet are locked, and measured after both.
     motion = gait_motion(template, result, model.channel_names, frame_time_s, body_map=bmap)
-    advance = np.array(result.root_position[-1] - result.root_position[0])
+    root = np.asarray(result.root_position)  # on the host: indexing on the device is 3 programs
+    advance = root[-1] - root[0]
     advance[bmap.up_axis] = 0.0
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))

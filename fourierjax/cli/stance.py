@@ -65,16 +65,28 @@ def _array(xyz, body):
 
 
 @functools.cache
+@functools.cache
 def _build_problem():
     """`shape_set.problem` as one jitted program (built eagerly, it was about 80 small ones, each
-    traced, lowered and read from the compile cache on every call of the command)."""
+    traced, lowered and read from the compile cache on every call of the command), saved
+    (`fourierjax._saved`: a warm call skips its trace)."""
     from fourierjax._jit import filter_jit
+    from fourierjax._saved import saved
 
     def build(shape_set, body, intensity, obj, target, hand):
         kw = {f"target_{hand}": target} if target is not None else {}
         return shape_set.problem(body, intensity, obj, **kw)
 
-    return filter_jit(build)
+    return saved(filter_jit(build))
+
+
+@functools.cache
+def _solver():
+    """`solve_stance`, saved (`fourierjax._saved`): its trace is most of a warm call."""
+    from fourierjax._saved import saved
+    from fourierjax.stance.solver import solve_stance
+
+    return saved(solve_stance)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -117,8 +129,6 @@ def run(args: argparse.Namespace) -> int:
 
     from fourierjax.io.stance_bvh import write_stance_bvh
     from fourierjax.stance.skeleton48 import make_body
-    from fourierjax.stance.solver import solve_stance
-
     try:
         body = make_body(height)
     except UserError as err:
@@ -127,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
                                _array(obj, body), _array(target, body), args.hand)
     # The checks `shape_set.problem` makes on known values, made on the built problem.
     shape_set.check_shape(np.asarray(problem.shape), intensity, obj)
-    sol = solve_stance(problem)
+    sol = _solver()(problem)
     hand = 0 if args.hand == "right" else 1
     if not np.isfinite(np.asarray(sol.pose.quats)).all():
         raise UserError("the solver produced an invalid pose (NaN); try a smaller intensity")

@@ -1,0 +1,295 @@
+"""Saved programs: jitted functions traced and lowered once, kept on disk (`jax.export`) for later runs."""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import logging
+import os
+import pathlib
+import pickle
+import re
+import tempfile
+from collections.abc import Callable
+
+_log = logging.getLogger(__name__)
+
+#: Bumped when the file layout below changes: older files are then ignored.
+FORMAT = 1
+_MAGIC = b"fourierjax-saved-program\n"
+
+
+def saved(fun: Callable, *, cpu_compiler_options: dict | None = None) -> Callable:
+    """Wrap a jitted pure function so that its program is read from disk on later runs.
+
+    The persistent compile cache (`fourierjax._compile_cache`) skips XLA's compile, but not
+    the trace and lowering that come before it, which cost most of a warm command line call
+    for the large programs (a fit chunk, a gait synthesis, a stance problem). A call of the
+    wrapped function at the top level (outside any transformation), with the cache on, looks
+    for a serialized `jax.export.Exported` in `_compile_cache.saved_dir()`, keyed by the
+    function's qualified name, the static arguments and input tree, the shapes and dtypes of
+    the array arguments, the fourierjax version and a hash of the package's source files, the
+    jax and jaxlib versions, the backend and the configuration that changes a trace (x64,
+    matmul precision). Found: it is deserialized and compiled (a persistent cache hit). Not
+    found: the function is exported, saved atomically (a temporary file, then a rename) and
+    called. The result is the one program either way.
+
+    The arguments follow `equinox.filter_jit`: array leaves (JAX and NumPy arrays and NumPy
+    scalars) are inputs; every other leaf (Python numbers included) is static and part of the
+    key. Pytrees are flattened at the boundary, so custom pytree classes need no serialization
+    registration; the output's structure is saved as the output with its leaves replaced by
+    their positions. A file that cannot be read or used (corrupt, another format, a key that
+    does not match) is ignored, with a debug log, and replaced. A function that cannot be
+    exported (host callbacks, e.g. `equinox.error_if`) runs as the plain jitted function.
+    Unless `_compile_cache.enable_compile_cache` turned the cache on (every command line call
+    does), or with ``$FOURIERJAX_NO_CACHE`` set (``fourierjax --no-cache``), the wrapper is the
+    plain function and writes nothing. Forward calls only (no vjp is saved).
+
+    Arguments:
+        fun: a jitted function (e.g. from `fourierjax._jit.filter_jit`); it is also what runs
+            inside transformations and when the cache is off.
+        cpu_compiler_options: the XLA:CPU options the program is compiled with (default: the
+            ones `fourierjax._jit.filter_jit` uses), so that it is the same executable.
+
+    Returns:
+        The wrapped function, with ``.stats`` (a dict counting ``"loaded"``, ``"exported"``,
+        ``"plain"`` calls and ``"rejected"`` files of this process) and ``.fun``.
+    """
+    programs: dict[str, tuple[Callable, object]] = {}
+    unexportable: set[str] = set()
+    stats = {"loaded": 0, "exported": 0, "plain": 0, "rejected": 0}
+    name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', repr(fun))}"
+
+    @functools.wraps(fun)
+    def wrapper(*args, **kwargs):
+        from fourierjax import _compile_cache, _jit
+
+        if not _compile_cache.saved_programs_on() or not _jit._trace_state_clean():
+            stats["plain"] += 1
+            return fun(*args, **kwargs)
+        import jax
+
+        leaves, treedef = jax.tree.flatten((args, kwargs))
+        dynamic = [_is_array(x) for x in leaves]
+        if not any(dynamic):
+            stats["plain"] += 1
+            return fun(*args, **kwargs)
+        arrays = [x for x, d in zip(leaves, dynamic, strict=True) if d]
+        static = [None if d else x for x, d in zip(leaves, dynamic, strict=True)]
+        specs = [jax.ShapeDtypeStruct(x.shape, jax.dtypes.canonicalize_dtype(x.dtype),
+                                      weak_type=bool(getattr(x, "weak_type", False)))
+                 for x in arrays]
+        # A hashable key first (no text to build on a repeated call, e.g. the explorer's).
+        fast = _fast_key(treedef, static, specs)
+        entry = None if fast is None else programs.get(fast)
+        key = None
+        if entry is None:
+            key = _key_text(name, treedef, static, specs)
+            if key is None or key in unexportable:
+                stats["plain"] += 1
+                return fun(*args, **kwargs)
+            entry = programs.get(key)
+        if entry is None:
+            path = _path(name, key)
+            entry = _load(path, key, specs, cpu_compiler_options)
+            if entry is None:
+                if path.exists():
+                    stats["rejected"] += 1
+                entry = _export(fun, treedef, static, dynamic, specs, path, key,
+                                cpu_compiler_options)
+                if entry is None:
+                    unexportable.add(key)
+                    stats["plain"] += 1
+                    return fun(*args, **kwargs)
+                stats["exported"] += 1
+            else:
+                stats["loaded"] += 1
+            programs[key] = entry
+        if fast is not None and key is not None:
+            programs[fast] = entry
+        runner, out_skeleton = entry
+        outs = runner(*arrays)
+        out_leaves, out_tree = jax.tree.flatten(out_skeleton)
+        return jax.tree.unflatten(out_tree, [outs[i] for i in out_leaves])
+
+    wrapper.stats = stats  # type: ignore[attr-defined]
+    wrapper.fun = fun  # type: ignore[attr-defined]
+    return wrapper
+
+
+def _is_array(x) -> bool:
+    import jax
+    import numpy as np
+
+    return isinstance(x, (jax.Array, np.ndarray, np.generic))
+
+
+def _fast_key(treedef, static: list, specs: list):
+    """The in-memory key of a call (None when a static leaf is not hashable)."""
+    import jax
+
+    key = ("fast", treedef, tuple(static), tuple((s.shape, str(s.dtype), s.weak_type) for s in specs),
+           jax.default_backend(), jax.config.jax_enable_x64, jax.config.jax_default_matmul_precision)
+    try:
+        hash(key)
+    except TypeError:
+        return None
+    return key
+
+
+#: An object's default repr names its address, which changes per process: such a key would
+#: never be found again, so the function runs unsaved instead of filling the folder.
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def _key_text(name: str, treedef, static: list, specs: list) -> str | None:
+    """Everything a saved program depends on, as text; None when part of it has no stable text."""
+    import jax
+    import jaxlib
+
+    from fourierjax import __version__
+
+    parts = [
+        f"format={FORMAT}", f"function={name}", f"fourierjax={__version__}",
+        f"source={source_hash()}", f"jax={jax.__version__}", f"jaxlib={jaxlib.__version__}",
+        f"backend={jax.default_backend()}", f"x64={jax.config.jax_enable_x64}",
+        f"matmul_precision={jax.config.jax_default_matmul_precision}",
+        f"tree={treedef!r}", f"static={static!r}",
+        "inputs=" + ";".join(f"{s.dtype}{list(s.shape)}{'w' if s.weak_type else ''}" for s in specs),
+    ]
+    text = "\n".join(parts)
+    return None if _ADDRESS.search(text) else text
+
+
+@functools.cache
+def source_hash() -> str:
+    """A hash of the package's source files (``*.py`` and ``*.toml`` under `fourierjax`), so that
+    an edited checkout never loads a program traced from other code.
+
+    Returns:
+        A hex digest (computed once per process).
+    """
+    return tree_hash(pathlib.Path(__file__).resolve().parent)
+
+
+def tree_hash(root: pathlib.Path) -> str:
+    """The hash `source_hash` takes of the ``*.py`` and ``*.toml`` files under ``root``: their
+    paths relative to it and their bytes.
+
+    Arguments:
+        root: a folder.
+
+    Returns:
+        A hex digest.
+    """
+    h = hashlib.sha256()
+    for path in sorted(p for ext in ("*.py", "*.toml") for p in root.rglob(ext)):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(b"\0")
+        h.update(path.read_bytes())
+        h.update(b"\0")
+    return h.hexdigest()
+
+
+def _path(name: str, key: str) -> pathlib.Path:
+    from fourierjax import _compile_cache
+
+    digest = hashlib.sha256(key.encode()).hexdigest()[:40]
+    short = re.sub(r"[^A-Za-z0-9_.]", "_", name.rsplit(".", 1)[-1])[:40]
+    return pathlib.Path(_compile_cache.saved_dir()) / f"{short}-{digest}.jaxexp"
+
+
+def _runner(exported, cpu_compiler_options: dict | None) -> Callable:
+    """The exported program as a jitted call, compiled with the entry points' XLA options."""
+    import jax
+
+    from fourierjax import _jit
+
+    opts = {}
+    if jax.default_backend() == "cpu":
+        opts = {"compiler_options": _jit._cpu_options() if cpu_compiler_options is None
+                else _jit._known_options(cpu_compiler_options)}
+    return jax.jit(exported.call, **opts)
+
+
+def _load(path: pathlib.Path, key: str, specs: list, cpu_compiler_options) -> tuple | None:
+    """The saved program at ``path`` as ``(runner, output skeleton)``, or None (missing, or
+    not usable: logged at debug level)."""
+    try:
+        blob = path.read_bytes()
+    except OSError:
+        return None
+    try:
+        import jax
+
+        if not blob.startswith(_MAGIC):
+            raise ValueError("not a saved program")
+        record = pickle.loads(blob[len(_MAGIC):])
+        if record.get("key") != key:
+            raise ValueError("its key differs (another version or input)")
+        exported = jax.export.deserialize(bytearray(record["exported"]))
+        got = [(tuple(a.shape), a.dtype) for a in exported.in_avals]
+        if got != [(tuple(s.shape), s.dtype) for s in specs]:
+            raise ValueError(f"its inputs {got} differ")
+        out_skeleton = record["out"]
+        out_leaves = jax.tree.leaves(out_skeleton)
+        if sorted(out_leaves) != list(range(len(exported.out_avals))):
+            raise ValueError("its output structure does not match its program")
+        return _runner(exported, cpu_compiler_options), out_skeleton
+    except Exception as err:  # noqa: BLE001 (any failure to load means: trace again)
+        _log.debug("fourierjax: ignoring the saved program %s: %s", path, err)
+        return None
+
+
+def _export(fun, treedef, static, dynamic, specs, path: pathlib.Path, key: str,
+            cpu_compiler_options) -> tuple | None:
+    """Export ``fun`` for these inputs, save it, and return ``(runner, output skeleton)``;
+    None when it cannot be exported."""
+    import jax
+
+    out_tree = []
+
+    def flat(*arrays):
+        it = iter(arrays)
+        leaves = [next(it) if d else s for s, d in zip(static, dynamic, strict=True)]
+        args, kwargs = jax.tree.unflatten(treedef, leaves)
+        out_leaves, tree = jax.tree.flatten(fun(*args, **kwargs))
+        out_tree.append(tree)
+        return out_leaves
+
+    try:
+        exported = jax.export.export(jax.jit(flat))(*specs)
+    except Exception as err:  # noqa: BLE001 (e.g. host callbacks): run unsaved
+        _log.debug("fourierjax: %s cannot be saved as a program: %s", path.name, err)
+        return None
+    out_skeleton = jax.tree.unflatten(out_tree[-1], list(range(out_tree[-1].num_leaves)))
+    try:
+        blob = bytes(exported.serialize())
+        # This call runs what later calls will read (a deserialized program's outputs are not
+        # weakly typed, for one), so that its results, and the keys of the programs they feed,
+        # are those of every later call.
+        exported = jax.export.deserialize(bytearray(blob))
+        record = {"key": key, "out": out_skeleton, "exported": blob}
+        _write_atomic(path, _MAGIC + pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+    except Exception as err:  # noqa: BLE001 (unpicklable output, full disk: still run it)
+        _log.debug("fourierjax: could not save the program %s: %s", path, err)
+    return _runner(exported, cpu_compiler_options), out_skeleton
+
+
+def _write_atomic(path: pathlib.Path, data: bytes) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        with _suppress():
+            os.unlink(tmp)
+        raise
+
+
+def _suppress():
+    import contextlib
+
+    return contextlib.suppress(OSError)
