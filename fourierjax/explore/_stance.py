@@ -85,7 +85,7 @@ class StancePanel:
     def _solve_now(self) -> None:
         import jax.numpy as jnp
 
-        from fourierjax.stance import balance, center_of_mass, pose_fk, solve_stance
+        from fourierjax.stance import StanceResult, balance, center_of_mass, pose_fk, solve_stance
 
         shape_set = self.sets[self.gui_set.value]
         obj = None if shape_set.object_mode == "none" else jnp.asarray(self.gizmo_object.position, jnp.float32)
@@ -121,8 +121,10 @@ class StancePanel:
         if converged:
             self.gui_result.content = text
         else:
-            self.gui_result.content = f"**Did not converge**: {text}"
-            self._message(f"stance: {shape_set.name} did not converge ({sol.result})")
+            why = StanceResult[sol.result]  # the outcome's sentence, e.g. "... ran out of steps ..."
+            self.gui_result.content = f"**Did not converge** ({why}): {text}"
+            self._message(f"stance: {shape_set.name} at intensity {float(self.gui_intensity.value):g} did not "
+                          f"converge: {why}")
 
     def close(self) -> None:
         with self._lock:
