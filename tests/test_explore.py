@@ -322,3 +322,60 @@ def test_view_is_the_fk_of_the_exported_bvh(explorer):
     start = pos[0, g.body_map.pelvis] * [1, 0, 1]
     np.testing.assert_allclose(explorer.positions, pos - start, atol=2e-4)  # metres
     explorer.set(s=0.0, step=1.0, weight_run=0.0, path_radius_m=0.0)
+
+
+def test_no_argument_loads_the_bundled_walks(monkeypatch):
+    from fourierjax.explore import _engine
+
+    bundled = explore.Library({}, {})
+    monkeypatch.setattr(_engine, "default_library", lambda: bundled)
+    assert explore.load_sources([]) == (bundled, [])
+    lib, messages = explore.load_sources(["no_such_clip"])
+    assert lib is bundled and messages[-1] == "no gait loaded: using the bundled walks and runs"
+    assert set(_engine.DEFAULT_GAITS) <= set(data.list())
+
+
+def test_scrubber_pauses_and_shows_that_frame(explorer):
+    from types import SimpleNamespace
+
+    explorer.playing = True
+    event = SimpleNamespace(client=object(), target=SimpleNamespace(value=0.5))
+    explorer._on_scrub(event)
+    assert not explorer.playing and explorer.frame == 30  # 0.5 s at 60 fps
+    np.testing.assert_array_equal(explorer.current_positions(), explorer.positions[30])
+    explorer._on_scrub(SimpleNamespace(client=None, target=SimpleNamespace(value=0.9)))  # the server's own move
+    assert explorer.frame == 30
+
+
+def test_cli_prints_the_url_and_passes_host_port(monkeypatch, capsys):
+    import time
+    import webbrowser
+
+    from fourierjax import explore as fexplore
+
+    seen, opened = {}, []
+
+    class FakeExplorer:
+        def __init__(self, library, **kw):
+            seen.update(kw, library=library)
+            self.url = f"http://{kw['host']}:{kw['port']}"
+
+        def close(self):
+            seen["closed"] = True
+
+    def stop(_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fexplore, "Explorer", FakeExplorer, raising=False)
+    monkeypatch.setattr(fexplore, "load_sources", lambda sources: ("lib", [f"read {len(sources)}"]))
+    monkeypatch.setattr(time, "sleep", stop)
+    monkeypatch.setattr(webbrowser, "open", opened.append)
+    from fourierjax import _compile_cache
+
+    monkeypatch.setattr(_compile_cache, "enable_compile_cache", lambda: None)  # in-process: the cache stays off
+    assert main(["explore", "--no-browser", "--port", "8123", "a.bvh"]) == 130  # Ctrl-C
+    out = capsys.readouterr().out
+    assert "open http://127.0.0.1:8123" in out and opened == [] and seen["closed"]
+    assert seen["host"] == "127.0.0.1" and seen["messages"] == ["read 1"] and seen["library"] == "lib"
+    assert main(["explore", "--host", "0.0.0.0", "--port", "8124"]) == 130
+    assert opened == ["http://0.0.0.0:8124"]

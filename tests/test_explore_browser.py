@@ -151,12 +151,12 @@ def test_browser_slider_shape_set_export_two_tabs(explorer, tmp_path, monkeypatc
             solves = explorer.stance.solves
             monkeypatch.setattr(fstance, "solve_stance", _not_converged(fstance.solve_stance))
             explorer.stance.request(delay=0.0)
-            assert _until(lambda: explorer.stance.solves > solves, 60)
+            assert explorer.stance.wait(60) and explorer.stance.solves == solves + 1
             page.get_by_text(re.compile("^Did not converge$")).wait_for(timeout=20_000)  # the panel, bold
             assert "did not converge: the stance solver ran out of steps" in explorer.messages[-1], explorer.messages
             monkeypatch.undo()
             explorer.stance.request(delay=0.0)
-            assert _until(lambda: explorer.stance.solves > solves + 1, 60)
+            assert explorer.stance.wait(60) and explorer.stance.solves == solves + 2
             assert not explorer.stance.gui_result.content.startswith("**Did not")
             # Export: the BVH equals `synth --config` of the exported config.
             page.get_by_role("button", name="Export BVH + config").click()
@@ -192,9 +192,31 @@ def test_browser_slider_shape_set_export_two_tabs(explorer, tmp_path, monkeypatc
             assert _until(lambda: _slider(page, explorer.gui_s).get_attribute("aria-valuenow") == "-1", 30)
             if os.environ.get(SCREENSHOT_ENV):
                 assert explorer.set(s=0.4, path_radius_m=0.0)
+                explorer.gui_file.value = ""
+                explorer._sync_gui()  # the path dropdown back to straight
+                explorer._send_frame(explorer.params.num_frames // 4)  # the walker near its start
+                page.get_by_text("Model A").scroll_into_view_if_needed()  # the gait panel at the top
                 for close in page.locator(".mantine-Notification-closeButton").all():
                     close.click()  # the "software WebGL" notice of a headless browser
                 page.wait_for_timeout(2000)
                 page.screenshot(path=str(pathlib.Path(__file__).resolve().parents[1] / "docs" / "explore.png"))
         finally:
             browser.close()
+
+
+def test_stance_gizmo_solves_on_release_only(explorer):
+    from types import SimpleNamespace
+
+    from fourierjax.explore._stance import SETTLE_S
+
+    panel = explorer.stance
+    assert panel.wait(120)
+    solves = panel.solves
+    gizmo = panel.gizmo_object
+    gizmo.position = (0.35, 1.25, 0.75)
+    for _ in range(3):  # drag events: no solve
+        panel._on_gizmo(SimpleNamespace(phase="update", target=gizmo))
+    time.sleep(SETTLE_S + 0.5)
+    assert panel.solves == solves
+    panel._on_gizmo(SimpleNamespace(phase="end", target=gizmo))  # release
+    assert panel.wait(60) and panel.solves == solves + 1

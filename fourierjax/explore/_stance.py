@@ -100,7 +100,6 @@ class StancePanel:
         feet = np.asarray(balance.monitor_points_world(self.body, problem.feet)).reshape(-1, 3)
         hull = balance.support_polygon(feet[:, [0, 2]])
         self.solution, self.positions = sol, pos
-        self.solves += 1
         parents = np.asarray(self.body.skeleton.topology.parents)
         n = len(parents)
         child = np.flatnonzero(parents >= 0)
@@ -125,6 +124,7 @@ class StancePanel:
             self.gui_result.content = f"**Did not converge** ({why}): {text}"
             self._message(f"stance: {shape_set.name} at intensity {float(self.gui_intensity.value):g} did not "
                           f"converge: {why}")
+        self.solves += 1  # counted once drawn and reported
 
     def close(self) -> None:
         with self._lock:
