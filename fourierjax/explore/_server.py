@@ -339,6 +339,9 @@ class Explorer:
             now = time.perf_counter()
             if self.playing:
                 with self._lock:
+                    if not self.playing:  # paused (a scrub) while this tick waited for the lock
+                        last = now
+                        continue
                     self.time_s = (self.time_s + (now - last) * self.playback_rate) % self.params.seconds
                     frame = int(self.time_s * self.params.fps) % self.params.num_frames
                     if frame != self.frame:
