@@ -348,10 +348,10 @@ def test_scrubber_pauses_and_shows_that_frame(explorer):
 
 
 def test_cli_prints_the_url_and_passes_host_port(monkeypatch, capsys):
-    import time
     import webbrowser
 
     from fourierjax import explore as fexplore
+    from fourierjax.cli import explore as cli_explore
 
     seen, opened = {}, []
 
@@ -363,12 +363,12 @@ def test_cli_prints_the_url_and_passes_host_port(monkeypatch, capsys):
         def close(self):
             seen["closed"] = True
 
-    def stop(_):
+    def stop():
         raise KeyboardInterrupt
 
     monkeypatch.setattr(fexplore, "Explorer", FakeExplorer, raising=False)
     monkeypatch.setattr(fexplore, "load_sources", lambda sources: ("lib", [f"read {len(sources)}"]))
-    monkeypatch.setattr(time, "sleep", stop)
+    monkeypatch.setattr(cli_explore, "_serve_forever", stop)  # Ctrl-C at once
     monkeypatch.setattr(webbrowser, "open", opened.append)
     from fourierjax import _compile_cache
 
