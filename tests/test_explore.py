@@ -43,7 +43,8 @@ def test_params_refuse_out_of_range():
     Params("a", "b", s=-1.0)
     Params("a", "b", s=2.0)
     for bad in (dict(s=2.01), dict(s=float("nan")), dict(step=-1.0), dict(gait=1.5), dict(hip_rule="x"),
-                dict(noise_harmonics=0), dict(fps=0.0), dict(weights=(("w", float("inf")),))):
+                dict(noise_harmonics=0), dict(fps=0.0), dict(weights=(("w", float("inf")),)),
+                dict(path_radius_m=0.1), dict(path_radius_m=-0.2), dict(path_radius_m=float("inf"))):
         with pytest.raises(UserError):
             Params("a", "b", **bad)
 
@@ -66,6 +67,7 @@ def test_sliders_do_not_compile_again(explorer):
     from jax import monitoring
 
     explorer.set(s=0.2, noise_deg=1.0)  # warm: the noise path compiles once
+    explorer.set(path_radius_m=2.0)  # and the path
     compiled = []
 
     def listener(event, duration_secs, **_):
@@ -76,20 +78,24 @@ def test_sliders_do_not_compile_again(explorer):
     try:
         before = explorer.current_positions()
         for change in (dict(s=0.7), dict(s=-0.5), dict(s=1.8), dict(step=1.3), dict(speed=0.6), dict(gait=0.05),
-                       dict(jump=0.4), dict(weight_run=0.8), dict(noise_deg=2.5), dict(root_motion=False)):
+                       dict(jump=0.4), dict(weight_run=0.8), dict(noise_deg=2.5), dict(path_radius_m=4.0),
+                       dict(path_radius_m=-2.0), dict(root_motion=False)):
             assert explorer.set(**change), explorer.messages[-1:]
     finally:
         monitoring.unregister_event_duration_listener(listener)
     assert compiled == [], f"{len(compiled)} programs compiled on slider moves"
     assert np.abs(explorer.current_positions() - before).max() > 1e-3
-    explorer.set(noise_deg=0.0, root_motion=True, s=0.0, step=1.0, speed=1.0, gait=1.0, jump=0.0, weight_run=0.0)
+    explorer.set(noise_deg=0.0, root_motion=True, s=0.0, step=1.0, speed=1.0, gait=1.0, jump=0.0, weight_run=0.0,
+                 path_radius_m=0.0)
 
 
 def test_export_equals_synth_config(explorer, tmp_path):
     from fourierjax.io.bvh import read_bvh
 
-    assert explorer.set(s=0.6, step=1.1, weight_run=0.5, noise_deg=1.5, hip_rule="continuous")
+    assert explorer.set(s=0.6, step=1.1, weight_run=0.5, noise_deg=1.5, hip_rule="continuous", foot_lock=False,
+                        path_radius_m=-2.0)
     bvh, config = explorer.export(tmp_path)
+    assert "foot_lock = false" in config.read_text() and "path_radius_m = -2.0" in config.read_text()
     assert main(["synth", "--config", str(config), "--out", str(tmp_path / "again.bvh")]) == 0
     a, b = read_bvh(bvh), read_bvh(tmp_path / "again.bvh")
     assert a.channels.shape == (60, 96)
@@ -100,7 +106,8 @@ def test_export_equals_synth_config(explorer, tmp_path):
     (tmp_path / "other.toml").write_text(text)
     assert main(["synth", "--config", str(tmp_path / "other.toml"), "--out", str(tmp_path / "other.bvh")]) == 0
     assert np.abs(read_bvh(tmp_path / "other.bvh").channels - a.channels).max() > 0.1
-    explorer.set(s=0.0, step=1.0, weight_run=0.0, noise_deg=0.0, hip_rule="unuma1995")
+    explorer.set(s=0.0, step=1.0, weight_run=0.0, noise_deg=0.0, hip_rule="unuma1995", foot_lock=True,
+                 path_radius_m=0.0)
 
 
 @pytest.mark.parametrize("edit, message", [
@@ -109,6 +116,7 @@ def test_export_equals_synth_config(explorer, tmp_path):
     (lambda t: t.replace("[gait]", "[gait]\nbogus = 1"), "gait.bogus"),
     (lambda t: t.replace("s = 0.0", "s = 5.0"), "s: must be in"),
     (lambda t: t.replace("root_motion = true", "root_motion = 1"), "root_motion"),
+    (lambda t: t.replace("path_radius_m = 0.0", "path_radius_m = 0.1"), "path_radius_m: 0 (straight)"),
     (lambda t: t + "\n[[[", "not a TOML file"),
 ])
 def test_synth_config_refuses_bad_files(explorer, tmp_path, capsys, edit, message):
@@ -134,10 +142,11 @@ def test_synth_without_model_or_config_is_one_line(capsys, tmp_path):
     assert "--config" in capsys.readouterr().err
 
 
-def test_bad_input_is_one_message_and_the_server_keeps_running(explorer, library, tmp_path):
+def test_bad_input_is_one_message_and_the_server_keeps_running(explorer, library, tmp_path, capsys):
     from fourierjax import fourier
 
     count = len(explorer.messages)
+    capsys.readouterr()
     assert not explorer.set(s=3.0)
     assert explorer.messages[-1].startswith("s: must be in [-1, 2]")
     assert explorer.params.s == 0.0 and explorer.gui_s.value == 0.0
@@ -161,6 +170,9 @@ def test_bad_input_is_one_message_and_the_server_keeps_running(explorer, library
     finally:
         del library.gaits["half"]
     assert len(explorer.messages) == count + 4
+    # The same four messages on the console, one line each, no traceback.
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"fourierjax explore: {m}" for m in explorer.messages[count:]], err
     assert explorer.set(s=0.5)  # still serving
     assert explorer._status.content == "Ready."
     explorer.set(s=0.0)
@@ -185,26 +197,22 @@ def test_load_sources_reports_each_bad_source(tmp_path):
     assert "bad.bvh" in messages[0] and "no_such_clip" in messages[1]
 
 
-def test_foot_lock_passed_only_where_supported(library, monkeypatch):
+def test_foot_lock_toggle_is_the_librarys_locking(explorer):
     from fourierjax import gait
-    from fourierjax.explore import _engine
 
-    seen = {}
-    real = gait.synthesize_gait
-
-    def spy(*args, **kw):
-        seen.update(kw)
-        kw.pop("foot_lock", None)
-        return real(*args, **kw)
-
-    monkeypatch.setattr(gait, "synthesize_gait", spy)
-    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: False)
-    p = Params("07_01", "02_03", foot_lock=True, seconds=0.5)
-    explore.render(library, p)
-    assert "foot_lock" not in seen
-    monkeypatch.setattr(_engine, "foot_lock_supported", lambda: True)
-    explore.render(library, p)
-    assert seen["foot_lock"] is True
+    g = explorer.library.gait(explorer.params.a)
+    results = {}
+    for lock in (False, True):
+        assert explorer.set(foot_lock=lock)
+        results[lock] = explorer.result
+        p = explorer.params
+        ref = gait.synthesize_gait(explorer.library.gait(p.a).model, g.template.skeleton(), p.num_frames,
+                                   p.frame_time_s, body_map=g.body_map, foot_lock=lock)
+        np.testing.assert_allclose(np.asarray(explorer.result.features), np.asarray(ref.features), atol=1e-5)
+    skate = {k: float(gait.contact_skating(r.foot_positions, explorer.params.frame_time_s,
+                                           body_map=g.body_map).mean_speed) for k, r in results.items()}
+    assert skate[True] < 0.7 * skate[False], skate  # planted feet slide less
+    assert explorer.params.foot_lock
 
 
 def test_transition_plays_and_exports_a_bvh_without_config(explorer, tmp_path):
@@ -225,22 +233,22 @@ def test_transition_plays_and_exports_a_bvh_without_config(explorer, tmp_path):
     assert explorer.set(s=0.0) and explorer.mode == "gait"
 
 
-def test_bend_path_puts_the_walk_on_a_circle():
-    from fourierjax.explore._engine import bend_path
-
-    T = 50
-    pos = np.zeros((T, 2, 3))
-    pos[:, 0, 2] = np.linspace(0.0, 3.0, T)  # pelvis walks 3 m along +Z
-    pos[:, 1] = pos[:, 0] + [0.0, 1.0, 0.2]  # a head 1 m up and 0.2 m ahead
-    assert bend_path(pos, 0, None) is pos
-    out = bend_path(pos, 0, 2.0)
-    centre = np.array([2.0, 0.0, 0.0])
-    np.testing.assert_allclose(np.linalg.norm(out[:, 0] - centre, axis=-1), 2.0, atol=1e-12)
-    np.testing.assert_allclose(out[:, 1, 1], 1.0)
-    # The body faces along the circle: the head stays 0.2 m ahead of the pelvis, tangent to it.
-    ahead = out[:, 1] - out[:, 0]
-    tangent = np.stack([np.sin(pos[:, 0, 2] / 2.0), np.zeros(T), np.cos(pos[:, 0, 2] / 2.0)], -1)
-    np.testing.assert_allclose(ahead[:, [0, 2]], 0.2 * tangent[:, [0, 2]], atol=1e-12)
+@pytest.mark.parametrize("radius_m", [2.0, -2.0])
+def test_path_mode_walks_the_circle(explorer, radius_m):
+    g = explorer.library.gait(explorer.params.a)
+    straight = explorer.positions[:, g.body_map.pelvis, [0, 2]]
+    assert explorer.set(path_radius_m=radius_m) and explorer._sync_gui() is None
+    assert explorer.gui_path.value == ("circle r = 2 m, left" if radius_m > 0 else "circle r = 2 m, right")
+    ground = explorer.positions[:, g.body_map.pelvis, [0, 2]]
+    # The pelvis on the circle through the start, centred on the walker's left (right), at the
+    # straight walk's pace; the feet are the library's locked ones.
+    r = np.linalg.norm(ground - [radius_m, 0.0], axis=-1)
+    np.testing.assert_allclose(r, abs(radius_m), atol=0.02)
+    arc = np.abs(radius_m) * np.unwrap(np.arctan2(ground[:, 1], radius_m - ground[:, 0]) * np.sign(radius_m))
+    walked = np.linalg.norm(straight[-1] - straight[0])
+    assert walked > 0.5 and abs(abs(arc[-1] - arc[0]) - walked) < 0.05 * walked, (arc[-1] - arc[0], walked)
+    assert explorer.params.foot_lock and np.isfinite(np.asarray(explorer.result.foot_positions)).all()
+    assert explorer.set(path_radius_m=0.0)
 
 
 def test_crowd_jitters_the_current_style(explorer):
@@ -307,10 +315,67 @@ def test_view_is_the_fk_of_the_exported_bvh(explorer):
 
     from fourierjax import kinematics
 
-    assert explorer.set(s=0.7, step=1.2, weight_run=0.3)
+    assert explorer.set(s=0.7, step=1.2, weight_run=0.3, path_radius_m=4.0)
     g = explorer.library.gait(explorer.params.a)
     pos = np.asarray(kinematics.joint_positions(g.template.skeleton(), jnp.asarray(explorer.motion.channels)))
     pos = pos * g.body_map.metres_per_unit
     start = pos[0, g.body_map.pelvis] * [1, 0, 1]
     np.testing.assert_allclose(explorer.positions, pos - start, atol=2e-4)  # metres
-    explorer.set(s=0.0, step=1.0, weight_run=0.0)
+    explorer.set(s=0.0, step=1.0, weight_run=0.0, path_radius_m=0.0)
+
+
+def test_no_argument_loads_the_bundled_walks(monkeypatch):
+    from fourierjax.explore import _engine
+
+    bundled = explore.Library({}, {})
+    monkeypatch.setattr(_engine, "default_library", lambda: bundled)
+    assert explore.load_sources([]) == (bundled, [])
+    lib, messages = explore.load_sources(["no_such_clip"])
+    assert lib is bundled and messages[-1] == "no gait loaded: using the bundled walks and runs"
+    assert set(_engine.DEFAULT_GAITS) <= set(data.list())
+
+
+def test_scrubber_pauses_and_shows_that_frame(explorer):
+    from types import SimpleNamespace
+
+    explorer.playing = True
+    event = SimpleNamespace(client=object(), target=SimpleNamespace(value=0.5))
+    explorer._on_scrub(event)
+    assert not explorer.playing and explorer.frame == 30  # 0.5 s at 60 fps
+    np.testing.assert_array_equal(explorer.current_positions(), explorer.positions[30])
+    explorer._on_scrub(SimpleNamespace(client=None, target=SimpleNamespace(value=0.9)))  # the server's own move
+    assert explorer.frame == 30
+
+
+def test_cli_prints_the_url_and_passes_host_port(monkeypatch, capsys):
+    import webbrowser
+
+    from fourierjax import explore as fexplore
+    from fourierjax.cli import explore as cli_explore
+
+    seen, opened = {}, []
+
+    class FakeExplorer:
+        def __init__(self, library, **kw):
+            seen.update(kw, library=library)
+            self.url = f"http://{kw['host']}:{kw['port']}"
+
+        def close(self):
+            seen["closed"] = True
+
+    def stop():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fexplore, "Explorer", FakeExplorer, raising=False)
+    monkeypatch.setattr(fexplore, "load_sources", lambda sources: ("lib", [f"read {len(sources)}"]))
+    monkeypatch.setattr(cli_explore, "_serve_forever", stop)  # Ctrl-C at once
+    monkeypatch.setattr(webbrowser, "open", opened.append)
+    from fourierjax import _compile_cache
+
+    monkeypatch.setattr(_compile_cache, "enable_compile_cache", lambda: None)  # in-process: the cache stays off
+    assert main(["explore", "--no-browser", "--port", "8123", "a.bvh"]) == 130  # Ctrl-C
+    out = capsys.readouterr().out
+    assert "open http://127.0.0.1:8123" in out and opened == [] and seen["closed"]
+    assert seen["host"] == "127.0.0.1" and seen["messages"] == ["read 1"] and seen["library"] == "lib"
+    assert main(["explore", "--host", "0.0.0.0", "--port", "8124"]) == 130
+    assert opened == ["http://0.0.0.0:8124"]

@@ -8,6 +8,7 @@ edit cost before the explorer (import, compile, synthesize, write).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import pathlib
 import subprocess
@@ -50,14 +51,25 @@ def run(size: str) -> list[Record]:
     ex.playing = False
     try:
         rng = np.random.default_rng(0)
-        ex.set(s=0.1, step=1.05, weight_run=0.1)  # warm every slider's path once
-        lat = []
-        for i in range(repeats):
-            change = [{"s": float(rng.uniform(-1, 2))}, {"step": float(rng.uniform(0.5, 1.5))},
-                      {"weight_run": float(rng.uniform(-1, 2))}][i % 3]
-            t = time.perf_counter()
-            assert ex.set(**change), ex.messages[-1:]
-            lat.append(ex.pose_sent_at - t)
+
+        def latencies(**fixed):
+            ex.set(s=0.1, step=1.05, weight_run=0.1, **fixed)  # warm every slider's path once
+            lat = []
+            for i in range(repeats):
+                change = [{"s": float(rng.uniform(-1, 2))}, {"step": float(rng.uniform(0.5, 1.5))},
+                          {"weight_run": float(rng.uniform(-1, 2))}][i % 3]
+                t = time.perf_counter()
+                assert ex.set(**change), ex.messages[-1:]
+                lat.append(ex.pose_sent_at - t)
+            return lat
+
+        # Interleaved: the page's default (feet locked), without locking, on a circle.
+        lat, lat_free, lat_path = [], [], []
+        for _ in range(2 if full else 1):
+            lat += latencies(foot_lock=True, path_radius_m=0.0)
+            lat_free += latencies(foot_lock=False, path_radius_m=0.0)
+            lat_path += latencies(foot_lock=True, path_radius_m=2.0)
+        ex.set(foot_lock=True, path_radius_m=0.0)
         # Where the time goes, for one parameter set.
         p = ex.params
         a, b = lib.gait(p.a), lib.gait(p.b)
@@ -66,12 +78,16 @@ def run(size: str) -> list[Record]:
         motion, _ = explore.synthesize_motion(a, model, p)
         skel = a.template.skeleton()
         result = explore.synthesize_result(a, model, p)
-        parts = {  # a slider move: edited model, synthesis, view FK; an export adds the BVH channels
+        free = dataclasses.replace(p, foot_lock=False)
+        parts = {  # a slider move: edited model, synthesis, foot lock, view FK, send; an export adds the BVH
             "edited_model_s": timeit(lambda: explore.edited_model(a.model, b.model, chars, p).offset,
                                      repeats=5)["median"],
-            "synthesize_result_s": timeit(lambda: explore.synthesize_result(a, model, p).features, repeats=5)["median"],
+            "synthesize_unlocked_s": timeit(lambda: explore.synthesize_result(a, model, free).features,
+                                            repeats=5)["median"],
+            "synthesize_locked_s": timeit(lambda: explore.synthesize_result(a, model, p).features, repeats=5)["median"],
             "view_positions_s": timeit(lambda: explore.view_positions(a, model.representation, result),
                                        repeats=5)["median"],
+            "send_pose_s": timeit(lambda: ex._send_frame(ex.frame), repeats=20)["median"],
             "export_bvh_channels_s": timeit(lambda: explore.result_motion(a, model.channel_names, result, p).channels,
                                             repeats=3)["median"],
             "joint_positions_of_bvh_s": timeit(lambda: kinematics.joint_positions(skel, jnp.asarray(motion.channels)),
@@ -87,14 +103,16 @@ def run(size: str) -> list[Record]:
                                 str(pathlib.Path(tmp) / "b.bvh")], check=True, capture_output=True)
                 base.append(time.perf_counter() - t)
         ours = _stats(lat)
+        free_stats, path_stats = _stats(lat_free), _stats(lat_path)
         records = [Record(
             "explore_slider_latency", ours["median"], float(np.median(base)), "s", lower_is_better=True,
             target=0.050, target_on="ours", target_op="<=",
             description=f"slider move -> new pose sent, one character, {p.num_frames} frames ({seconds:g} s at "
-                        f"{fps:g} Hz) resynthesized per move",
+                        f"{fps:g} Hz) resynthesized per move, feet locked (the page's default)",
             baseline_name="one `fourierjax synth --config` process (import, compile, synthesize, write)",
             ours_stats=ours, baseline_stats=_stats(base),
-            details={"first_start_s": round(first_s, 2), **{k: round(v, 5) for k, v in parts.items()}},
+            details={"first_start_s": round(first_s, 2), "feet_not_locked": free_stats, "on_circle_r2m": path_stats,
+                     **{k: round(v, 5) for k, v in parts.items()}},
         )]
         # Crowd: compute + the float16 points sent, per frame.
         crowd = ex.crowd

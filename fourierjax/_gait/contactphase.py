@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
+from fourierjax._jit import filter_jit
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -75,18 +76,25 @@ def intervals_from_contacts(
 
 
 def _cycle_feet(model, skeleton, body_map, num_samples):
+    feet = tuple(body_map.left.foot_points), tuple(body_map.right.foot_points)
+    if len(feet[0]) != len(feet[1]):
+        raise UserError("contact_intervals: both feet must have the same number of points")
+    grid, pts, root_v = _cycle_feet_jit(model, skeleton, feet, int(body_map.pelvis), int(num_samples))
+    return np.asarray(grid), np.asarray(pts, np.float64), np.asarray(root_v, np.float64)
+
+
+@filter_jit
+def _cycle_feet_jit(model, skeleton, feet, pelvis, num_samples):
+    # One program: run eagerly, the cycle's synthesis and FK were ~0.5 s of dispatches per call
+    # (`fourierjax explore` estimates the intervals of each edited model).
     from fourierjax._gait.common import pose_points
     from fourierjax.fourier import synthesize_phase
 
-    feet = body_map.left.foot_points, body_map.right.foot_points
-    if len(feet[0]) != len(feet[1]):
-        raise UserError("contact_intervals: both feet must have the same number of points")
     idx = jnp.asarray(feet)
     grid = jnp.linspace(0.0, TWO_PI, num_samples, endpoint=False, dtype=jnp.asarray(model.offset).dtype)
     feats = synthesize_phase(model, grid)
-    pts, _ = jax.vmap(lambda f: pose_points(skeleton, model.representation, idx, (body_map.pelvis,), f,
-                                            body_map.pelvis))(feats)
-    return np.asarray(grid), np.asarray(pts, np.float64), np.asarray(feats[:, :2], np.float64)
+    pts, _ = jax.vmap(lambda f: pose_points(skeleton, model.representation, idx, (pelvis,), f, pelvis))(feats)
+    return grid, pts, feats[:, :2]
 
 
 def intervals_from_model(

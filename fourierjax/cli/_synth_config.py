@@ -6,7 +6,8 @@ import pathlib
 
 _SECTIONS = {
     "models": {"a", "b"},
-    "gait": {"s", "step", "speed", "gait", "jump", "hip_rule", "root_motion", "foot_lock", "seconds", "fps"},
+    "gait": {"s", "step", "speed", "gait", "jump", "hip_rule", "root_motion", "foot_lock", "path_radius_m",
+             "seconds", "fps"},
     "noise": {"degrees", "harmonics", "seed"},
 }
 

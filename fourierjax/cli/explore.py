@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import time
 
 HELP = "Start the interactive gait and stance editor in the browser (Unuma 1995 Fig. 8; viser)."
 
@@ -21,9 +22,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fps", type=float, default=60.0, metavar="F", help="frame rate (default 60)")
 
 
-def run(args: argparse.Namespace) -> int:
-    import time
+def _serve_forever() -> None:
+    """Keep the process alive while the server's threads work (Ctrl-C ends it)."""
+    while True:
+        time.sleep(1.0)
 
+
+def run(args: argparse.Namespace) -> int:
     from fourierjax.errors import UserError
 
     try:
@@ -45,7 +50,6 @@ def run(args: argparse.Namespace) -> int:
 
         webbrowser.open(explorer.url)
     try:
-        while True:
-            time.sleep(1.0)
+        _serve_forever()
     finally:
         explorer.close()

@@ -5,12 +5,11 @@ from fourierjax.explore._engine import (
     DEFAULT_GAITS,
     Gait,
     Library,
-    bend_path,
     check_pair,
     default_library,
     edited_model,
     fit_clips,
-    foot_lock_supported,
+    ground_path,
     load_sources,
     render,
     result_motion,
@@ -19,12 +18,20 @@ from fourierjax.explore._engine import (
     transition_motion,
     view_positions,
 )
-from fourierjax.explore._params import CONFIG_FORMAT, CONFIG_VERSION, HIP_RULES, Params, config_text
+from fourierjax.explore._params import (
+    CONFIG_FORMAT,
+    CONFIG_VERSION,
+    HIP_RULES,
+    MIN_PATH_RADIUS_M,
+    Params,
+    config_text,
+)
 
 __all__ = [
     "CONFIG_FORMAT", "CONFIG_VERSION", "DEFAULT_CHARACTERISTICS", "DEFAULT_GAITS", "HIP_RULES", "Explorer",
-    "Gait", "Library", "Params", "bend_path", "check_pair", "config_text", "default_library", "edited_model",
-    "fit_clips", "foot_lock_supported", "load_sources", "render", "result_motion", "synthesize_motion",
+    "MIN_PATH_RADIUS_M",
+    "Gait", "Library", "Params", "check_pair", "config_text", "default_library", "edited_model",
+    "fit_clips", "ground_path", "load_sources", "render", "result_motion", "synthesize_motion",
     "synthesize_result", "transition_motion", "view_positions",
 ]  # fmt: skip
 

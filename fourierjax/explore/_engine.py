@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import inspect
+import functools
 import pathlib
 
 import numpy as np
@@ -44,13 +44,6 @@ class Library:
             return self.gaits[name]
         except KeyError:
             raise UserError(f"no gait named {name!r} (loaded: {', '.join(self.gaits)})") from None
-
-
-def foot_lock_supported() -> bool:
-    """Whether `gait.synthesize_gait` takes `foot_lock` (engineer footlock's work, issue 22)."""
-    from fourierjax import gait
-
-    return "foot_lock" in inspect.signature(gait.synthesize_gait).parameters
 
 
 def _gait_of(name, model, template, source, body_map=None) -> Gait:
@@ -184,18 +177,43 @@ def edited_model(a, b, characteristics, p: Params):
     return model
 
 
+def ground_path(gait_a: Gait, radius_m: float):
+    """The circle a walk of gait a follows (`gait.circle_path`, file units; None for 0: straight on).
+
+    Arguments:
+        gait_a: the gait whose body map gives the units.
+        radius_m: `Params.path_radius_m`: > 0 turns left, < 0 right, 0 straight.
+
+    Returns:
+        A `gait.GroundPath` or None. The same radius gives the same points: a new radius is a new
+        array of one shape, so it runs the already-compiled program.
+    """
+    if radius_m == 0:
+        return None
+    return _circle(float(radius_m) / float(gait_a.body_map.metres_per_unit or 1.0))
+
+
+@functools.lru_cache(maxsize=16)
+def _circle(radius_units: float):
+    from fourierjax import gait
+
+    return gait.circle_path(abs(radius_units), left=radius_units > 0)
+
+
 def synthesize_result(gait_a: Gait, model, p: Params):
-    """`gait.synthesize_gait` of `model` for `p.seconds` on gait a's skeleton and body map.
+    """`gait.synthesize_gait` of `model` for `p.seconds` on gait a's skeleton and body map: the
+    step constraints, the library's foot locking (`p.foot_lock`) and the path (`p.path_radius_m`:
+    the straight walk is bent onto the circle before the feet are locked, as `synth --path`).
 
     Returns:
         The `gait.GaitResult`.
     """
     from fourierjax import gait
 
-    kw = {"foot_lock": True} if p.foot_lock and foot_lock_supported() else {}
     return gait.synthesize_gait(
         model, gait_a.template.skeleton(), p.num_frames, p.frame_time_s, body_map=gait_a.body_map,
-        step=p.step, speed=p.speed, gait=p.gait, jump=p.jump, rule=p.hip_rule, root_motion=p.root_motion, **kw,
+        step=p.step, speed=p.speed, gait=p.gait, jump=p.jump, rule=p.hip_rule, root_motion=p.root_motion,
+        foot_lock=bool(p.foot_lock), path=ground_path(gait_a, p.path_radius_m),
     )
 
 
@@ -272,28 +290,3 @@ def transition_motion(library: Library, p: Params, start_s: float, duration_s: f
     feats, root, _, _ = gait.ground_features(feats, a.template.skeleton(), a.model.representation, p.frame_time_s,
                                              body_map=a.body_map)
     return grounded_motion(a.template, feats, root, a.model.channel_names, p.frame_time_s, body_map=a.body_map)
-
-
-def bend_path(positions: Float[np.ndarray, "T J 3"], pelvis: int, radius_m: float | None) -> Float[np.ndarray, "T J 3"]:
-    """Display a straight walk along +Z on a circle of `radius_m` (None: straight, unchanged).
-
-    Arguments:
-        positions: `[T, J, 3]` joints (m, Y up), walking along +Z from the origin.
-        pelvis: the body map's pelvis joint.
-        radius_m: circle radius (m), turning left.
-
-    Returns:
-        `[T, J, 3]`: each frame turned about Y by (distance walked) / radius and carried onto the circle.
-    """
-    if radius_m is None:
-        return positions
-    root = positions[:, pelvis].copy()
-    root[:, 1] = 0.0
-    theta = root[:, 2] / radius_m
-    rel = positions - root[:, None, :]
-    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
-    out = np.empty_like(positions)
-    out[..., 0] = rel[..., 0] * c + rel[..., 2] * s + (radius_m * (1 - np.cos(theta)) + root[:, 0])[:, None]
-    out[..., 1] = rel[..., 1]
-    out[..., 2] = -rel[..., 0] * s + rel[..., 2] * c + (radius_m * np.sin(theta))[:, None]
-    return out

@@ -12,6 +12,8 @@ CONFIG_FORMAT = "fourierjax.explore_config"
 CONFIG_VERSION = 1
 #: Hip rules of `gait.synthesize_gait`, repeated so that the parameter set does not import JAX.
 HIP_RULES = ("unuma1995", "continuous", "smooth")
+#: The tightest circle a path may have (m): a quarter of a stride; tighter, the walker spins.
+MIN_PATH_RADIUS_M = 0.25
 
 
 @dataclasses.dataclass(frozen=True)
@@ -22,7 +24,10 @@ class Params:
     - `weights`: `(name, weight)` per loaded characteristic (Unuma eq. 8).
     - `step`, `speed`, `gait`, `jump`, `hip_rule`, `root_motion`: the step constraints (§3.1).
     - `noise_deg`, `noise_harmonics`, `seed`: Unuma §3.3 noise on the rotation channels.
-    - `foot_lock`: passed to `synthesize_gait` where it takes the keyword.
+    - `foot_lock`: plant the feet (`synthesize_gait(foot_lock=)`, the library's locking; on by
+      default, as in `synth`).
+    - `path_radius_m`: 0 walks straight on; otherwise the walk follows a circle of that radius
+      in metres, turning left (> 0) or right (< 0), as `synth --path circle:R`.
     - `seconds`, `fps`: length and frame rate of the synthesized (and exported) motion.
     """
 
@@ -39,7 +44,8 @@ class Params:
     noise_deg: float = 0.0
     noise_harmonics: int = 3
     seed: int = 0
-    foot_lock: bool = False
+    foot_lock: bool = True
+    path_radius_m: float = 0.0
     seconds: float = 4.0
     fps: float = 60.0
 
@@ -64,6 +70,7 @@ _RANGES = {  # name: (low, high), inclusive; None = unbounded
     "gait": (0.0, 1.0),
     "jump": (0.0, None),
     "noise_deg": (0.0, 90.0),
+    "path_radius_m": (-1000.0, 1000.0),
     "seconds": (1e-3, 600.0),
     "fps": (1.0, 1000.0),
 }
@@ -80,6 +87,9 @@ def check_params(p: Params) -> None:
     for name, w in p.weights:
         if isinstance(w, bool) or not isinstance(w, int | float) or not math.isfinite(w):
             raise UserError(f"characteristic {name!r}: weight must be a finite number, got {w!r}")
+    if 0.0 < abs(p.path_radius_m) < MIN_PATH_RADIUS_M:
+        raise UserError(f"path_radius_m: 0 (straight) or a radius of at least {MIN_PATH_RADIUS_M:g} m "
+                        f"(negative turns right), got {p.path_radius_m!r}")
     if p.hip_rule not in HIP_RULES:
         raise UserError(f"hip_rule: expected one of {', '.join(HIP_RULES)}, got {p.hip_rule!r}")
     if isinstance(p.noise_harmonics, bool) or not isinstance(p.noise_harmonics, int) or p.noise_harmonics < 1:
@@ -121,7 +131,8 @@ def config_text(p: Params, files: dict[str, str]) -> str:
         "",
         "[gait]",
     ]
-    for key in ("s", "step", "speed", "gait", "jump", "hip_rule", "root_motion", "foot_lock", "seconds", "fps"):
+    for key in ("s", "step", "speed", "gait", "jump", "hip_rule", "root_motion", "foot_lock", "path_radius_m",
+                "seconds", "fps"):
         lines.append(f"{key} = {_toml_value(getattr(p, key))}")
     lines += ["", "[noise]", f"degrees = {_toml_value(p.noise_deg)}",
               f"harmonics = {p.noise_harmonics}", f"seed = {p.seed}"]

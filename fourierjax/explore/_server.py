@@ -17,6 +17,8 @@ from fourierjax.explore._params import HIP_RULES, Params, config_text
 #: Playback ticks per second (a new pose is sent at most this often).
 PLAYBACK_HZ = 120.0
 _BONE_COLOUR = (40, 90, 200)
+#: The path dropdown: label -> `Params.path_radius_m` (m; > 0 turns left, 0 straight on).
+PATHS = {"straight": 0.0, "circle r = 2 m, left": 2.0, "circle r = 4 m, left": 4.0, "circle r = 2 m, right": -2.0}
 
 
 class Explorer:
@@ -56,7 +58,6 @@ class Explorer:
         self.frame = 0
         self.pose_sent_at = 0.0  # time.perf_counter() of the last pose sent
         self.mode = "gait"  # or "transition": what the preview plays
-        self.path_radius_m = None  # None: straight; else the circle the walk is bent onto
         self._build_gui()
         self.server.on_client_connect(self._on_connect)
         self._recompute(self.params)
@@ -152,16 +153,9 @@ class Explorer:
             self.mode = "transition"
             self.time_s, self.playing = 0.0, True
             self._send_frame(0)
-        self._status.content = f"Transition {p.a} → {p.b} over {d:g} s from t = {start:g} s."
+        self._status.content = (f"Transition {p.a} → {p.b} over {d:g} s from t = {start:g} s"
+                                + (" (on a straight line)." if p.path_radius_m else "."))
         return True
-
-    def set_path(self, radius_m: float | None) -> None:
-        """Show the walk on a straight line (None) or bent onto a circle of `radius_m` (display only)."""
-        with self._lock:
-            self.path_radius_m = radius_m
-            gait_a = self.library.gait(self.params.a)
-            self.positions = _engine.bend_path(self._straight, gait_a.body_map.pelvis, radius_m)
-            self._send_frame(self.frame)
 
     def _recompute(self, p: Params, motion=None) -> None:
         import jax.numpy as jnp
@@ -186,8 +180,7 @@ class Explorer:
         start = pos[0, gait_a.body_map.pelvis].copy()
         start[up] = 0.0
         self.params, self._motion, self.result = p, motion, result
-        self._straight = pos - start  # [T, J, 3] metres, starting over the origin
-        self.positions = _engine.bend_path(self._straight, gait_a.body_map.pelvis, self.path_radius_m)
+        self.positions = pos - start  # [T, J, 3] metres, starting over the origin
         self._parents = np.asarray(gait_a.template.topology.parents)
         self.frame %= p.num_frames
         self.clear_message()
@@ -254,16 +247,8 @@ class Explorer:
             self.gui_rule = gui.add_dropdown("hip rule", HIP_RULES, initial_value=p.hip_rule)
             self.gui_root = gui.add_checkbox("root motion", p.root_motion)
             self.gui_noise = gui.add_slider("noise (deg)", 0.0, 10.0, 0.1, p.noise_deg)
-            self.gui_lock = gui.add_checkbox("foot locking", p.foot_lock, disabled=not _engine.foot_lock_supported(),
-                                             hint="synthesize_gait(foot_lock=True), where available")
-        controls = {"a": self.gui_a, "b": self.gui_b, "s": self.gui_s, "step": self.gui_step,
-                    "speed": self.gui_speed, "gait": self.gui_gait, "jump": self.gui_jump,
-                    "hip_rule": self.gui_rule, "root_motion": self.gui_root, "noise_deg": self.gui_noise,
-                    "foot_lock": self.gui_lock}
-        controls.update({f"weight_{n}": h for n, h in self.gui_weights.items()})
-        self._controls = controls
-        for key, handle in controls.items():
-            handle.on_update(self._on_control(key))
+            self.gui_lock = gui.add_checkbox("foot locking", p.foot_lock,
+                                             hint="plant the feet: synthesize_gait(foot_lock=True)")
         with gui.add_folder("Playback"):
             play = gui.add_button("Play")
             pause = gui.add_button("Pause")
@@ -277,10 +262,17 @@ class Explorer:
             self.gui_duration = gui.add_slider("transition D (s)", 0.1, 5.0, 0.1, 1.0)
             go = gui.add_button("Transition A→B")
             go.on_click(lambda _: self.transition())
-            self.gui_path = gui.add_dropdown("path", ("straight", "circle r = 2 m", "circle r = 4 m"),
-                                             initial_value="straight", hint="display only: the export walks straight")
-            self.gui_path.on_update(lambda e: self.set_path(
-                None if e.target.value == "straight" else float(e.target.value.split("= ")[1].split()[0])))
+            self.gui_path = gui.add_dropdown("path", tuple(PATHS), initial_value=_path_label(p.path_radius_m),
+                                             hint="synthesize_gait(path=): the walk follows it, feet planted; "
+                                             "the export and its config too")
+        controls = {"a": self.gui_a, "b": self.gui_b, "s": self.gui_s, "step": self.gui_step,
+                    "speed": self.gui_speed, "gait": self.gui_gait, "jump": self.gui_jump,
+                    "hip_rule": self.gui_rule, "root_motion": self.gui_root, "noise_deg": self.gui_noise,
+                    "foot_lock": self.gui_lock, "path_radius_m": self.gui_path}
+        controls.update({f"weight_{n}": h for n, h in self.gui_weights.items()})
+        self._controls = controls
+        for key, handle in controls.items():
+            handle.on_update(self._on_control(key))
         with gui.add_folder("Load and export"):
             self.gui_file = gui.add_text("BVH or model file", "")
             load = gui.add_button("Load")
@@ -301,6 +293,8 @@ class Explorer:
             if event.client is None:  # the server moved it (a refused value put back)
                 return
             value = event.target.value
+            if key == "path_radius_m":
+                value = PATHS[value]
             value = float(value) if isinstance(value, int | float) and not isinstance(value, bool) else value
             with self._wake:
                 self._pending[key] = value
@@ -320,7 +314,7 @@ class Explorer:
         p = self.params
         values = {"a": p.a, "b": p.b, "s": p.s, "step": p.step, "speed": p.speed, "gait": p.gait,
                   "jump": p.jump, "hip_rule": p.hip_rule, "root_motion": p.root_motion,
-                  "noise_deg": p.noise_deg, "foot_lock": p.foot_lock}
+                  "noise_deg": p.noise_deg, "foot_lock": p.foot_lock, "path_radius_m": _path_label(p.path_radius_m)}
         values.update({f"weight_{n}": w for n, w in p.weights})
         for key, handle in self._controls.items():
             if key in values and handle.value != values[key]:
@@ -345,6 +339,9 @@ class Explorer:
             now = time.perf_counter()
             if self.playing:
                 with self._lock:
+                    if not self.playing:  # paused (a scrub) while this tick waited for the lock
+                        last = now
+                        continue
                     self.time_s = (self.time_s + (now - last) * self.playback_rate) % self.params.seconds
                     frame = int(self.time_s * self.params.fps) % self.params.num_frames
                     if frame != self.frame:
@@ -481,6 +478,11 @@ class Explorer:
             self.stance.close()
         self.crowd.close()
         self.server.stop()
+
+
+def _path_label(radius_m: float) -> str:
+    """The path dropdown's entry for a radius (the nearest one offered, for a radius set from Python)."""
+    return min(PATHS, key=lambda k: abs(PATHS[k] - radius_m))
 
 
 def _safe(name: str) -> str:

@@ -85,7 +85,7 @@ class StancePanel:
     def _solve_now(self) -> None:
         import jax.numpy as jnp
 
-        from fourierjax.stance import balance, center_of_mass, pose_fk, solve_stance
+        from fourierjax.stance import StanceResult, balance, center_of_mass, pose_fk, solve_stance
 
         shape_set = self.sets[self.gui_set.value]
         obj = None if shape_set.object_mode == "none" else jnp.asarray(self.gizmo_object.position, jnp.float32)
@@ -100,7 +100,6 @@ class StancePanel:
         feet = np.asarray(balance.monitor_points_world(self.body, problem.feet)).reshape(-1, 3)
         hull = balance.support_polygon(feet[:, [0, 2]])
         self.solution, self.positions = sol, pos
-        self.solves += 1
         parents = np.asarray(self.body.skeleton.topology.parents)
         n = len(parents)
         child = np.flatnonzero(parents >= 0)
@@ -121,8 +120,11 @@ class StancePanel:
         if converged:
             self.gui_result.content = text
         else:
-            self.gui_result.content = f"**Did not converge**: {text}"
-            self._message(f"stance: {shape_set.name} did not converge ({sol.result})")
+            why = StanceResult[sol.result]  # the outcome's sentence, e.g. "... ran out of steps ..."
+            self.gui_result.content = f"**Did not converge** ({why}): {text}"
+            self._message(f"stance: {shape_set.name} at intensity {float(self.gui_intensity.value):g} did not "
+                          f"converge: {why}")
+        self.solves += 1  # counted once drawn and reported
 
     def close(self) -> None:
         with self._lock:
