@@ -113,3 +113,38 @@ def test_rig_without_knees_is_refused_with_the_missing_joint(cmu):
         assert isinstance(err.value, UserError)
         assert "cannot find the legs" in text and said in text, text
         assert "body_map=" in text and "--body-map FILE" in text and "[legs.left]" in text
+
+
+def test_composite_rig_end_to_end(cmu):
+    """A rig none of the conventions has (`tests.rigs.composite`: Daz Genesis 8 bend/twist bones
+    and `hip -> pelvis`, no toe joint, leaf twist bones, `Armature -> Root -> hip` with the travel
+    on `Root`, large rest rotations, 6 ZXY channels a joint) through the user's path: its inferred
+    map, heel strikes within 2 frames of the CMU clip's (its feet have no toe joint), a fit whose
+    fundamental is within 1% of the steps' and whose mean speed is the captured one (1%), aligned
+    to the left heel strike; its synthesis walks forward at that speed and stands on the floor."""
+    from fourierjax import gait
+    from fourierjax.motion import fit_motions
+
+    m, _, (l0, r0, _), P_ref = cmu
+    rig = composite(m)
+    (f,) = fit_motions([rig], 3)
+    bm = f.body_map
+    assert f.successful and f.alignment == "left_heel_strike"
+    assert (bm.name(bm.trajectory), bm.name(bm.pelvis), bm.left.names[0], bm.right.names[2]) == (
+        "Root", "hip", "lThighBend", "rFoot")
+    assert (len(f.left_heel_strikes), len(f.right_heel_strikes)) == (len(l0), len(r0))
+    assert np.abs(np.r_[f.left_heel_strikes - l0, f.right_heel_strikes - r0]).max() <= 2
+    assert f.omega_fit == pytest.approx(f.omega_steps, rel=0.01)
+    a, b = f.frame_start, f.frame_stop - 1
+    captured = np.linalg.norm((P_ref[b, 0] - P_ref[a, 0])[[0, 2]]) / ((b - a) * f.frame_time_s)
+    advance = float(np.asarray(f.model.offset)[1])  # root.vz: the mean speed along the heading
+    assert advance == pytest.approx(captured, rel=0.01)
+    dt = f.frame_time_s
+    n = int(round(2 * np.pi / f.omega_fit / dt)) + 1  # one cycle
+    g = gait.synthesize_gait(f.model, rig.skeleton(), n, dt)
+    root = np.asarray(g.root_position, np.float64)
+    travel = (root[-1] - root[0])[[0, 2]]
+    assert np.linalg.norm(travel) / ((n - 1) * dt) == pytest.approx(advance, rel=0.10)
+    assert travel @ np.asarray(bm.forward)[[0, 2]] / np.linalg.norm(travel) >= 0.95
+    low = np.asarray(g.lowest).min(axis=1)  # the lower foot above the ground, file units
+    assert abs(np.median(low)) <= 0.35 and low.min() >= -0.1, (np.median(low), low.min())  # 2 cm, 0.5 cm
