@@ -11,7 +11,7 @@ import subprocess
 import sys
 import time
 
-EXPERIMENTS = ("fit_quality", "style", "hip_rule", "stance", "style_space")
+EXPERIMENTS = ("fit_quality", "style", "hip_rule", "stance", "style_space", "any_skeleton")
 
 
 def main(argv=None) -> int:

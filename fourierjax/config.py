@@ -208,6 +208,17 @@ SCHEMAS["style_space"] = {
                    "where fitted models are cached (outside the repository)"),
 }
 
+SCHEMAS["any_skeleton"] = {
+    "clips": Field(clips(), doc="bundled walks and runs to rewrite into each convention"),
+    "conventions": Field(list_of(_is_str, "convention names", min_len=0),
+                         doc="tests.conventions / tests.rigs rewrites to compare with the CMU clips"),
+    "harmonics": Field(integer(1, 16), 3),
+    "max_frames": Field(integer(16, 100000), 400, "frames of each clip (after its rest frames)"),
+    "synth_frames": Field(integer(16, 10000), 240, "frames of each synthesized gait"),
+    "bandai_contents": Field(list_of(_is_str, "contents", min_len=0), ["walk", "run", "dash", "walk-back"],
+                             "Bandai-1 contents of the per-content table (skipped when the data is absent)"),
+}
+
 
 def validate(raw: dict, schema: dict[str, Field], where: str) -> dict:
     """Check ``raw`` against ``schema``; return it with defaults filled in.

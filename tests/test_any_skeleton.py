@@ -52,6 +52,25 @@ def test_z_up_is_refused_by_the_features():
         features_from_motion(m)
 
 
+def test_blender_export_plots_standing(tmp_path, monkeypatch, capsys):
+    """`fourierjax plot stick` of a Blender-style export (Z up, 6 channels a joint) draws the pose
+    of the original, standing (it was drawn lying flat, read as Y-up)."""
+    from fourierjax import viz
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+    from fourierjax.motion import motion_joint_positions
+
+    m = read_bvh(fourierjax.data.path("07_01"))[:40]
+    write_bvh(convert(m, "zup"), tmp_path / "zup.bvh")
+    drawn = []
+    monkeypatch.setattr(viz, "plot_stick_figure", lambda p, *a, **k: drawn.append(np.asarray(p)))
+    monkeypatch.setattr(viz, "save_figure", lambda fig, out: None)
+    assert main(["plot", "stick", str(tmp_path / "zup.bvh"), "--frame", "20", "--out", str(tmp_path / "s.png")]) == 0
+    assert "z is up; turned Y-up on reading" in capsys.readouterr().err
+    want = motion_joint_positions(m, [20])[0]
+    np.testing.assert_allclose(drawn[0], want, atol=1e-3)  # the BVH's 6 decimals
+
+
 def test_stop_frame():
     m = fourierjax.data.load("07_01")
     with pytest.raises(UserError, match="outside"):

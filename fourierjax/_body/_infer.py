@@ -79,12 +79,10 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
         mean_world = _mean_relative(points, pelvis)
         up_axis, up_sign = up_given or _up_from_legs(mean_world, pelvis, legs)
     else:
-        pelvis = _branching_joint(parents)
+        pelvis, (up_axis, up_sign) = _pelvis_from_reach(points.mean(axis=0), point_parents, J, up_given)
         if pelvis < 0:
-            raise BodyMapError(missing_legs_message("no joint has three branches (two legs and a spine)", names))
-        mean_world = _mean_relative(points, pelvis)
-        subtrees = [_subtree(point_parents, c) for c in range(len(point_parents)) if point_parents[c] == pelvis]
-        up_axis, up_sign = up_given or _up_from_reach(mean_world, subtrees)
+            raise BodyMapError(missing_legs_message(
+                "no joint has two branches that reach down (two legs)", names))
     if "up" not in sources:
         sources["up"] = "geometry"
     u = np.zeros(3)
@@ -95,6 +93,10 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     if not legs:
         legs = _legs_from_geometry(local, u_local, point_parents, pelvis, J, names)
         sources["legs"] = "geometry"
+    trunk = trunk_pelvis(parents, pelvis, (legs["left"]["hip"], legs["right"]["hip"]))
+    if trunk != pelvis:
+        pelvis = trunk
+        local, u_local = _mean_local(points, rotations, pelvis, u)
     for side in ("left", "right"):  # single fields of the override file win
         for k in _LEG_FIELDS:
             if k in legs_ov.get(side, {}):
@@ -222,12 +224,45 @@ def _subtree(point_parents, root: int) -> list[int]:
     return sorted(inside)
 
 
-def _branching_joint(parents) -> int:
-    """The shallowest joint with at least three child joints (two legs and a spine), or -1."""
-    counts = np.bincount([p for p in parents if p >= 0], minlength=len(parents))
-    depth = _names.depths(parents)
-    cands = [j for j in range(len(parents)) if counts[j] >= 3]
-    return min(cands, key=lambda j: (depth[j], j)) if cands else -1
+def _pelvis_from_reach(mean: np.ndarray, point_parents, J: int, up_given) -> tuple[int, tuple[int, int]]:
+    """The joint two of whose branches reach farthest along one signed axis (the legs, down from
+    the pelvis), and that axis's opposite (up); `(-1, (1, 1))` when no joint has two branches.
+
+    `mean` `[J+E, 3]` is the mean pose. Every joint with two or more branches is a candidate, not
+    only the shallowest with three: Daz's `hip` has two (`pelvis` and the abdomen) and its
+    `pelvis` two (the thighs), while the chest has three (the neck and both arms), which
+    hang down too, but less far than the legs. Ties go to the shallowest joint.
+    """
+    kids: dict[int, list[int]] = {}
+    for c, p in enumerate(point_parents):
+        if p >= 0:
+            kids.setdefault(p, []).append(c)
+    depth = _names.depths(tuple(point_parents))
+    signs = [up_given] if up_given else [(a, s) for a in range(3) for s in (1, -1)]
+    best, best_key = (-1, (1, 1)), None
+    for j, cs in kids.items():
+        if j >= J or len(cs) < 2:
+            continue
+        branches = [_subtree(point_parents, c) for c in cs]
+        for axis, sign in signs:
+            reach = sorted((float((-sign * (mean[b, axis] - mean[j, axis])).max()) for b in branches), reverse=True)
+            key = (round(reach[1], 9), -depth[j], -j)
+            if best_key is None or key > best_key:
+                best, best_key = (j, (axis, sign)), key
+    return best
+
+
+def trunk_pelvis(parents, pelvis: int, hips: tuple[int, int]) -> int:
+    """The joint the legs and the spine hang from: the hips' common ancestor `pelvis`, or its parent
+    when every branch of `pelvis` holds a leg and the parent has another branch (Daz Genesis:
+    `hip -> pelvis -> lThighBend, rThighBend`, `hip -> abdomenLower`: the trunk's root is `hip`)."""
+    kids = [c for c, p in enumerate(parents) if p == pelvis]
+    if any(all(h != c and not _names._is_ancestor(parents, c, h) for h in hips) for c in kids):
+        return pelvis
+    up = parents[pelvis]
+    if up >= 0 and any(p == up and c != pelvis for c, p in enumerate(parents)):
+        return up
+    return pelvis
 
 
 def _mean_relative(points: np.ndarray, pelvis: int) -> np.ndarray:
@@ -238,19 +273,6 @@ def _up_from_legs(mean: np.ndarray, pelvis: int, legs) -> tuple[int, int]:
     d = -0.5 * (mean[legs["left"]["ankle"]] + mean[legs["right"]["ankle"]])  # pelvis minus feet
     axis = int(np.argmax(np.abs(d)))
     return axis, int(np.sign(d[axis]) or 1)
-
-
-def _up_from_reach(mean: np.ndarray, subtrees: list[list[int]]) -> tuple[int, int]:
-    """The signed axis along which two branches of the pelvis (the legs) reach farthest down."""
-    if len(subtrees) < 2:
-        raise BodyMapError("body map: the pelvis has fewer than two branches")
-    best, best_score = (1, 1), -np.inf
-    for axis in range(3):
-        for sign in (1, -1):
-            reach = sorted((float((-sign * mean[s, axis]).max()) for s in subtrees), reverse=True)
-            if reach[1] > best_score:
-                best, best_score = (axis, sign), reach[1]
-    return best
 
 
 def _mean_local(points, rotations, pelvis: int, u: np.ndarray):
@@ -323,7 +345,15 @@ def _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J):
     line = _unit(local[ankle] - local[hip])
     off = [np.linalg.norm((local[p] - local[hip]) - line * ((local[p] - local[hip]) @ line)) for p in between]
     knee = between[int(np.argmax(off))]
-    toe = kept[ankle_at + 1] if ankle_at + 1 < len(kept) and kept[ankle_at + 1] < J else None
+    # Thigh and shin are bones of about one length (CMU 0.94, Bandai ~1); a leg without a knee
+    # joint (hip -> foot -> toe) would otherwise take its ankle for the knee and its toe for the ankle.
+    k = kept.index(knee)
+    if not 0.5 <= (arc[k] - arc[0]) / max(arc[ankle_at] - arc[k], 1e-12) <= 2.0:
+        return None
+    # The toe is the last joint past the ankle (Daz's lFoot -> lMetatarsals -> lToe: lToe), so that
+    # its End Site, the toe tip, is a foot point.
+    toes = [p for p in kept[ankle_at + 1:] if p < J]
+    toe = toes[-1] if toes else None
     return {"hip": hip, "knee": knee, "ankle": ankle, "toe": toe}
 
 
@@ -501,6 +531,7 @@ def from_names(topology, up=None) -> BodyMap:
     pelvis = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
     if pelvis < 0:
         raise BodyMapError(missing_legs_message("the two hips have no common ancestor", names))
+    pelvis = trunk_pelvis(parents, pelvis, (legs["left"]["hip"], legs["right"]["hip"]))
     sources["pelvis"] = "names" if pelvis in _names.match_centre(names, "pelvis") else "hierarchy"
     leg_joints = set(_present(legs["left"])) | set(_present(legs["right"]))
     below = [j for j in range(len(names)) if j != pelvis and _path(parents, pelvis, j) and j not in leg_joints]

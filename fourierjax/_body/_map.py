@@ -332,6 +332,10 @@ def point_name(names: tuple[str, ...], end_site_parents: tuple[int, ...], point:
 
 
 def missing_legs_message(what: str, names: tuple[str, ...]) -> str:
+    from fourierjax._body._names import leg_roles_found
+
     shown = ", ".join(names[:40]) + (", ..." if len(names) > 40 else "")
-    return (f"cannot find the legs of this skeleton: {what}. Its joints are: {shown}. Name them in a "
-            f"body map file (TOML, passed as overrides / --body-map), for example:\n{_MINIMAL_TOML}")
+    return (f"cannot find the legs of this skeleton: {what}. By name, {leg_roles_found(names)}. Its joints "
+            f"are: {shown}. Name them in a body map file (TOML): pass it as `--body-map FILE` on the command "
+            f"line, or in Python as `infer_body_map(motion, overrides=FILE)` and give that map as `body_map=` "
+            f"(fit_motions, synthesize_gait, ...). For example:\n{_MINIMAL_TOML}")

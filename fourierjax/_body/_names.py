@@ -139,3 +139,20 @@ def depths(parents: tuple[int, ...]) -> list[int]:
     for p in parents:
         d.append(0 if p < 0 else d[p] + 1)
     return d
+
+
+def leg_roles_found(names: tuple[str, ...]) -> str:
+    """What the name table finds of each leg, and which role no joint's name gives, for messages:
+    e.g. "left leg: hip 'thigh_l', no knee (no joint named like leg, lowerleg, shin, calf, knee)"."""
+    keyed = [side_and_key(n) for n in names]
+    parts = []
+    for side in ("left", "right"):
+        found = []
+        for role, table in LEG_ROLES.items():
+            hits = sorted((table[k], j) for j, (s, k) in enumerate(keyed) if s == side and k in table)
+            if hits:
+                found.append(f"{role} {names[hits[0][1]]!r}")
+            elif role != "toe":
+                found.append(f"no {role} (no joint named like {', '.join(list(table)[:5])})")
+        parts.append(f"{side} leg: " + ", ".join(found))
+    return "; ".join(parts)
