@@ -243,3 +243,31 @@ def test_a_sliding_foot_point_is_not_planted_and_the_smoothing_is_a_moving_avera
     np.testing.assert_allclose(y[[0, 7, -1], 0], [0.0, 0.0, 1.0])
     assert np.all(np.diff(y[:, 0]) >= 0) and np.abs(np.diff(y[:, 0])).max() < 0.5
     np.testing.assert_allclose(y[9:11, 0], [1 / 3, 2 / 3], atol=1e-6)  # weights 1, 2, 3, 2, 1 (/9)
+
+
+def test_a_foot_that_slides_through_its_stance_stays_on_the_floor():
+    """A root that outruns the stride (issue 20's `synth A --add (A-B)=1`, an extrapolation) slides
+    the stance foot, never still. It is planted and slides with the hip where the leg's reach
+    runs out, on the floor; the sliding-point rule lifted it 1.2 contact bands (3.2 cm on Bandai)."""
+    mot, fit = _fits()["07_01"]
+    sk, dt, bm = mot.skeleton(), mot.frame_time_s, fit.body_map
+    up = bm.up_axis
+    iv = gait.contact_intervals(fit.model, sk, body_map=bm)
+    r = gait.synthesize_gait(fit.model, sk, 120, dt, body_map=bm, foot_lock=False)
+    horiz = [k for k in range(3) if k != up]
+    root = r.root_position.at[:, jnp.asarray(horiz)].multiply(2.5)  # the root outruns the stride
+    w = gait.contact_weights(r.phase, iv)
+    _, feet = gait.lock_feet(r.features, sk, w, body_map=bm, representation="euler", root_position=root,
+                             clearance=r.clearance, return_feet=True, smooth_frames=5)
+    band = 0.02 * float(bm.height)
+    lowest = np.asarray(feet[..., up] * bm.up_sign - r.clearance[None]).min(-1)  # [T, 2]
+    stance = np.asarray(w) >= 0.99
+    unlocked = np.asarray(r.foot_positions) + np.asarray(root - r.root_position)[:, None, None]
+    slide = np.linalg.norm(np.diff(unlocked[..., horiz], axis=0), axis=-1).min(-1)  # [T-1, 2]
+    held = np.linalg.norm(np.diff(np.asarray(feet)[..., horiz], axis=0), axis=-1).min(-1)
+    both = stance[1:] & stance[:-1]
+    print(f"\nstance lowest point: median {np.median(lowest[stance]):.3f}, 90% {np.quantile(lowest[stance], 0.9):.3f} "
+          f"(band {band:.2f}); slide per frame {held[both].mean():.3f} locked vs {slide[both].mean():.3f} unlocked")
+    assert np.median(lowest[stance]) <= 0.05 * band and np.quantile(lowest[stance], 0.9) <= 0.5 * band
+    assert lowest.min() >= -1e-3 * band  # never below the floor
+    assert held[both].mean() < 0.8 * slide[both].mean()  # held where the reach allows
