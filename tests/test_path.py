@@ -207,7 +207,7 @@ def test_feet_stay_planted_on_a_circle(walk):
     straight_off = gait.synthesize_gait(mf.model, t.skeleton(), 480, mf.frame_time_s, body_map=bmap,
                                         foot_lock=False, path=gait.circle_path(R))
     np.testing.assert_allclose(np.asarray(straight_off.root_position), np.asarray(on_path.root_position), atol=1e-4)
-    # Measured: 1.57 vs 8.94 units/s (0.18x; 0.26x before the lift of a sliding point became a
+    # Measured: 1.99 vs 8.94 units/s (0.22x; 0.26x before the lift of a sliding point became a
     # moving maximum before its easing).
     assert ours <= 0.25 * theirs
     with pytest.raises(UserError, match="GroundPath"):
