@@ -251,13 +251,12 @@ def test_bandai_new_user_commands(new_user_outputs):
     assert glob.glob(f"{w}/sn.bvh")
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="issue 21: `characteristic A B` is A - B (normal - old), so `synth A "
-                   "--add it=1` extrapolates to 2 normal - old: root 179 cm/s against 124, skating 149 "
-                   "units/s before locking; `gait.lock_feet` holds the planted foot until the leg's reach "
-                   "runs out and then lifts it (weight 1, the unlocked foot on the floor): median lowest "
-                   "foot point 3.4 cm above the floor, 7.0 cm at the 90% quantile (0 without locking)")
 def test_bandai_new_user_extrapolated_synth_stands_on_the_floor(new_user_outputs):
+    """`characteristic A B` is A - B (normal - old), so `synth A --add it=1` extrapolates to
+    2 normal - old: the root outruns the stride and the stance foot slides, never still. Foot
+    locking plants it and slides the plant where the leg's reach runs out; it used to lift it as a
+    sliding point (1.2 contact bands: median lowest foot point 3.4 cm above the floor, 7.0 cm at
+    the 90% quantile)."""
     w, _ = new_user_outputs
     cos, low = _floor_and_forward(f"{w}/sa.bvh")
     assert cos >= 0.95, cos

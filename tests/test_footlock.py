@@ -94,15 +94,17 @@ def measure(mot, fit, *, foot_lock=True, seconds=SECONDS):
             np.radians(m["knee_step_capture_deg"]), np.radians(m["straightest_knee_deg"]))
 
 
-# Not met yet (measured 2026-12-02 with still-point planting and 0.04 s easing, 5 s at the clip's
-# rate, N = 4; skating synthesized vs captured, largest frame-to-frame knee change synthesized vs
-# captured; `python -m experiments.footlock_bounds`). Strict: a clip that starts meeting the bounds
-# fails here until it is moved out of this table.
+# Not met yet (measured 2026-12-02, session 14, with the lift of a sliding point a moving maximum
+# before its 0.04 s easing, faded where the foot is held; 5 s at the clip's rate, N = 4; skating
+# synthesized vs captured, largest frame-to-frame knee change synthesized vs captured;
+# `python -m experiments.footlock_bounds`).
+# Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 NOT_MET = {
-    "02_01": "skating 1.05 vs 4.76 units/s (0.22x, met); knee step 4.2 vs 3.5 deg",
-    "02_03": "skating 5.26 vs 7.17 units/s (0.73x); knee step 4.7 vs 5.3 deg (met)",
-    "09_01": "skating 7.49 vs 7.23 units/s (1.04x); knee step 6.8 vs 8.2 deg (met)",
-    "09_02": "skating 6.62 vs 9.76 units/s (0.68x); knee step 6.4 vs 5.7 deg",
+    "02_01": "skating 1.08 vs 4.76 units/s (0.23x, met); knee step 4.4 vs 3.5 deg",
+    "02_03": "skating 2.80 vs 7.17 units/s (0.39x; the toe end site at toe-off is most of it); "
+             "knee step 4.4 vs 5.3 deg (met)",
+    "09_01": "skating 3.60 vs 7.23 units/s (0.50x); knee step 6.3 vs 8.2 deg (met)",
+    "09_02": "skating 3.15 vs 9.76 units/s (0.32x); knee step 6.2 vs 5.7 deg",
 }
 
 
@@ -243,3 +245,34 @@ def test_a_sliding_foot_point_is_not_planted_and_the_smoothing_is_a_moving_avera
     np.testing.assert_allclose(y[[0, 7, -1], 0], [0.0, 0.0, 1.0])
     assert np.all(np.diff(y[:, 0]) >= 0) and np.abs(np.diff(y[:, 0])).max() < 0.5
     np.testing.assert_allclose(y[9:11, 0], [1 / 3, 2 / 3], atol=1e-6)  # weights 1, 2, 3, 2, 1 (/9)
+
+
+def test_a_foot_that_slides_through_its_stance_stays_on_the_floor():
+    """A root that outruns the stride (issue 20's `synth A --add (A-B)=1`, an extrapolation) slides
+    the stance foot, never still. It is planted and slides with the hip where the leg's reach
+    runs out, on the floor; the sliding-point rule lifted it 1.2 contact bands (3.2 cm on Bandai)."""
+    mot, fit = _fits()["07_01"]
+    sk, dt, bm = mot.skeleton(), mot.frame_time_s, fit.body_map
+    up = bm.up_axis
+    iv = gait.contact_intervals(fit.model, sk, body_map=bm)
+    r = gait.synthesize_gait(fit.model, sk, 120, dt, body_map=bm, foot_lock=False)
+    horiz = [k for k in range(3) if k != up]
+    root = r.root_position.at[:, jnp.asarray(horiz)].multiply(2.5)  # the root outruns the stride
+    w = gait.contact_weights(r.phase, iv)
+    _, feet = gait.lock_feet(r.features, sk, w, body_map=bm, representation="euler", root_position=root,
+                             clearance=r.clearance, return_feet=True, smooth_frames=5)
+    band = 0.02 * float(bm.height)
+    lowest = np.asarray(feet[..., up] * bm.up_sign - r.clearance[None]).min(-1)  # [T, 2]
+    stance = np.asarray(w) >= 0.99
+    unlocked = np.asarray(r.foot_positions) + np.asarray(root - r.root_position)[:, None, None]
+    slide = np.linalg.norm(np.diff(unlocked[..., horiz], axis=0), axis=-1).min(-1)  # [T-1, 2]
+    held = np.linalg.norm(np.diff(np.asarray(feet)[..., horiz], axis=0), axis=-1).min(-1)
+    both = stance[1:] & stance[:-1]
+    print(f"\nstance lowest point: median {np.median(lowest[stance]):.3f}, 90% {np.quantile(lowest[stance], 0.9):.3f} "
+          f"(band {band:.2f}); slide per frame {held[both].mean():.3f} locked vs {slide[both].mean():.3f} unlocked")
+    # Measured: median 0.0 bands, 90% 0.39 bands (lifted, the median was 1.2 bands).
+    assert np.median(lowest[stance]) <= 0.05 * band and np.quantile(lowest[stance], 0.9) <= 0.75 * band
+    assert lowest.min() >= -1e-3 * band  # never below the floor
+    # At 2.5x the root's speed the reach holds nothing back: 0.297 against 0.292 units a frame
+    # unlocked (measured); the plant slides with the hip, no faster than 5% over the unlocked foot.
+    assert held[both].mean() <= 1.05 * slide[both].mean()

@@ -34,6 +34,9 @@ BLEND_RAD = 0.06 * TWO_PI
 #: A foot point is still (planted) below this fraction of the mean root move per frame (easing
 #: out at twice it), and a sliding point is lifted to `LIFT_BANDS` contact bands over its floor.
 STILL_FRACTION, LIFT_BANDS = 0.15, 1.2
+#: A stance (the phase's) in which a low foot point is still on less than half this share of
+#: the frames slides (planted, not lifted), easing to a normal stance at this share.
+SLIDING_SHARE = 0.4
 #: `synthesize_gait` eases the feet's shifts over this many seconds on each side (`lock_feet`).
 SMOOTH_S = 0.04
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
@@ -259,6 +262,49 @@ def _smooth(x, half):
     return sum(w[k] * xp[k:k + T] for k in range(2 * half + 1))
 
 
+def _stance_mean(on, x):
+    """Per frame, the mean of `x` over its run of `on` frames (a stance); 1 outside stance."""
+    T = on.shape[0]
+    idx = jnp.arange(T)
+    prev_on = jnp.concatenate([jnp.zeros((1,), bool), on[:-1]])
+    seg = jnp.clip(jax.lax.cummax(jnp.where(on & ~prev_on, idx, -1), axis=0), 0, T - 1)
+    total = jax.ops.segment_sum(jnp.where(on, x, 0.0), seg, num_segments=T)[seg]
+    count = jax.ops.segment_sum(on.astype(x.dtype), seg, num_segments=T)[seg]
+    return jnp.where(on, total / jnp.maximum(count, 1.0), 1.0)
+
+
+def _reach_on_floor(H, G, A, reach, upv):
+    """Ankle goals `[T, 3]` whose horizontal distance from the hip is eased short of what the leg
+    reaches at the goal's height: where the reach runs out, the plant slides with the hip and
+    the foot stays on the floor (eased along the hip-to-goal line, `soft_reach`, it would lift).
+    Goals within `REACH_KNEE` of the reach (or the pose's own hip-to-ankle distance) stay."""
+    from fourierjax._math import safe_sqrt
+
+    u = upv[None]
+    HG = G - H
+    v = jnp.sum(HG * u, -1, keepdims=True)
+    h = HG - v * u
+    hn = safe_norm(h)
+    d0 = REACH_KNEE * reach
+    d_ok = jnp.minimum(jnp.maximum(d0, safe_norm(A - H)), d0 + 0.9 * (REACH_LIMIT * reach - d0))
+    h_max = jnp.maximum(safe_sqrt(jnp.maximum(d_ok ** 2 - v[:, 0] ** 2, 0.0)), 1e-3 * reach)
+    AH = A - H
+    start = safe_norm(AH - jnp.sum(AH * u, -1, keepdims=True) * u)
+    hn2 = soft_reach(hn, h_max, 0.8, 1.0, start)
+    return H + v * u + h * (hn2 / jnp.maximum(hn, 1e-9))[:, None]
+
+
+def _dilate(x, half):
+    """A moving maximum over the first axis, `half` frames each side (edges held): eased by
+    `_smooth` over the same frames, a lift never falls below what it was on any frame."""
+    T = x.shape[0]
+    xp = jnp.concatenate([jnp.repeat(x[:1], half, 0), x, jnp.repeat(x[-1:], half, 0)], axis=0)
+    out = xp[:T]
+    for k in range(1, 2 * half + 1):
+        out = jnp.maximum(out, xp[k:k + T])
+    return out
+
+
 def _lock(features, skeleton, contact, root_position, clearance, ground, band, *, representation,
           body_map, legs, smooth_frames=0):
     from fourierjax.features import local_pose_from_features
@@ -286,6 +332,16 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # held where it stops, the landing leg could not. A sliding point is lifted clear of the
     # band instead (it is not in contact), and the foot is planted where its points are still.
     still = stillness(feet_pts, root_position, horizontal=1.0 - upv)
+    # A stance (the phase's) in which no low point is ever still slides on the floor: an
+    # extrapolated model whose root outruns its stride (`synth A --add (A-B)=1` on Bandai
+    # walk_normal slides the stance foot at 168 cm/s). Lifted as a sliding point, it stood 3.2 cm
+    # over the floor for most of the walk; it is planted instead, and the plant slides with the
+    # hip where the leg's reach runs out (`_reach_on_floor`).
+    still_low = jnp.max(still * (rel <= band), axis=-1)  # [T, 2]
+    still_share = jnp.stack([_stance_mean(contact[:, f] >= 0.5, still_low[:, f]) for f in range(2)], 1)
+    sliding = _smoothstep((SLIDING_SHARE - still_share) / (0.5 * SLIDING_SHARE))
+    slide_w = contact * sliding  # [T, 2]
+    still = jnp.maximum(still, slide_w[..., None])
     lam = hold_weights(rel, contact, band) * still
     # Down: within the band; in stance (the phase's weight) also a foot that hovers under twice it.
     low = (rel <= band) | ((contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True))
@@ -306,8 +362,15 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         # The lowest point stays on or over the floor. (Easing the lift too costs skating where
         # the eased lift dips into the band: 07_01 0.17x against 0.08x unsmoothed, 09_01 1.04x
         # against 0.36x; lifting at once pops the knee: 10.3 and 9.3 deg against 4.7 and 6.8.)
+        # The lift is a moving maximum before the easing, so it does not dip into the band where
+        # a point still slides, faded (eased) where the foot is held: 02_03 0.73x -> 0.39x, 09_01
+        # 1.04x -> 0.50x. Not faded it gave 0.55x and 0.28x but lifted held feet (Bandai
+        # `interpolate` walk: median lowest foot 1.29 cm against 0.28); faded at once it popped
+        # the knee (02_01 8.6 deg against 4.4).
         shift = _smooth(shift, smooth_frames)
-        dy = jnp.maximum(sign * shift[..., up], -gap)
+        lifted = (_smooth(_dilate(need * (1.0 - W), smooth_frames), smooth_frames)
+                  * _smooth(1.0 - W, smooth_frames))
+        dy = jnp.maximum(sign * shift[..., up], jnp.maximum(-gap, lifted))
         shift = shift * (1.0 - upv)[None, None] + (sign * dy)[..., None] * upv[None, None]
     out = features
     feet_out = []
@@ -318,6 +381,10 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         # Two-bone IK: the knee on the circle of points at thigh length from the hip and shin
         # length from the goal, on the side it bent to; a goal past reach is eased (no snap).
         l1, l2 = safe_norm(K - H), safe_norm(A - K)
+        # In a sliding stance the plant slides where the reach runs out (the foot stays on the
+        # floor); elsewhere an unreachable goal is eased along the leg, as before: on walks,
+        # sliding on the floor there instead skated 0.98x the capture on 07_01 (0.07x lifted).
+        G = G + slide_w[:, f, None] * (_reach_on_floor(H, G, A, l1 + l2, upv) - G)
         HG = G - H
         d = safe_norm(HG)
         G = H + HG * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H)) / jnp.maximum(d, 1e-9))[:, None]
