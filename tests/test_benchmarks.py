@@ -72,3 +72,26 @@ def test_a_benchmark_that_raises_still_writes_its_headline_records(tmp_path, mon
         assert r["ours"] is None and r["met"] is None
         assert any("fk raised RuntimeError: no such compile option" in n for n in r["notes"]), r
     assert "no such compile option" in capsys.readouterr().err
+
+
+def test_a_run_stopped_part_way_keeps_the_records_it_made(tmp_path, monkeypatch):
+    """Each benchmark's records are written as it ends (results.partial.json), so a run stopped
+    by a timeout keeps them; a finished run leaves only results.json."""
+    from experiments.benchmarks import __main__ as suite
+    from experiments.benchmarks import bvh_parse, fk
+
+    def broken(size):
+        raise RuntimeError("no such compile option")
+
+    def stopped(size):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fk, "run", broken)
+    monkeypatch.setattr(bvh_parse, "run", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        suite.main(["--out", str(tmp_path), "--small", "--only", "fk,bvh_parse"])
+    partial = json.loads((tmp_path / "results.partial.json").read_text())
+    assert [r["name"] for r in partial] == ["fk_1x1000", "fk_1024x240"]
+    assert not (tmp_path / "results.json").exists()
+    assert suite.main(["--out", str(tmp_path), "--small", "--only", "fk"]) == 0
+    assert (tmp_path / "results.json").exists() and not (tmp_path / "results.partial.json").exists()

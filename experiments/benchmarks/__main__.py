@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import sys
@@ -83,6 +84,9 @@ def main(argv=None) -> int:
             r.details.setdefault("load_average_after", load_average())
             records.append(r.as_json())
         print(f"  {name}: {time.perf_counter() - t0:.1f} s, load {load_average()}", flush=True)
+        # Written after every benchmark, so a run stopped part way keeps what it measured.
+        with open(os.path.join(args.out, "results.partial.json"), "w") as f:
+            json.dump(records, f, indent=1)
         jax.clear_caches()
     meta["load_average_end"] = load_average()
     meta["seconds"] = round(time.perf_counter() - t_start, 1)
@@ -92,6 +96,8 @@ def main(argv=None) -> int:
         r["meta"] = run_meta
     with open(os.path.join(args.out, "results.json"), "w") as f:
         json.dump(records, f, indent=1)
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(os.path.join(args.out, "results.partial.json"))
     with open(os.path.join(args.out, "metadata.json"), "w") as f:
         json.dump(meta, f, indent=1)
     table = _table(records)
