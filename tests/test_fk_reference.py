@@ -88,13 +88,14 @@ def test_every_entry_point_matches_numpy_reference_on_random_topologies(topo, se
     one = jax.vmap(lambda c: kinematics.fk_from_channels(skel, c))(x)
     local = jax.vmap(lambda c: kinematics.forward_kinematics(skel, *kinematics.pose_from_channels(skel, c)))(x)
     for res in (frames, one, local):
-        np.testing.assert_allclose(res.positions, ref_p, atol=1e-4)
-        np.testing.assert_allclose(res.end_site_positions, ref_e, atol=1e-4)
+        np.testing.assert_allclose(res.positions, ref_p, atol=1e-4, rtol=2e-6)
+        np.testing.assert_allclose(res.end_site_positions, ref_e, atol=1e-4, rtol=2e-6)
         # Rotations are unit quaternions equal (up to sign) across the entry points.
         np.testing.assert_allclose(np.linalg.norm(res.rotations, axis=-1), 1.0, atol=1e-5)
         dots = np.abs((np.asarray(res.rotations) * np.asarray(frames.rotations)).sum(-1))
         np.testing.assert_allclose(dots, 1.0, atol=1e-5)
-    np.testing.assert_allclose(kinematics.joint_positions(skel, x), ref_p, atol=1e-4)
+    # float32: hypothesis once drew a 131.87-unit position, 1.2e-4 (8 ulp) off the float64 reference.
+    np.testing.assert_allclose(kinematics.joint_positions(skel, x), ref_p, atol=1e-4, rtol=2e-6)
 
 
 @pytest.mark.parametrize("name", data.list())
