@@ -5,11 +5,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import logging
-import os
 import pathlib
 import pickle
 import re
-import tempfile
 from collections.abc import Callable
 
 _log = logging.getLogger(__name__)
@@ -277,19 +275,7 @@ def _export(fun, treedef, static, dynamic, specs, path: pathlib.Path, key: str,
 
 
 def _write_atomic(path: pathlib.Path, data: bytes) -> None:
+    from fourierjax.io.atomic import write_bytes_atomic
+
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        with _suppress():
-            os.unlink(tmp)
-        raise
-
-
-def _suppress():
-    import contextlib
-
-    return contextlib.suppress(OSError)
+    write_bytes_atomic(path, data)
