@@ -177,8 +177,11 @@ def test_toml_round_trip(maps, tmp_path):
     assert all(how == "file" for _, how in again.sources)
     path = tmp_path / "map.toml"
     path.write_text(text)
-    assert infer_body_map(fourierjax.data.load("07_01"), overrides=path) == dataclasses.replace(
-        bm, sources=infer_body_map(fourierjax.data.load("07_01"), overrides=path).sources)
+    from_file = infer_body_map(fourierjax.data.load("07_01"), overrides=path)
+    # The facing is measured again from the clip: NumPy's SIMD sums can round the last bit
+    # differently from one array to another (CI: 0.018963507926337147 against ...143).
+    np.testing.assert_allclose(from_file.facing, bm.facing, rtol=0, atol=1e-12)
+    assert dataclasses.replace(from_file, facing=bm.facing) == dataclasses.replace(bm, sources=from_file.sources)
     # the same TOML fits a renamed rig once its names are changed the same way
     stored = json.loads(json.dumps(bm.to_dict()))
     assert stored["version"] == 1

@@ -202,13 +202,19 @@ def test_foot_lock_toggle_is_the_librarys_locking(explorer):
 
     g = explorer.library.gait(explorer.params.a)
     results = {}
-    for lock in (False, True):
-        assert explorer.set(foot_lock=lock)
-        results[lock] = explorer.result
-        p = explorer.params
-        ref = gait.synthesize_gait(explorer.library.gait(p.a).model, g.template.skeleton(), p.num_frames,
-                                   p.frame_time_s, body_map=g.body_map, foot_lock=lock)
-        np.testing.assert_allclose(np.asarray(explorer.result.features), np.asarray(ref.features), atol=1e-5)
+    try:
+        for lock in (False, True):
+            assert explorer.set(foot_lock=lock)
+            results[lock] = explorer.result
+            p = explorer.params
+            ref = gait.synthesize_gait(explorer.library.gait(p.a).model, g.template.skeleton(), p.num_frames,
+                                       p.frame_time_s, body_map=g.body_map, foot_lock=lock)
+            # Two float32 programs compiled apart: on the CI machine the root position (26 units)
+            # came out 7.9e-5 apart, 3e-6 relative.
+            np.testing.assert_allclose(np.asarray(explorer.result.features), np.asarray(ref.features),
+                                       rtol=2e-5, atol=1e-5)
+    finally:
+        explorer.set(foot_lock=True)  # the module's explorer is shared: leave it as the default
     skate = {k: float(gait.contact_skating(r.foot_positions, explorer.params.frame_time_s,
                                            body_map=g.body_map).mean_speed) for k, r in results.items()}
     assert skate[True] < 0.7 * skate[False], skate  # planted feet slide less
