@@ -9,8 +9,8 @@ import pytest
 
 import fourierjax.data
 from fourierjax import fourier, style
-from fourierjax.errors import UserError
 from fourierjax.body import infer_body_map
+from fourierjax.errors import UserError
 from fourierjax.features import features_from_motion, heading_of, root_relative_positions
 from fourierjax.io.axes import to_y_up
 from fourierjax.model_io import load_model, save_model
