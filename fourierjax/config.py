@@ -120,7 +120,7 @@ SCHEMAS: dict[str, dict[str, Field]] = {
     "fit_quality": {
         "clips": Field(clips(), doc="bundled clips to fit"),
         "harmonics": Field(_N, doc="numbers of harmonics N to compare"),
-        "representation": Field(choice("euler", "expmap"), "euler", "rotation channels"),
+        "representation": Field(choice("euler", "expmap", "tangent"), "euler", "rotation channels"),
         "reference_harmonics": Field(integer(1, 32), 3, "N of the fit that finds omega"),
         "troje_variance": Field(number(0, 1), 0.99,
                                 "variance of a normal walk carried by 2 harmonics (Troje)"),
@@ -191,7 +191,7 @@ SCHEMAS["style_space"] = {
     "normal": Field(_is_str, "normal", "the neutral style"),
     "recognition_content": Field(_is_str, "walk", "the content of the leave-one-take-out recognition"),
     "harmonics": Field(integer(1, 16), 3),
-    "representations": Field(list_of(choice("euler", "expmap"), "representations"), ["euler", "expmap"],
+    "representations": Field(list_of(choice("euler", "expmap", "tangent"), "representations"), ["euler", "expmap"],
                              "rotation channels to compare (the first is the main one)"),
     "pca_k": Field(list_of(integer(1, 1000), "integers"), [2, 5, 10, 20]),
     "knn": Field(integer(1, 50), 1, "k of the k-NN classifier"),

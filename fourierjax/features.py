@@ -2,7 +2,9 @@
 
 Features are one column per channel: ``ROOT_CHANNELS`` (heading-frame root velocity and height)
 first, then every joint's rotation in radians, as Euler angles in the file's order
-(``"<joint>.<Z|Y|X>rotation"``) or a continuous exponential map (``"<joint>.expmap0..2"``).
+(``"<joint>.<Z|Y|X>rotation"``) or a continuous exponential map (``"<joint>.expmap0..2"``; for
+``"tangent"`` models ``"<joint>.expmap_tangent0..2"``, also expmaps as features: only the model's
+coefficients are tangent coordinates about the clip means, `fourierjax._fourier._tangent`).
 """
 
 from __future__ import annotations
@@ -50,10 +52,12 @@ if TYPE_CHECKING:  # imported where used at run time: `fourierjax._fourier` impo
     from fourierjax._fourier._model import FourierModel
 
 #: Feature representations of joint rotations.
-REPRESENTATIONS = ("euler", "expmap")
+REPRESENTATIONS = ("euler", "expmap", "tangent")
 #: The root channels that start every feature layout: heading-frame velocity (file units/s) and
 #: root height (file units). Root position is integrated from the velocities when written back.
 ROOT_CHANNELS = ("root.vx", "root.vz", "root.y")
+#: Channel name stems of the expmap-valued feature layouts.
+_EXPMAP_SUFFIX = {"expmap": "expmap", "tangent": "expmap_tangent"}
 
 __all__ = [
     "REPRESENTATIONS",
@@ -94,7 +98,7 @@ def channel_names_for(topology: Topology, representation: str) -> tuple[str, ...
         if representation == "euler":
             names += [f"{joint}.{axis}rotation" for axis in order]
         else:
-            names += [f"{joint}.expmap{k}" for k in range(3)]
+            names += [f"{joint}.{_EXPMAP_SUFFIX[representation]}{k}" for k in range(3)]
     return tuple(names)
 
 
@@ -388,7 +392,7 @@ def motion_from_features(
         col += 3
         if j in above:
             continue  # the template's values
-        if j == pelvis or rep == "expmap":
+        if j == pelvis or rep != "euler":
             q = (_rot("quat_from_euler", ang, order=order) if rep == "euler"
                  else _rot("quat_from_expmap", ang))
             if j == pelvis:
@@ -447,7 +451,7 @@ def channel_model(
     rep = _check_names(topo, model.channel_names, "channel_model: `model`")
     if rep != "euler":
         raise UserError(
-            "channel_model: `model` has expmap features; BVH channels are Euler angles, which "
+            f"channel_model: `model` has {rep} features; BVH channels are Euler angles, which "
             "are not linear in exponential maps (fit with representation='euler')"
         )
     omega = model.omega

@@ -551,7 +551,7 @@ def test_body_map_travels_with_the_model(tmp_path):
     model_io.save_model(path, fit.model, motion=m, body_map=fit.body_map)
     with np.load(path) as z:
         header = json.loads(str(z["header"]))
-    assert header["version"] == 2 and model_io.FORMAT_VERSION == 3  # 3: with contact intervals
+    assert header["version"] == 2 and model_io.FORMAT_VERSION == 4  # 3: with contact intervals, 4: tangent frames
     assert header["body_map"] == fit.body_map.to_dict()
     mf = model_io.load_model(path)
     assert mf.stored_body_map is not None and fields(mf.body_map) == fields(fit.body_map)
@@ -587,7 +587,7 @@ def test_contact_intervals_travel_with_the_model(tmp_path):
     model_io.save_model(path, fit.model, motion=m, body_map=fit.body_map, contact_intervals=iv)
     with np.load(path) as z:
         header = json.loads(str(z["header"]))
-    assert header["version"] == model_io.FORMAT_VERSION == 3
+    assert header["version"] == 3 and model_io.FORMAT_VERSION == 4
     mf = model_io.load_model(path)
     np.testing.assert_allclose(mf.contact_intervals, np.mod(iv, 2 * np.pi))
     # Older files (no intervals) still load, without them.

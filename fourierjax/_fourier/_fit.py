@@ -12,6 +12,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from fourierjax import _jit
 from fourierjax._checks import integer
+from fourierjax._fourier import _tangent
 from fourierjax._fourier._buckets import fill_masked
 from fourierjax._fourier._core import _fit_arrays
 from fourierjax._fourier._linear import _masked_mean, _solve_coefficients
@@ -396,9 +397,9 @@ def _broadcasts_to(shape, target) -> bool:
         return False
 
 
-def _fit_result(out, representation, channel_names) -> FitResult:
+def _fit_result(out, representation, channel_names, frames=None) -> FitResult:
     model = FourierModel(out["offset"], out["amplitude"], out["phase"], out["omega"],
-                         representation, tuple(channel_names))
+                         representation, tuple(channel_names), frames)
     return FitResult(model, out["omega_spectral"], out["omega_steps"], out["omega_guess"],
                      out["omega"], out["rms"], out["rms_deg"],
                      out["variance_explained_angles"], out["num_frames"], out["result"])
@@ -453,6 +454,9 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
     _check_channel_weights(name, channel_weights, defaulted)
     _check_fit_values(name, features, mask, frame_time_s, omega_steps, num_harmonics,
                       options["f_min_hz"], channel_weights, per_clip=throw)
+    frames = None
+    if representation == "tangent":  # fitted about each joint's clip mean (_tangent)
+        features, frames = _tangent.fit_inputs(name, features, mask, channel_names)
     limit = resolve_limit(f"{name}: max_memory", max_memory)
     batch = features.shape[0] if features.ndim == 3 else 1
     per_clip = fit_bytes_per_clip(*features.shape[-2:], num_harmonics,
@@ -469,7 +473,7 @@ def _run_fit(program, name, features, frame_time_s, num_harmonics, *, mask=None,
     else:
         out = _fit_in_chunks(program, chunk, features, mask, frame_time_s, omega_steps,
                              channel_weights, options)
-    result = _fit_result(out, representation, channel_names)
+    result = _fit_result(out, representation, channel_names, frames)
     if not throw:
         return result
     if _is_traced(result.result):

@@ -141,6 +141,9 @@ def fit_linear(
     fn = "fit_linear"
     num_harmonics = integer(num_harmonics, f"{fn}: num_harmonics", 1)
     _check_representation(fn, representation)
+    if representation == "tangent":
+        raise UserError(f"{fn}: representation 'tangent' is fitted by `fit` (about the clip means); "
+                        "use fit, or representation 'euler' / 'expmap' here")
     features = _as_float_features(fn, _as_array(features))
     if features.ndim != 2:
         raise UserError(f"{fn}: features must be [T, C], got shape {features.shape}")

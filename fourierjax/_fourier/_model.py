@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from fourierjax._fourier import _tangent
 from fourierjax._fourier._validate import _names_tuple
 from fourierjax._math import wrap_angle
 from fourierjax.errors import UserError
@@ -33,8 +34,10 @@ class FourierModel(eqx.Module):
     """Per-channel Fourier series with one fundamental (Unuma 1995 eq. 1, sine convention).
 
     Fields: ``offset [C]`` (A0), ``amplitude [C, N]`` (A_n >= 0), ``phase [C, N]`` (phi_n in
-    (-pi, pi]), ``omega []`` (rad/s); static ``representation`` ("euler" | "expmap") and
-    ``channel_names`` (tuple of str, empty or length C).
+    (-pi, pi]), ``omega []`` (rad/s); static ``representation`` ("euler" | "expmap" |
+    "tangent") and ``channel_names`` (tuple of str, empty or length C); ``frames [K, 4]`` (wxyz),
+    the clip-mean rotation of each joint that a "tangent" model's coefficients are about
+    (`fourierjax._fourier._tangent`; required there, None for the other representations).
     """
 
     offset: Float[Array, " C"]
@@ -43,6 +46,7 @@ class FourierModel(eqx.Module):
     omega: Float[Array, ""]
     representation: str = eqx.field(static=True, default="euler")
     channel_names: tuple[str, ...] = eqx.field(static=True, default=(), converter=_names_tuple)
+    frames: Float[Array, "K 4"] | None = None
 
     def __check_init__(self):
         off, amp, ph, om = (jnp.shape(x) for x in (self.offset, self.amplitude, self.phase,
@@ -69,6 +73,12 @@ class FourierModel(eqx.Module):
             raise UserError(
                 f"FourierModel: {len(self.channel_names)} channel_names for {amp[-2]} channels"
             )
+        if (self.frames is None) == (self.representation == "tangent"):
+            raise UserError(
+                "FourierModel: `frames` [K, 4] (the joints' clip means) is required for "
+                f"representation 'tangent' and must be None otherwise (got {self.representation!r})")
+        if self.frames is not None:
+            _tangent.check_frames("FourierModel", self.frames, amp[-2], names, off[:-1])
 
     @property
     def num_channels(self) -> int:
@@ -87,11 +97,12 @@ class FourierModel(eqx.Module):
         return self.amplitude * jnp.cos(self.phase), self.amplitude * jnp.sin(self.phase)
 
     @classmethod
-    def from_sin_cos(cls, offset, a, b, omega, representation="euler", channel_names=()):
+    def from_sin_cos(cls, offset, a, b, omega, representation="euler", channel_names=(),
+                     frames=None):
         """Inverse of :meth:`sin_cos` (amplitudes made >= 0, phases in (-pi, pi])."""
         amplitude, phase = _safe_norm_atan2(jnp.asarray(a), jnp.asarray(b))
         return cls(jnp.asarray(offset), amplitude, phase, jnp.asarray(omega),
-                   representation, tuple(channel_names))
+                   representation, tuple(channel_names), frames)
 
     def to_cosine(self) -> tuple[Array, Array, Array]:
         """Tilmanne & Dutoit eq. 1 convention: ``x = p0 + sum p_n cos(n w t + phase_cos_n)``.

@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import _jit
+from fourierjax._fourier import _tangent
 from fourierjax._fourier._model import FourierModel
 from fourierjax._fourier._validate import _check_one_model
 from fourierjax._linalg import matmul as _mm
@@ -83,7 +84,16 @@ def synthesize_phase(model: FourierModel, phase: Float[Array, " T"]) -> Float[Ar
     # One [T, 2N] basis and one contraction (one character at a time; for many, the elementwise
     # form of `synthesize_batch` is faster under vmap).
     basis = jnp.concatenate([jnp.sin(nt), jnp.cos(nt)], axis=1)
-    return model.offset[None, :] + _mm(basis, jnp.concatenate([a, b], axis=1).T)
+    out = model.offset[None, :] + _mm(basis, jnp.concatenate([a, b], axis=1).T)
+    return _tangent_features(model, out)
+
+
+def _tangent_features(models: FourierModel, x: Array) -> Array:
+    """A tangent model's synthesis as features: expmaps about its frames (others unchanged)."""
+    if models.representation != "tangent":
+        return x
+    cols = _tangent.triples(models.channel_names, models.num_channels, models.frames.shape[-2])
+    return _tangent.from_tangent(x, models.frames, cols)
 
 
 def _synthesize_phase_elementwise(model: FourierModel, phase: Float[Array, " T"]) -> Float[Array, "T C"]:
@@ -201,4 +211,5 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
         t_s = np.asarray(t_s)
         if t_s.dtype.kind not in "biuf":
             raise UserError(f"synthesize_batch: `t_s` must be real times in seconds, got dtype {t_s.dtype}")
-    return _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s)
+    out = _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s)
+    return _tangent_features(models, out)

@@ -64,6 +64,14 @@ class Characteristic(eqx.Module):
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
 
 
+def refuse_tangent(where: str, model) -> None:
+    """Style algebra other than `interpolate` is defined on Euler and expmap coefficients only."""
+    if getattr(model, "representation", "") == "tangent":
+        raise UserError(f"{where}: tangent models (coefficients about each joint's clip mean) are "
+                        "not supported here; fit with --representation euler (or representation="
+                        "'euler')")
+
+
 def pad_harmonics(model, num_harmonics: int):
     """`model` with zero-amplitude harmonics appended up to `num_harmonics` (same signal).
 
@@ -126,6 +134,7 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
         be infinite; under jit the error comes from `eqx.error_if` when the program runs).
     """
     check_compatible(a, b)
+    refuse_tangent("characteristic", a)
     a, b = check_models_omega("characteristic", a=a, b=b)
     a, b = common_harmonics(a, b)
     return _characteristic(a, b)
@@ -278,6 +287,7 @@ def superpose(
         weights or log_omega and a base ω that is not > 0 (under jit, from `eqx.error_if`).
     """
     check_choice(method, METHODS, "method", "superpose")
+    refuse_tangent("superpose", base)
     base = check_models_omega("superpose", base=base)
     base, chars, weights = _prepare_superposition(base, characteristics, weights)
     chars = check_log_omega("superpose", chars)

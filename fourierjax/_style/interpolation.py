@@ -33,6 +33,7 @@ from fourierjax._style._common import (
 from fourierjax._style.characteristics import common_harmonics
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
+from fourierjax.rotations import quat_slerp
 
 
 def interpolate_omega(
@@ -108,6 +109,10 @@ def interpolate_core(a, b, s, method: str, omega_mode: str):
 
 @filter_jit
 def _interpolate(a, b, s, method: str, omega_mode: str):
+    if a.representation == "tangent":
+        # Eq. 3 on the tangent coordinates, and the clip means slerped (s = 0, 1: a and b).
+        out = interpolate_core(a, b, s, method, omega_mode)
+        return replace(out, frames=quat_slerp(a.frames, b.frames, s))
     return interpolate_core(a, on_branch_of(a, b), s, method, omega_mode)
 
 
@@ -133,7 +138,9 @@ def interpolate(
     (thighs at +179° and −179° meet at ±180°, not 0°), an exponential-map triple `J.expmap0..2`
     after b's rotation vector is replaced by the equivalent one nearest a's (`v − 2πk·v/|v|`,
     its harmonics mapped to first order); `root.*` channels interpolate plainly. So `s = 1`
-    gives b's motion on a's branch.
+    gives b's motion on a's branch. Tangent models (`representation="tangent"`) interpolate
+    their coefficients (the tangent coordinates) by eq. 3 and slerp the joints' clip means
+    (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`.
 
     Which method: polar keeps each harmonic's amplitude between the two (a harmonic whose
     phases oppose does not cancel halfway, as it does with phasors) and is what Unuma

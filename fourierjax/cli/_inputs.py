@@ -45,7 +45,7 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
         "--representation",
         default="euler",
         metavar="REP",
-        help="channel representation when fitting a BVH argument: euler (default) or expmap",
+        help="channel representation when fitting a BVH argument: euler (default), expmap or tangent",
     )
 
 

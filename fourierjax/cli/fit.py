@@ -19,9 +19,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "bundled clips (e.g. 07_12)")
     parser.add_argument("--harmonics", required=True, type=int, metavar="N",
                         help="number of harmonics N (Tilmanne: 2; Unuma: 3 to 7)")
-    parser.add_argument("--representation", default="euler", choices=("euler", "expmap"),
+    parser.add_argument("--representation", default="euler", choices=("euler", "expmap", "tangent"),
                         help="rotation channels: the file's Euler angles made continuous "
-                        "(default) or the continuous exponential map (Tilmanne)")
+                        "(default), the continuous exponential map (Tilmanne), or tangent "
+                        "coordinates about each joint's clip mean (the same fit whatever the "
+                        "rig's joint frames and Euler orders)")
     parser.add_argument("--start-frame", type=int, default=None, metavar="K",
                         help="first frame of the file to use (default: drop leading rest/T-pose "
                         "frames, with a notice)")

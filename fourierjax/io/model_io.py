@@ -21,7 +21,7 @@ from fourierjax.errors import UserError
 from fourierjax.io.atomic import write_bytes_atomic
 
 FORMAT_NAME = "fourierjax.fourier_model"
-FORMAT_VERSION = 3
+FORMAT_VERSION = 4
 CHARACTERISTIC_FORMAT_NAME = "fourierjax.fourier_characteristic"
 CHARACTERISTIC_FORMAT_VERSION = 1
 
@@ -337,7 +337,7 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
 
     Format ``fourierjax.fourier_model``, version 1: an uncompressed ``.npz`` holding ``header``
     (a 0-d unicode array, one JSON object: ``format``, ``version``, ``representation``
-    ("euler" | "expmap"), ``channel_names``, ``num_channels`` C, ``num_harmonics`` N,
+    ("euler" | "expmap" | "tangent"), ``channel_names``, ``num_channels`` C, ``num_harmonics`` N,
     ``phase_convention`` "sine", ``skeleton`` (null or names, parents, channels,
     end_site_parents, frame_time_s), ``provenance`` (free JSON), ``alignment``); float64
     ``offset [C]``, ``amplitude [C, N]`` (A_n >= 0), ``phase [C, N]`` (radians, Unuma eq. 1
@@ -348,6 +348,8 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     without a body map is written as version 1, which older readers still read. Version 3 adds
     ``contact_intervals`` (``[[left start, left end], [right start, right end]]``, radians of the
     cycle; `fourierjax.gait.contact_intervals`); a file without them keeps version 1 or 2.
+    Version 4 adds ``frames [K, 4]`` (wxyz), the clip means of a ``"tangent"`` model, only
+    written for such models (other models keep versions 1-3).
 
     Arguments:
         path: output file (written as given; conventionally ``*.npz``).
@@ -373,10 +375,14 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     version = 2 if body_map is not None else 1
     intervals = _contact_intervals(os.fspath(path), contact_intervals, UserError)
     if intervals is not None:
-        version = FORMAT_VERSION
+        version = 3
+    if getattr(model, "frames", None) is not None:
+        version = FORMAT_VERSION  # a tangent model: its joints' clip means
     header = _header(FORMAT_NAME, version, model, "model", skeleton=None,
                      provenance=provenance, alignment=alignment)
     arrays = {k: getattr(model, k) for k in _MODEL_ARRAYS}
+    if getattr(model, "frames", None) is not None:
+        arrays["frames"] = model.frames
     _refuse_non_finite("save_model", "model", arrays, path)
     if not float(np.asarray(model.omega)) > 0:
         raise UserError(f"save_model: `model` omega must be > 0 rad/s, got "
@@ -442,8 +448,11 @@ def load_model(path) -> ModelFile:
     names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
                                                 "phase": ("C", "N"), "omega": ()})
     try:
+        frames = data.get("frames")
+        if frames is not None and not np.allclose(np.linalg.norm(frames, axis=-1), 1.0, atol=1e-5):
+            raise ModelFileError(path, "frames must be unit quaternions (wxyz)")
         model = FourierModel(*(data[k] for k in _MODEL_ARRAYS),
-                             header.get("representation", ""), names)
+                             header.get("representation", ""), names, frames)
     except (ValueError, TypeError) as err:
         raise ModelFileError(path, str(err)) from None
     problem = _model_problem(model.representation, names, data["amplitude"], data["omega"])
@@ -512,7 +521,8 @@ def _model_problem(representation: str, names, amplitude, omega) -> str | None:
     A_n >= 0, signs folded into the phase), ω outside the physical range."""
     amplitude = np.asarray(amplitude, np.float64)
     omega = float(np.asarray(omega))
-    other = {"expmap": (_EULER_NAME, "an Euler"), "euler": (_EXPMAP_NAME, "an expmap")}
+    other = {"expmap": (_EULER_NAME, "an Euler"), "euler": (_EXPMAP_NAME, "an expmap"),
+             "tangent": (_EULER_NAME, "an Euler")}
     if representation in other:
         pattern, what = other[representation]
         bad = [n for n in names if pattern.search(n)]

@@ -1,0 +1,152 @@
+"""The "tangent" representation: each joint's rotation about its clip mean, ``R_j = M_j exp(d_j)``.
+
+A change of joint frames ``R' = C_p^T R C_j`` moves the chordal mean the same way
+(``M' = C_p^T M C_j``) and maps the tangent coordinates linearly (``d' = C_j^T d``); a least-squares
+Fourier fit with one basis on all three channels of a joint commutes with that map, so the fit of
+a rewritten clip is the rewritten fit, whatever the rig's rest frames or Euler orders.
+
+Features (what `fit` takes and synthesis returns) stay exponential maps, each on the branch
+nearest ``log M_j``; only the model's coefficients are the ``d_j`` and ``FourierModel.frames``
+``[K, 4]`` holds the ``M_j`` (wxyz).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from fourierjax import rotations
+from fourierjax.errors import UserError
+
+#: Suffix of the first channel of a joint's triple (``"<joint>.expmap_tangent0..2"``).
+_FIRST = ".expmap_tangent0"
+_TWO_PI = 2.0 * np.pi
+# Power iterations of the 4x4 scatter matrix after the sign-aligned start: the start is already
+# within a few degrees of the dominant eigenvector for a gait clip; each iteration shrinks the
+# error by the eigenvalue ratio (plain jnp: no batched LAPACK call, see STYLE "Known traps").
+_POWER_STEPS = 12
+
+
+def triples(channel_names: tuple[str, ...], num_channels: int, num_joints: int | None = None) -> np.ndarray:
+    """Static ``[K, 3]`` column indices of the joints' tangent triples.
+
+    From the channel names when there are any (``"<joint>.expmap_tangent0..2"``), else the last
+    ``3 * num_joints`` channels (the feature layout: root channels first).
+    """
+    if channel_names:
+        first = [i for i, n in enumerate(channel_names) if n.endswith(_FIRST)]
+        return np.asarray([[i, i + 1, i + 2] for i in first], dtype=int).reshape(-1, 3)
+    if num_joints is None:
+        raise UserError("tangent models need channel_names (`<joint>.expmap_tangent0..2`)")
+    start = num_channels - 3 * num_joints
+    return np.arange(start, num_channels).reshape(-1, 3)
+
+
+def check_frames(where: str, frames, num_channels: int, channel_names, lead: tuple[int, ...]) -> None:
+    """Static checks of ``FourierModel.frames`` for a model of ``representation``."""
+    shape = jnp.shape(frames)
+    if len(shape) < 2 or shape[-1] != 4 or tuple(shape[:-2]) != tuple(lead):
+        raise UserError(
+            f"{where}: `frames` must be [..., K, 4] (wxyz clip-mean quaternions, one per rotation "
+            f"joint) with the model's leading axes {lead}, got shape {shape}")
+    K = shape[-2]
+    if channel_names:
+        k = len(triples(channel_names, num_channels))
+        if k != K:
+            raise UserError(f"{where}: {K} `frames` for {k} `.expmap_tangent0..2` joints in "
+                            "channel_names")
+    elif 3 * K > num_channels:
+        raise UserError(f"{where}: {K} `frames` need {3 * K} channels, the model has {num_channels}")
+
+
+def _normalize(q: Array) -> Array:
+    n2 = jnp.sum(q * q, axis=-1, keepdims=True)
+    # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.
+    small = n2 < 1e-30
+    return jnp.where(small, jnp.array([1.0, 0.0, 0.0, 0.0], q.dtype),
+                     q / jnp.sqrt(jnp.where(small, 1.0, n2)))
+
+
+def clip_means(q: Float[Array, "T K 4"], w: Float[Array, "T K"]) -> Float[Array, "K 4"]:
+    """Weighted chordal mean of each joint's quaternions (the dominant eigenvector of
+    ``sum_t w q q^T``, sign-invariant), ``w >= 0`` canonical; equivariant: ``mean(a q b) = a mean(q) b``.
+    """
+    ref = jnp.take_along_axis(q, jnp.argmax(w, axis=0)[None, :, None], axis=0)[0]  # [K, 4]
+    s = jnp.where(jnp.sum(q * ref[None], axis=-1) < 0, -1.0, 1.0).astype(q.dtype)
+    m = _normalize(jnp.sum((w * s)[..., None] * q, axis=0))
+    for _ in range(_POWER_STEPS):
+        m = _normalize(jnp.sum((w * jnp.sum(q * m[None], axis=-1))[..., None] * q, axis=0))
+    return jnp.where(m[..., :1] < 0, -m, m)
+
+
+def _log_about(frames: Array, v: Array) -> Array:
+    """``d = log(M^-1 exp(v))`` on the hemisphere of ``M`` (angle in [0, pi])."""
+    q = rotations.quat_from_expmap(v)
+    return rotations.expmap_from_quat(rotations.quat_multiply(rotations.quat_conjugate(frames), q))
+
+
+def _nearest_branch(v: Array, ref: Array) -> Array:
+    """Of ``v + 2 pi k v/|v|`` (one rotation), the one nearest ``ref``."""
+    n2 = jnp.sum(v * v, axis=-1, keepdims=True)
+    small = n2 < 1e-24
+    # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.
+    norm = jnp.sqrt(jnp.where(small, 1.0, n2))
+    axis = jnp.where(small, 0.0, v / norm)
+    angle = jnp.where(small, 0.0, norm)[..., 0]
+    k = jax.lax.stop_gradient(jnp.round((jnp.sum(ref * axis, axis=-1) - angle) / _TWO_PI))
+    return v + (_TWO_PI * k)[..., None] * axis
+
+
+def to_tangent(features: Float[Array, "*B T C"], weights: Float[Array, "*B T K"],
+               cols: np.ndarray) -> tuple[Float[Array, "*B T C"], Float[Array, "*B K 4"]]:
+    """Fit inputs: expmap features to tangent coordinates about the clip means (weights: frames
+    used per joint). Returns ``(features with d in the triples, frames)``."""
+    v = features[..., cols]  # [*B, T, K, 3]
+    q = rotations.quat_from_expmap(v)
+    mean = clip_means
+    for _ in range(features.ndim - 2):
+        mean = jax.vmap(mean)
+    frames = mean(q, weights)
+    d = _log_about(frames[..., None, :, :], v)
+    out = features.at[..., cols.reshape(-1)].set(d.reshape(*d.shape[:-2], -1))
+    return out, frames
+
+
+def from_tangent(x: Float[Array, "*B T C"], frames: Float[Array, "*B K 4"],
+                 cols: np.ndarray) -> Float[Array, "*B T C"]:
+    """Synthesized tangent coordinates to expmap features: ``exp(v) = M exp(d)``, ``v`` on the
+    branch nearest ``log M``."""
+    d = x[..., cols]  # [*B, T, K, 3]
+    m = jnp.asarray(frames, x.dtype)[..., None, :, :]
+    v = rotations.expmap_from_quat(rotations.quat_multiply(m, rotations.quat_from_expmap(d)))
+    v = _nearest_branch(v, rotations.expmap_from_quat(m))
+    return x.at[..., cols.reshape(-1)].set(v.reshape(*v.shape[:-2], -1))
+
+
+def fit_inputs(name: str, features, mask, channel_names):
+    """`fit` / `fit_batch` hook: ``(tangent features, frames)`` of expmap ``features [*B, T, C]``
+    with ``mask`` None, ``[*B, T]`` or ``[*B, T, C]`` (the frames each joint's mean uses)."""
+    if not channel_names:
+        raise UserError(f"{name}: representation 'tangent' needs channel_names "
+                        "(`<joint>.expmap_tangent0..2`, features.channel_names_for)")
+    cols = triples(tuple(channel_names), features.shape[-1])
+    if len(cols) == 0:
+        raise UserError(f"{name}: representation 'tangent' but no `.expmap_tangent0` channels")
+    traced = isinstance(features, jax.core.Tracer)
+    x = jnp.asarray(features)
+    if mask is None:
+        w = jnp.ones((*x.shape[:-1], len(cols)), x.dtype)
+    else:
+        m = jnp.asarray(mask)
+        w = (m[..., cols[:, 0]] if m.ndim == x.ndim else
+             jnp.broadcast_to(m[..., None], (*m.shape, len(cols)))).astype(x.dtype)
+        # Frames left out may hold NaN: they must not reach the means.
+        keep = w[..., None] > 0
+        v = jnp.where(keep, x[..., cols], 0.0)
+        x = x.at[..., cols.reshape(-1)].set(v.reshape(*v.shape[:-2], -1))
+    out, frames = to_tangent(x, w, cols)
+    if not traced:
+        out, frames = np.asarray(out), np.asarray(frames)
+    return out, frames
