@@ -100,3 +100,22 @@ def test_batch_size_sweep_compiles_at_most_twice_and_keeps_results(walk):
             np.testing.assert_allclose(a.omega_fit, b.omega_fit, rtol=1e-5, err_msg=str(size))
             np.testing.assert_allclose(a.raw_model.amplitude, b.raw_model.amplitude, atol=1e-4)
             assert a.alignment == b.alignment
+
+
+def test_batch_sizes_through_the_whole_pipeline_compile_nothing_new(walk):
+    """Acceptance, end to end: after one clip, `fit_motions` of 8, 13 and 50 clips (segment,
+    glitch masks, features, contacts, fit, metrics; all in the small batch bucket) compiles no
+    XLA program at all. The sweep above starts at `_fit_clips`, after the stages before the fit,
+    so it missed eager rotation and FK programs on each chunk's concatenated frames (7 new
+    programs per batch size whose concatenation reached a new length bucket)."""
+    from fourierjax._programs import ProgramCount
+
+    m, bm = walk
+    M.fit_motions([m], 2, body_map=bm)  # one clip: compiles every program of the small bucket
+    counts = {}
+    for size in (8, 13, 50):
+        with ProgramCount() as count:
+            fits = M.fit_motions([m[3 * (k % 5):] for k in range(size)], 2, body_map=bm)
+        counts[size] = (count.programs, dict(count.where))
+        assert all(f.successful for f in fits)
+    assert all(n == 0 for n, _ in counts.values()), counts

@@ -302,3 +302,31 @@ def test_transition_command_writes_the_grounded_motion(tmp_path):
     assert np.linalg.norm(travel[[0, 2]]) > 50  # walks, then runs: ~4 s at 20-46 units/s
     assert main(["transition", a, b, "--seconds", "4", "--start", "1.5", "--duration", "1.5", "--no-root-motion",
                  "--out", str(tmp_path / "n.bvh")]) == 0
+
+
+def test_a_warm_grounded_transition_runs_a_few_saved_programs(monkeypatch, tmp_path):
+    """Issue 25: a second `fourierjax transition` (from model files) was 552 XLA programs and 447
+    traces, 8.9 s: the hip rule, root motion, floors, FK and foot locking ran as small eager and
+    jitted pieces. The tail after the blend is one saved program now. As a new process with a
+    warm cache (`jax.clear_caches()`, saved programs on): a handful of programs, the tail
+    loaded, not traced, and the same frames. Counted with JAX's compile events, never a clock.
+    Last in the file: the cleared caches cost later tests their compiled programs."""
+    import jax
+
+    from fourierjax import _compile_cache
+    from fourierjax._programs import ProgramCount
+
+    monkeypatch.delenv(_compile_cache.NO_CACHE_ENV, raising=False)
+    monkeypatch.setenv(_compile_cache.CACHE_DIR_ENV, str(tmp_path / "cache"))
+    monkeypatch.setattr(_compile_cache, "_enabled", True)
+    motions, fits = _fits(("02_01", "02_03"), 5)
+    dt = fits[0].frame_time_s
+    args = (fits[0].model, fits[1].model, motions[0].skeleton(), int(round(3.0 / dt)), dt, 1.0, 1.0)
+    first = style.grounded_transition(*args, body_map=fits[0].body_map)
+    jax.clear_caches()
+    with ProgramCount() as count:
+        again = style.grounded_transition(*args, body_map=fits[0].body_map)
+    np.testing.assert_allclose(np.asarray(again.features), np.asarray(first.features), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(np.asarray(again.root_position), np.asarray(first.root_position), atol=1e-4)
+    assert "_grounded" not in count.by_name and "flat" not in count.by_name, count.by_name
+    assert count.programs <= 16, (count.programs, dict(count.where))

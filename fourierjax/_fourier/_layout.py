@@ -49,18 +49,25 @@ def bucket(n: int) -> int:
 
 _JITTED: dict = {}
 
+#: `rot` runs more rows than this in blocks of this many, so its programs stop at this size:
+#: a batch's concatenated frames (`_motion._batch`) reuse one program whatever the batch size.
+ROW_BLOCK = 4096
+
 
 def rot(name: str, *arrays, **static) -> np.ndarray:
     """``rotations.<name>(*arrays)`` on NumPy arrays whose first axis is time: padded to a
-    length bucket and run through one cached jit per function (eager JAX ops would compile
-    again for every clip length)."""
+    length bucket (blocks of `ROW_BLOCK` rows beyond it) and run through one cached jit per
+    function (eager JAX ops would compile again for every clip length)."""
     F = arrays[0].shape[0]
-    Fp = bucket(F)
-    padded = [np.concatenate([a, np.repeat(a[-1:], Fp - F, axis=0)]) for a in arrays]
     key = (name, tuple(sorted(static.items())))
     fn = _JITTED.get(key)
     if fn is None:
         fn = _JITTED[key] = _jit.filter_jit(functools.partial(getattr(rotations, name), **static))
+    if F > ROW_BLOCK:
+        return np.concatenate([rot(name, *(a[s:s + ROW_BLOCK] for a in arrays), **static)
+                               for s in range(0, F, ROW_BLOCK)])
+    Fp = bucket(F)
+    padded = [np.concatenate([a, np.repeat(a[-1:], Fp - F, axis=0)]) for a in arrays]
     return as_f64(fn(*padded))[:F]
 
 

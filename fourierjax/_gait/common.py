@@ -12,6 +12,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
 from fourierjax._jit import filter_jit
+from fourierjax._saved import saved
 from fourierjax.errors import UserError
 from fourierjax.skeleton import common_ancestor
 
@@ -162,6 +163,7 @@ def feet_of(body_map: BodyMap) -> FootPoints:
                       (tuple(body_map.left.foot_point_names), tuple(body_map.right.foot_point_names)))
 
 
+@saved
 @filter_jit
 def _cycle_fk(model, skeleton, num_samples):
     from fourierjax.fourier import synthesize_phase

@@ -10,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from fourierjax._jit import filter_jit
+from fourierjax._saved import saved
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -83,6 +84,7 @@ def _cycle_feet(model, skeleton, body_map, num_samples):
     return np.asarray(grid), np.asarray(pts, np.float64), np.asarray(root_v, np.float64)
 
 
+@saved
 @filter_jit
 def _cycle_feet_jit(model, skeleton, feet, pelvis, num_samples):
     # One program: run eagerly, the cycle's synthesis and FK were ~0.5 s of dispatches per call

@@ -7,8 +7,8 @@ import os
 
 import numpy as np
 
-from fourierjax._fourier._buckets import length_bucket
 from fourierjax._fourier._layout import (
+    ROW_BLOCK,
     ancestors,
     relative_position,
     rot,
@@ -98,6 +98,32 @@ def _concat(motions):
     return cat, starts
 
 
+# The concatenation's rows are padded to whole blocks of `ROW_BLOCK` for every JAX program (the
+# rotation functions and FK) and cut back, so a chunk of any size, and one clip alone, run the
+# same programs: an eager op on the concatenation's own length would compile again for every
+# batch size (issue 25: a sweep of 8 to 500 clips compiled 21 programs).
+def _blocked(a: np.ndarray) -> np.ndarray:
+    """``a`` with its last row repeated up to a whole number of `ROW_BLOCK` rows."""
+    rows = max(1, -(-len(a) // ROW_BLOCK)) * ROW_BLOCK
+    return np.concatenate([a, np.repeat(a[-1:], rows - len(a), axis=0)])
+
+
+def _rot(name: str, *arrays, **static) -> np.ndarray:
+    """`rot` of the rows of ``arrays``, run in whole blocks."""
+    return rot(name, *map(_blocked, arrays), **static)[:len(arrays[0])]
+
+
+def _blocked_motion(cat):
+    """``cat`` with its frames padded like `_blocked` (pose functions of it: cut to
+    ``cat.num_frames``)."""
+    return dataclasses.replace(cat, channels=_blocked(cat.channels))
+
+
+def _world_pose(cat, joint):
+    pos, q = world_pose(_blocked_motion(cat), joint)
+    return pos[:cat.num_frames], q[:cat.num_frames]
+
+
 def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> list:
     from fourierjax._motion._clip import _steps, closed_loop
     from fourierjax._motion._pipeline import _Clip, _Clock
@@ -109,7 +135,7 @@ def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> lis
     # -- steady segment: the pelvis's world track of every clip from one pass
     if segment:
         cat, starts = _concat([it.clip for it in items])
-        pos, _ = world_pose(cat, pelvis)
+        pos, _ = _world_pose(cat, pelvis)
         for k, it in enumerate(items):
             it.a, it.b = steady_from_positions(pos[starts[k]:starts[k + 1]][:, [0, 2]], dts[k])
     else:
@@ -158,8 +184,8 @@ def _glitch_joints(cat, starts, dt_f, dts, max_joint_speed_deg_s=5000.0, pad_s=0
     first[starts[:-1]] = True  # no speed across two clips
     for order in dict.fromkeys(o for _, o, _ in joints):
         group = [(j, i) for j, o, i in joints if o == order]
-        q = rot("quat_from_euler", np.radians(cat.channels[:, np.array([i for _, i in group])]),
-                order=order)
+        q = _rot("quat_from_euler", np.radians(cat.channels[:, np.array([i for _, i in group])]),
+                 order=order)
         dot = np.clip(np.abs(np.sum(q[1:] * q[:-1], axis=-1)), 0.0, 1.0)
         f = np.degrees(2 * np.arccos(dot)) / dt_f[1:, None] > max_joint_speed_deg_s
         fast[1:, [j for j, _ in group]] = f & ~first[1:, None]
@@ -178,13 +204,14 @@ def _facing_locals(cat, starts, q, items) -> np.ndarray:
     pelvis = items[0].body_map.pelvis
     hips = {(it.body_map.left.hip, it.body_map.right.hip) for it in items}
     lat = np.zeros((cat.num_frames, 3))
+    blocked = _blocked_motion(cat)
     for lh, rh in hips:
         rows = np.concatenate([np.arange(starts[k], starts[k + 1]) for k, it in enumerate(items)
                                if (it.body_map.left.hip, it.body_map.right.hip) == (lh, rh)])
-        d = relative_position(cat, pelvis, lh) - relative_position(cat, pelvis, rh)
+        d = relative_position(blocked, pelvis, lh) - relative_position(blocked, pelvis, rh)
         lat[rows] = d[rows]
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])
-    up = rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
+    up = _rot("quat_apply", conj, np.tile([0.0, 1.0, 0.0], (len(q), 1)))
     cross = np.cross(lat, up)
     out = np.zeros((len(items), 3))
     for k in range(len(items)):
@@ -221,19 +248,19 @@ def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
 
     topo = cat.topology
     B = len(items)
-    pos, q_root = world_pose(cat, pelvis)
+    pos, q_root = _world_pose(cat, pelvis)
     facing = _facing_locals(cat, starts, q_root, items)
     for it, sub in zip(items, subs, strict=True):
         check_static_above(sub, _RJ(it.body_map.trajectory))
     n = np.diff(starts)
-    f = rot("quat_apply", q_root, np.repeat(facing, n, axis=0))
+    f = _rot("quat_apply", q_root, np.repeat(facing, n, axis=0))
     s, c = _segment_sums(f[:, 0], starts), _segment_sums(f[:, 2], starts)
     psi = np.array([0.0 if np.hypot(s[k], c[k]) < 1e-9 * n[k] else float(np.arctan2(s[k], c[k]))
                     for k in range(B)])
     cf, sf = np.repeat(np.cos(psi), n), np.repeat(np.sin(psi), n)
     x_h = cf * pos[:, 0] - sf * pos[:, 2]
     z_h = sf * pos[:, 0] + cf * pos[:, 2]
-    q_rel = rot("quat_multiply", yaw_quat(np.repeat(-psi, n)), q_root)
+    q_rel = _rot("quat_multiply", yaw_quat(np.repeat(-psi, n)), q_root)
     cols = [_gradient(x_h, starts, dt_f), _gradient(z_h, starts, dt_f), pos[:, 1]]
     joints = rotation_joints(topo)
     blocks = {}
@@ -245,7 +272,7 @@ def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
         members = [j for j, _ in group]
         e = np.radians(cat.channels[:, np.array([idx for _, idx in group])])
         if pelvis in members:
-            e[:, members.index(pelvis)] = rot("euler_from_quat", q_rel, order=order)
+            e[:, members.index(pelvis)] = _rot("euler_from_quat", q_rel, order=order)
         # [T, B * J_g, 3]: every clip's frames side by side; frames after a clip's end repeat
         # its last and come after it, so they never serve as a reference.
         padded = e[index].reshape(T, -1, 3)
@@ -269,17 +296,17 @@ class _RJ:
 
 
 def _contacts(cat, starts, dts, items) -> list:
-    """`foot_contacts_of(sub, body_map=bm)` of every clip: one FK of all the frames (padded to a
-    length bucket), then `contacts.foot_contacts_many`."""
+    """`foot_contacts_of(sub, body_map=bm)` of every clip: FK of all the frames (in blocks of
+    `ROW_BLOCK`), then `contacts.foot_contacts_many`."""
     import jax.numpy as jnp
 
     from fourierjax import contacts
     from fourierjax.kinematics import fk_frames
 
-    N = cat.num_frames
-    ch = np.concatenate([cat.channels, np.repeat(cat.channels[-1:], length_bucket(N) - N, 0)])
-    fk = fk_frames(cat.skeleton(), jnp.asarray(ch))
-    allp = np.concatenate([np.asarray(fk.positions), np.asarray(fk.end_site_positions)], 1)[:N]
+    N, ch, skeleton = cat.num_frames, _blocked(cat.channels), cat.skeleton()
+    blocks = [fk_frames(skeleton, jnp.asarray(ch[s:s + ROW_BLOCK])) for s in range(0, len(ch), ROW_BLOCK)]
+    allp = np.concatenate([np.concatenate([np.asarray(fk.positions), np.asarray(fk.end_site_positions)], 1)
+                           for fk in blocks])[:N]
     ps = []
     for k, it in enumerate(items):
         pts = contacts.foot_points(cat.topology, it.body_map)

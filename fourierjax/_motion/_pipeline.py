@@ -376,8 +376,9 @@ def iter_fit_motions(
                 bm = next(maps)
             except StopIteration:
                 raise UserError(f"fit_motions: fewer body maps than motions ({count[0]})") from None
-            if size[0] is None:  # the first clip alone sizes the chunks
-                first = _prepare(count[0], m, bm, **opts)
+            if size[0] is None:  # the first clip alone sizes the chunks; it runs the chunks'
+                # programs (`_batch`'s whole blocks of rows), so later chunks compile nothing new
+                first = prepare_chunk([(count[0], m, bm)], **opts)[0]
                 size[0] = _stream_chunk(first, num_harmonics, fit_kwargs.get("max_memory"))
                 entries.append(first)
             else:

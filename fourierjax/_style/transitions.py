@@ -347,12 +347,40 @@ def grounded_transition(
     t = jnp.arange(num_frames, dtype=dt.dtype) * dt
     x, s, theta = transition(a, b, t, start_s, duration_s, ease=ease, method=method, omega_mode=omega_mode,
                              return_schedule=True)
+    a, b = common_harmonics(*check_models_omega("grounded_transition", a=a, b=b))
+    b = _on_branch(a, b)
+    if clearance is not None:
+        clearance = jnp.asarray(clearance, x.dtype)
+    smooth_frames = None
+    if foot_lock:
+        if isinstance(frame_time_s, jax.core.Tracer):
+            raise UserError("grounded_transition: foot locking needs a concrete `frame_time_s` (it sets "
+                            "the easing's frame count), or foot_lock=False")
+        smooth_frames = int(round(SMOOTH_S / float(frame_time_s)))
+        contact_intervals = _contact_intervals(a, b, skeleton, body_map, contact_intervals)
+    return _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, contact_intervals,
+                     smooth_frames)
+
+
+_on_branch = saved(filter_jit(on_branch_of))
+
+
+# Everything after the blend is one saved program: run eagerly, the hip rule, root motion, floors,
+# FK of all frames and foot locking were 551 small XLA programs (446 traces) of a warm
+# `fourierjax transition` call, 8.9 s of it.
+@saved
+@filter_jit
+def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, contact_intervals,
+              smooth_frames):
+    """`grounded_transition` after the blend `x, s, theta`: ``b`` on ``a``'s branch, and
+    ``smooth_frames`` None for no foot lock."""
+    from fourierjax import gait
+
     rep, up = a.representation, int(body_map.up_axis)
     feats, root, feet, clearance = gait.ground_features(x, skeleton, rep, frame_time_s, body_map=body_map,
                                                         clearance=clearance)
-    a, b = common_harmonics(*check_models_omega("grounded_transition", a=a, b=b))
     floor_a = _captured_floor(a, skeleton, rep, frame_time_s, body_map, clearance)
-    floor_b = _captured_floor(on_branch_of(a, b), skeleton, rep, frame_time_s, body_map, clearance)
+    floor_b = _captured_floor(b, skeleton, rep, frame_time_s, body_map, clearance)
     # The lowest point on a's floor, or the blend's own height above its own (blended) floor
     # where that is higher (flight). Two captures need not share a floor level (02_01 and
     # 02_03 differ by 0.25 units, 1.4 cm): the motion keeps one, a's.
@@ -362,21 +390,18 @@ def grounded_transition(
     feats = feats.at[:, 2].set(height)
     root = root.at[:, up].set(height)
     feet = feet.at[..., up].add(lift[:, None, None])
-    if foot_lock:
-        if isinstance(frame_time_s, jax.core.Tracer):
-            raise UserError("grounded_transition: foot locking needs a concrete `frame_time_s` (it sets "
-                            "the easing's frame count), or foot_lock=False")
-        weights = _transition_contacts(a, on_branch_of(a, b), skeleton, body_map, s, theta, contact_intervals)
+    if smooth_frames is not None:
+        weights = _transition_contacts(s, theta, contact_intervals)
         feats, feet = gait.lock_feet(feats, skeleton, weights, body_map=body_map, representation=rep,
                                      root_position=root, clearance=clearance, ground=floor_a, return_feet=True,
-                                     smooth_frames=int(round(SMOOTH_S / float(frame_time_s))))
+                                     smooth_frames=smooth_frames)
     lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
     return GroundedTransition(feats, root, feet, lowest, s, theta, clearance, jnp.asarray(floor_a))
 
 
-def _transition_contacts(a, b, skeleton, body_map, s, theta, contact_intervals):
-    """`[T, 2]` stance weights of a transition's frames: each model's `gait.contact_weights` at the
-    integrated phase, blended by s (the contact intervals change with the gait, as ω does)."""
+def _contact_intervals(a, b, skeleton, body_map, contact_intervals):
+    """`(A's, B's)` `[2, 2]` contact phases: those given, or estimated from each model's cycle
+    (``b`` on ``a``'s branch)."""
     from fourierjax import gait
 
     if contact_intervals is None:
@@ -386,5 +411,13 @@ def _transition_contacts(a, b, skeleton, body_map, s, theta, contact_intervals):
         contact_intervals = tuple(gait.contact_intervals(m, skeleton, body_map=body_map) for m in (a, b))
     if len(contact_intervals) != 2:
         raise UserError("grounded_transition: `contact_intervals` must be (A's [2, 2], B's [2, 2])")
+    return tuple(jnp.asarray(iv, dtype_of(a)) for iv in contact_intervals)
+
+
+def _transition_contacts(s, theta, contact_intervals):
+    """`[T, 2]` stance weights of a transition's frames: each model's `gait.contact_weights` at the
+    integrated phase, blended by s (the contact intervals change with the gait, as ω does)."""
+    from fourierjax import gait
+
     w_a, w_b = (gait.contact_weights(theta, jnp.asarray(iv, theta.dtype)) for iv in contact_intervals)
     return (1.0 - s)[:, None] * w_a + s[:, None] * w_b
