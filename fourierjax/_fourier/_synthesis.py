@@ -249,8 +249,9 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     about 2x faster on 2 CPU cores at 1024 x 57 x 240 (0.8 of the speed of merely writing the
     output, against 0.45 for the vmap): one elementwise loop over the ``[B, T, C]`` output with
     a basis of one sin and one cos per character and frame (harmonics by the angle-addition
-    recurrence). A single character on CPU is one small product instead (dispatch-bound: three
-    fusions). On other backends it is that vmap, which XLA:GPU runs 3x faster than the
+    recurrence). A single character on CPU is computed in loops over frames that XLA runs on the
+    calling thread (dispatch-bound; see `_INLINE_FLOPS`), or, for models too large for that, one
+    small product. On other backends it is that vmap, which XLA:GPU runs 3x faster than the
     elementwise loop. Jitted; differentiable in every model leaf and in ``t_s``; also fine
     inside jit, vmap and grad.
 
