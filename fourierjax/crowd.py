@@ -197,8 +197,9 @@ def crowd_positions(
     joint, position channels replacing OFFSET components). Equal to
     `kinematics.joint_positions(skeleton, jax.vmap(lambda m: fourier.synthesize(m, t[None])[0])(models))`
     for the skeleton and models the crowd was made from. Differentiable in `t` and in the
-    crowd's arrays. With `foot_lock=True` the positions then go through `gait.lock_crowd`
-    (held foot points and two-bone leg IK; frames are posed in order, carrying `state`).
+    crowd's arrays. With `foot_lock=True` the feet are then locked as by `gait.lock_crowd`
+    (held foot points and two-bone leg IK; frames are posed in order, carrying `state`), in the
+    same jitted program.
 
     Arguments:
         crowd: from `make_crowd`.
@@ -227,14 +228,17 @@ def crowd_positions(
     if body_map is None or intervals is None:
         raise UserError("crowd_positions: foot_lock=True needs `body_map` (the skeleton's BodyMap) and "
                         "`intervals` ([B, 2, 2] contact intervals, gait.contact_intervals per model)")
-    from fourierjax import gait
+    from fourierjax._gait import crowdlock
 
-    return gait.lock_crowd(_positions_jit(crowd, t), crowd.omega * t, intervals, state, body_map=body_map,
-                           parents=crowd.topology.parents, floor=floor, clearance=clearance)
+    topology = crowd.topology
+    plan = crowdlock.lock_plan(body_map, topology.parents, topology.num_joints, "crowd_positions")
+    _, iv, state, floor, clearance = crowdlock.check_inputs(
+        "crowd_positions", plan, crowd.num_characters, t.dtype, None, intervals, state, floor, clearance)
+    return _positions_locked_jit(crowd, t, iv, state, floor, clearance, plan=plan)
 
 
-def _positions(crowd: Crowd, t: Array) -> Array:
-    pose = _pose(crowd, t)
+def _characters_first(pose: Array) -> Array:
+    """`[J, 3, B]` -> `[B, J, 3]`."""
     num_joints = pose.shape[0]
     # Store the [J * 3, B] block, then one 2-D transpose: XLA emits a tiled transpose for it
     # (0.4 ms at 10,000 characters) instead of fusing the concatenation into a strided
@@ -243,9 +247,24 @@ def _positions(crowd: Crowd, t: Array) -> Array:
     return flat.T.reshape(-1, num_joints, 3)
 
 
+def _positions(crowd: Crowd, t: Array) -> Array:
+    return _characters_first(_pose(crowd, t))
+
+
+def _positions_locked(crowd: Crowd, t: Array, intervals, state, floor, clearance, plan):
+    # The lock on the pose as FK leaves it (characters last), before the one transpose.
+    from fourierjax._gait import crowdlock
+
+    pose, state = crowdlock.lock_pose(_fk.store(_pose(crowd, t)), crowd.omega * t, intervals, state, floor,
+                                      clearance, plan)
+    return _characters_first(pose), state
+
+
 # `_jit.jit` (the one wrapper's mechanism over `jax.jit`; the crowd is all arrays): called once per
 # frame, where `filter_jit`'s argument filtering cost ~150 us a call. XLA's default CPU fusion
 # emitters (`cpu_compiler_options={}`) run this graph faster than the classic ones of
 # `CPU_COMPILER_OPTIONS` (5.8 vs 8.1 ms per frame at 10,000 characters) but compile it slower
 # (3.0 vs 1.5 s; shared 2-core machine, load ~5): a crowd is compiled once and posed every frame.
 _positions_jit = _jit.jit(_positions, cpu_compiler_options={})
+# The crowd and its foot lock in one program: one dispatch a frame, the lock on `[3, B]` rows.
+_positions_locked_jit = _jit.jit(_positions_locked, static_argnames=("plan",), cpu_compiler_options={})

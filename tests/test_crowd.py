@@ -181,3 +181,42 @@ def test_foot_lock_in_the_crowd_equals_lock_crowd_by_hand():
     assert moved > 1e-3  # the lock changed the feet (the test can fail)
     with pytest.raises(UserError, match="intervals"):
         crowd.crowd_positions(c, 0.0, True, body_map=bm)
+    # Shapes that do not fit are refused, naming the argument (before anything is traced).
+    for kw, name in ((dict(intervals=iv[:3]), "`intervals`"), (dict(floor=floor[:2]), "`floor`"),
+                     (dict(state=(s_crowd[0][..., :2], s_crowd[1])), "`state`"),
+                     (dict(clearance=jnp.zeros((3, 2))), "`clearance`")):
+        args = {"body_map": bm, "intervals": iv, "floor": floor, **kw}
+        with pytest.raises(UserError, match=name):
+            crowd.crowd_positions(c, 0.1, True, **args)
+    # One program a frame: a new time or state does not retrace.
+    before = crowd._positions_locked_jit.num_traces()
+    crowd.crowd_positions(c, 0.3, True, body_map=bm, intervals=iv, state=s_crowd, floor=floor)
+    assert crowd._positions_locked_jit.num_traces() == before
+
+
+@pytest.mark.parametrize("P", [2, 3])
+def test_the_crowds_hold_step_is_footlocks_with_characters_last(P):
+    # The crowd lock's per-row form of `footlock.hold_step` (characters as the minor axis) gives
+    # the same numbers on random holds (planted, landing and released points), to float32
+    # round-off: XLA fuses the two programs differently (measured: up to 1 ulp in 10 of 384
+    # shifts; the crowd's own lock matched the vmapped form bit for bit over 60 frames).
+    from fourierjax._gait import crowdlock
+    from fourierjax._gait.footlock import hold_step
+
+    rng = np.random.default_rng(7)
+    B = 64
+    f = np.float32
+    targets = rng.normal(size=(B, 2, P, 3)).astype(f)
+    planted = (rng.uniform(size=(B, 2, P)) < 0.5).astype(f)
+    points = rng.normal(size=(B, 2, P, 3)).astype(f)
+    weights = np.where(rng.uniform(size=(B, 2, P)) < 0.3, 0.0, rng.uniform(size=(B, 2, P))).astype(f)
+    horizontal = jnp.asarray([1.0, 0.0, 1.0], jnp.float32)
+    (t_ref, p_ref), s_ref = jax.jit(hold_step)((targets, planted), points, weights, horizontal)
+    last = (lambda x: np.moveaxis(x, 0, -1))
+    (t_row, p_row), s_row = jax.jit(crowdlock._hold_step_rows)(
+        (last(targets), last(planted)), last(points), last(weights), horizontal)
+    tol = 4e-7
+    np.testing.assert_allclose(np.moveaxis(np.asarray(t_row), -1, 0), t_ref, rtol=tol, atol=tol)
+    np.testing.assert_array_equal(np.moveaxis(np.asarray(p_row), -1, 0), p_ref)
+    np.testing.assert_allclose(np.moveaxis(np.asarray(s_row), -1, 0), s_ref, rtol=tol, atol=tol)
+    assert 0 < float(np.asarray(p_ref).mean()) < 1 and float(np.abs(np.asarray(s_ref)).max()) > 0.1

@@ -411,6 +411,31 @@ def test_synthesize_batch_float64_and_gradients_match_finite_differences(x64):
     np.testing.assert_allclose(float(gt[i]), fd_t, rtol=1e-6, atol=1e-6)
 
 
+def test_one_character_runs_inline_on_cpu_with_finite_gradients():
+    """One character on CPU is synthesized in loops that XLA counts under its 1000-flop inline
+    budget (no hand-off to a worker thread); its values and gradients are the vmap's."""
+    from fourierjax._fourier import _synthesis as S
+
+    models = _batch(np.random.default_rng(14), 1, 57, 3)
+    t = jnp.arange(240, dtype=jnp.float32) / 120.0
+    if jax.default_backend() == "cpu":
+        for c, n in ((57, 3), (10, 5), (1, 1), (10, 4)):
+            m = _batch(np.random.default_rng(c), 1, c, n)
+            cost = S._synthesize_batch_jit.lower(m.offset, m.amplitude, m.phase, m.omega, t).compile().cost_analysis()
+            cost = cost[0] if isinstance(cost, list) else cost
+            assert S._inline_flops(c, n) < S._INLINE_FLOPS
+            assert cost["flops"] <= S._inline_flops(c, n), (c, n, cost["flops"])
+    np.testing.assert_allclose(F.synthesize_batch(models, t), _eq1_batch(models, t), atol=2e-6)
+    w = jnp.asarray(np.random.default_rng(15).normal(size=(1, 240, 57)), jnp.float32)
+    g, gt = jax.grad(lambda m, t: jnp.sum(w * F.synthesize_batch(m, t)), argnums=(0, 1))(models, t)
+    ref = jax.grad(lambda m: jnp.sum(w * jax.vmap(F.synthesize, in_axes=(0, None))(m, t)))(models)
+    for field in ("offset", "amplitude", "phase", "omega"):
+        got = np.asarray(getattr(g, field))
+        assert np.all(np.isfinite(got))
+        np.testing.assert_allclose(got, getattr(ref, field), rtol=2e-4, atol=2e-3)
+    assert np.all(np.isfinite(np.asarray(gt)))
+
+
 def test_synthesize_batch_bad_shapes_name_the_argument():
     rng = np.random.default_rng(12)
     models = _batch(rng, 4, 3, 2)

@@ -177,4 +177,7 @@ def run(size: str) -> list[Record]:
                  "max_abs_position_diff_vs_numpy": err,
                  **compute_limit(), **fractions(B * J / ours["median"], compute_limit())},
     )
-    return [rec]
+    # The crowd with foot locking (issue 21), in the same run as crowd_10k.
+    from experiments.benchmarks.footlock import lock_record
+
+    return [rec, lock_record(size)]

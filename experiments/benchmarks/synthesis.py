@@ -101,6 +101,37 @@ def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
     return stats, times
 
 
+def _one_character_parts(models, t_s) -> dict:
+    """Calls timed with synthesis_1: a jitted call that only returns its first argument (the
+    dispatch floor), and the straight product form under plain `jax.jit` (handed to a worker
+    thread: XLA counts its ~200 kflop)."""
+    import jax
+
+    from fourierjax._fourier import _synthesis as S
+
+    args = (models.offset, models.amplitude, models.phase, models.omega, t_s)
+    floor = jax.jit(lambda *a: a[0])
+
+    @jax.jit
+    def product(offset, amplitude, phase, omega, t):
+        one = S.FourierModel(offset[0], amplitude[0], phase[0], omega[0])
+        return S._synthesize_one_product(one, one.omega * t)[None]
+
+    return {"dispatch_floor": lambda: floor(*args), "product_form": lambda: product(*args)}
+
+
+def _one_character_details(models, t_s, stats) -> dict:
+    from fourierjax._fourier import _synthesis as S
+
+    args = (models.offset, models.amplitude, models.phase, models.omega, t_s)
+    cost = S._synthesize_batch_jit.lower(*args).compile().cost_analysis()
+    cost = cost[0] if isinstance(cost, list) else cost
+    us = {k: 1e6 * stats[k]["median"] for k in ("ours", "numpy", "dispatch_floor", "product_form")}
+    return {"xla_counted_flops": cost.get("flops"), "inline_flop_limit": S._INLINE_FLOPS,
+            "median_us": us, "product_form_ratio_vs_numpy": us["numpy"] / us["product_form"],
+            "ours_minus_dispatch_floor_us": us["ours"] - us["dispatch_floor"]}
+
+
 def run(size: str) -> list[Record]:
     import jax
     import jax.numpy as jnp
@@ -128,12 +159,15 @@ def run(size: str) -> list[Record]:
         a, b = (np.asarray(v) for v in models.sin_cos())
         off, om, ts = np.asarray(models.offset), np.asarray(models.omega), np.asarray(t_s)
         err = float(np.abs(numpy_synthesize(off, a, b, om, ts) - got).max())
-        stats, times = _interleaved({
+        fns = {
             "ours": lambda: fourier.synthesize_batch(models, t_s),
             "write": lambda: write(models.offset, t_s),
             "vmap_synthesize": lambda: vmapped(models, t_s),
             "numpy": lambda: numpy_synthesize(off, a, b, om, ts),
-        }, repeats)
+        }
+        if B == 1:  # where one character's time goes (issue 26): dispatch, hand-off, compute
+            fns.update(_one_character_parts(models, t_s))
+        stats, times = _interleaved(fns, repeats if B > 1 else 5 * repeats)
         ours, wr, old, base = (stats[k] for k in ("ours", "write", "vmap_synthesize", "numpy"))
         per_round = np.asarray(times["write"]) / np.asarray(times["ours"])
         per_round_old = np.asarray(times["write"]) / np.asarray(times["vmap_synthesize"])
@@ -154,6 +188,8 @@ def run(size: str) -> list[Record]:
             # pages (GLIBC_TUNABLES=glibc.malloc.hugetlb=1) on the 2-core machine.
             "glibc_tunables": os.environ.get("GLIBC_TUNABLES"),
         }
+        if B == 1:
+            details.update(_one_character_details(models, t_s, stats))
         for vname, fn in variants().items():
             vf = jax.jit(jax.vmap(fn, in_axes=(0, None)))
             verr = float(np.abs(np.asarray(vf(models, t_s)) - ref).max())

@@ -126,6 +126,70 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
     return synthesize_phase(model, model.omega * t_s)
 
 
+#: XLA:CPU runs a program on the calling thread, without handing it to a worker thread, when
+#: HloCostAnalysis counts fewer than 1000 flops in it (PjRt CPU client, `cheap_computation_`);
+#: a while loop's body is counted once. One character of 57 channels x 240 frames is ~80 kflop,
+#: so the straight product (`_synthesize_one_product`) is handed off. Measured on 2 loaded
+#: cores: dispatch 6 us + the program 9 us + the hand-off 6-23 us (bimodal with the load) =
+#: 20-45 us, against NumPy's 22 us. In loops over frames (`_synthesize_one_loop`) it is counted
+#: as one frame (~880 flops at C = 57, N = 3) and runs inline: 25-27 us, steady under load (the
+#: loops' own cost is ~14 us of it; benchmark synthesis_1 0.47-0.57x NumPy -> 0.88x). The loops
+#: are used while their count fits the budget (`_inline_flops`, checked against XLA's count in
+#: tests/test_fourier.py); larger models take the product.
+_INLINE_FLOPS = 1000
+
+
+def _inline_flops(num_channels: int, num_harmonics: int) -> int:
+    """An upper estimate of the flops HloCostAnalysis counts in `_synthesize_one_loop`: the
+    frame body's 2N multiply-adds per channel, the coefficient body's 2 products per channel,
+    and the scalar basis work."""
+    # The scalar work, measured with jax 0.10.2: 52-85 flops for N <= 4, 526-1733 for N = 5-12.
+    scalar = 100 if num_harmonics <= 4 else 150 * num_harmonics
+    return num_channels * (4 * num_harmonics + 2) + scalar
+
+
+def _synthesize_one_loop(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T C"]:
+    """One character on CPU in loops (see `_INLINE_FLOPS`): the same sums as
+    `_synthesize_one_product` (one shared-reduction sincos per frame, the angle-addition
+    recurrence, `2N + 1` terms per channel), counted by XLA as one harmonic and one frame, so
+    that the program stays under XLA:CPU's inline-execution count.
+    """
+    num_channels, num_harmonics = model.amplitude.shape
+    dtype = t_s.dtype
+
+    def coefficients(n, table):  # rows 1 + n (sine) and 1 + N + n (cosine): `FourierModel.sin_cos`
+        amp = jax.lax.dynamic_index_in_dim(model.amplitude, n, 1, keepdims=False)
+        ph = jax.lax.dynamic_index_in_dim(model.phase, n, 1, keepdims=False)
+        table = jax.lax.dynamic_update_index_in_dim(table, amp * jnp.cos(ph), 1 + n, 0)
+        return jax.lax.dynamic_update_index_in_dim(table, amp * jnp.sin(ph), 1 + num_harmonics + n, 0)
+
+    table = jnp.zeros((2 * num_harmonics + 1, num_channels), dtype).at[0].set(model.offset)
+    table = jax.lax.fori_loop(0, num_harmonics, coefficients, table)
+
+    def basis_row(i, basis):  # sin(n theta), cos(n theta) of frame i (theta = omega t)
+        th = model.omega * jax.lax.dynamic_index_in_dim(t_s, i, 0, keepdims=False)
+        s1, c1 = _sincos(th)
+        sines, cosines = [s1], [c1]
+        for _ in range(num_harmonics - 1):
+            s, c = sines[-1], cosines[-1]
+            sines.append(s * c1 + c * s1)
+            cosines.append(c * c1 - s * s1)
+        return jax.lax.dynamic_update_index_in_dim(basis, jnp.stack(sines + cosines), i, 0)
+
+    def frame(i, out):
+        row = jax.lax.dynamic_index_in_dim(basis, i, 0, keepdims=False)  # [2N]
+        x = table[0]
+        for k in range(2 * num_harmonics):
+            x = x + row[k] * table[1 + k]
+        return jax.lax.dynamic_update_index_in_dim(out, x, i, 0)
+
+    # Two loops: the basis first (fused into the channel loop, each frame's sin and cos would be
+    # recomputed for every channel), then the channels.
+    num_frames = t_s.shape[0]
+    basis = jax.lax.fori_loop(0, num_frames, basis_row, jnp.zeros((num_frames, 2 * num_harmonics), dtype))
+    return jax.lax.fori_loop(0, num_frames, frame, jnp.zeros((num_frames, num_channels), dtype))
+
+
 def _synthesize_one_product(model: FourierModel, theta: Float[Array, " T"]) -> Float[Array, "T C"]:
     """One character on CPU: a `[T, 2N + 1]` basis (one shared-reduction sincos per frame, then
     the recurrence) against `[2N + 1, C]` coefficients whose first row is the offset.
@@ -165,13 +229,17 @@ def _synthesize_batch(offset, amplitude, phase, omega, t_s):
     dtype = jnp.result_type(offset, amplitude, phase, omega, float)
     models = FourierModel(*(jnp.asarray(x, dtype) for x in (offset, amplitude, phase, omega)))
     t_s = jnp.asarray(t_s, dtype)
-    theta = models.omega[:, None] * (t_s if t_s.ndim == 2 else t_s[None, :])  # [B, T]
+    t_rows = t_s if t_s.ndim == 2 else t_s[None, :]
     # XLA:GPU runs the vmapped product well and fuses the elementwise form worse (measured on
     # an H100 at 1024 x 57 x 240: 54 G channel-samples/s against 18 G, 0.71 and 0.22 of the
     # output-write bound): the layout above is XLA:CPU's.
     cpu = jax.default_backend() == "cpu"
     if cpu and models.offset.shape[0] == 1:
-        return _synthesize_one_product(jax.tree.map(lambda x: x[0], models), theta[0])[None]
+        one = jax.tree.map(lambda x: x[0], models)
+        if _inline_flops(*one.amplitude.shape) < _INLINE_FLOPS:
+            return _synthesize_one_loop(one, t_rows[0])[None]
+        return _synthesize_one_product(one, one.omega * t_rows[0])[None]
+    theta = models.omega[:, None] * t_rows  # [B, T]
     form = _synthesize_phase_elementwise if cpu else synthesize_phase
     return jax.vmap(form)(models, theta)
 
@@ -191,8 +259,9 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
     about 2x faster on 2 CPU cores at 1024 x 57 x 240 (0.8 of the speed of merely writing the
     output, against 0.45 for the vmap): one elementwise loop over the ``[B, T, C]`` output with
     a basis of one sin and one cos per character and frame (harmonics by the angle-addition
-    recurrence). A single character on CPU is one small product instead (dispatch-bound: three
-    fusions). On other backends it is that vmap, which XLA:GPU runs 3x faster than the
+    recurrence). A single character on CPU is computed in loops over frames that XLA runs on the
+    calling thread (dispatch-bound; see `_INLINE_FLOPS`), or, for models too large for that, one
+    small product. On other backends it is that vmap, which XLA:GPU runs 3x faster than the
     elementwise loop. Jitted; differentiable in every model leaf and in ``t_s``; also fine
     inside jit, vmap and grad.
 
