@@ -36,7 +36,9 @@ def knee_angles(positions, body_map):
 
 def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
     """dict: skating synthesized and captured (units/s), depth below the floor (m), largest knee
-    step synthesized and captured (degrees) and the most straight knee (degrees) of a clip's
+    step synthesized and captured (degrees), the most straight knee (degrees) and the flight
+    fraction synthesized and captured (`gait.contact_flight_fraction`; the capture on its fitted
+    ground plane, `contacts.estimate_ground`) of a clip's
     locked synthesis, through an independent FK of the written motion. `path` (a `GroundPath`)
     walks it along the path (`gait.synthesize_gait(path=...)`)."""
     from fourierjax import gait
@@ -61,12 +63,19 @@ def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
     s_cap = float(gait.contact_skating(p_cap, dt, body_map=bm).mean_speed)
     low = p_syn[..., bm.up_axis] - np.asarray(r.clearance)[None]
     depth_m = max(0.0, -float(low.min())) * bm.metres_per_unit
+    from fourierjax import contacts
+
+    ground = contacts.estimate_ground(p_cap, dt, up_axis=bm.up_axis)
+    f_cap = float(gait.contact_flight_fraction(p_cap, body_map=bm,
+                                               floor=contacts.floor_heights(ground, p_cap, up_axis=bm.up_axis)))
+    f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm, floor=np.asarray(r.clearance)[None]))
     ka_syn = knee_angles(M.motion_joint_positions(out), bm)
     k_syn = np.abs(np.diff(ka_syn, axis=0)).max()
     k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()
     return {"skating_synth": s_syn, "skating_capture": s_cap, "ratio": s_syn / s_cap, "depth_m": depth_m,
             "knee_step_synth_deg": float(np.degrees(k_syn)), "knee_step_capture_deg": float(np.degrees(k_cap)),
-            "straightest_knee_deg": float(np.degrees(ka_syn.max())), "result": r, "motion": out}
+            "straightest_knee_deg": float(np.degrees(ka_syn.max())), "flight_synth": f_syn, "flight_capture": f_cap,
+            "result": r, "motion": out}
 
 
 def met(row) -> bool:
@@ -122,7 +131,8 @@ def main(argv=None) -> int:
         rows.append(row)
         print(f"{row['clip']:28s} skating {row['skating_synth']:7.2f} vs {row['skating_capture']:7.2f} "
               f"({row['ratio']:.3f}x)  below {100 * row['depth_m']:.3f} cm  knee step "
-              f"{row['knee_step_synth_deg']:5.1f} vs {row['knee_step_capture_deg']:5.1f} deg  "
+              f"{row['knee_step_synth_deg']:5.1f} vs {row['knee_step_capture_deg']:5.1f} deg  flight "
+              f"{100 * row['flight_synth']:3.0f}% vs {100 * row['flight_capture']:3.0f}%  "
               f"{'met' if row['met'] else 'NOT met'}", flush=True)
     print(f"{sum(r['met'] for r in rows)}/{len(rows)} met, {time.perf_counter() - t0:.0f} s")
     if args.out:

@@ -97,7 +97,8 @@ def measure(mot, fit, *, foot_lock=True, seconds=SECONDS):
 # Not met yet (measured 2026-12-02, session 14, with the lift of a sliding point a moving maximum
 # before its 0.04 s easing, faded where the foot is held; 5 s at the clip's rate, N = 4; skating
 # synthesized vs captured, largest frame-to-frame knee change synthesized vs captured;
-# `python -m experiments.footlock_bounds`).
+# `python -m experiments.footlock_bounds`). Re-measured in session 16: unchanged; flight 28% on
+# 02_03 against the capture's 16%, 25% against 24% on 09_01.
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 NOT_MET = {
     "02_01": "skating 1.08 vs 4.76 units/s (0.23x, met); knee step 4.4 vs 3.5 deg",

@@ -343,6 +343,13 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     slide_w = contact * sliding  # [T, 2]
     still = jnp.maximum(still, slide_w[..., None])
     lam = hold_weights(rel, contact, band) * still
+    # Tried for the landing (session 16, 02_03 / 09_01 against 0.39x / 0.50x skating, 28% / 25%
+    # flight): counting a landing point still within 1 band of its planted target (or 0.5)
+    # gave 0.43x / 0.56x (0.41x / 0.52x), flight 24% (27%); the heel then slides into the band at
+    # the swing's speed (41 units/s at 2.5 bands from the target). Drawing it to the target as it
+    # descends (height-weighted) gave 0.40x and 9% flight but popped the knee (7.9 deg against
+    # the capture's 5.3; 09_01 13.4 against 8.2); eased in over 0.1-0.3 s it kept the knee but
+    # skated 0.49-0.70x. Planting earlier needs the leg to reach forward faster than the bound.
     # Down: within the band; in stance (the phase's weight) also a foot that hovers under twice it.
     low = (rel <= band) | ((contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True))
     low = low & (still > 0.5)
