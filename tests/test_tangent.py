@@ -155,8 +155,17 @@ def test_interpolate_ends_reproduce_the_models(fits):
 def test_refusals_name_tangent(fits):
     _, _, tangent, _ = fits
     a = tangent["cmu"].model
-    with pytest.raises(UserError, match="tangent.*--representation euler"):
-        style.characteristic(a, a)
+    t = np.linspace(0.0, 1.0, 8)
+    # Every style operation but `interpolate` reads the coefficients as if they were angles:
+    # on a tangent model each would answer with the wrong motion, so each refuses.
+    for name, call in (("characteristic", lambda: style.characteristic(a, a)),
+                       ("transition", lambda: style.transition(a, a, t, 0.2, 0.5)),
+                       ("blend_time_domain", lambda: style.blend_time_domain(a, a, 0.5, 0.1)),
+                       ("style_vector", lambda: style.style_vector(a)),
+                       ("style_matrix", lambda: style.style_matrix([a, a])),
+                       ("content_mean", lambda: style.content_mean([a, a]))):
+        with pytest.raises(UserError, match=f"{name}: tangent.*--representation euler"):
+            call()
     with pytest.raises(UserError, match="frames"):
         fourier.FourierModel(a.offset, a.amplitude, a.phase, a.omega, "tangent", a.channel_names)
     with pytest.raises(UserError, match="frames"):

@@ -18,7 +18,7 @@ from fourierjax._style._common import (
     polar_from_phasor,
     replace,
 )
-from fourierjax._style.characteristics import characteristic, common_harmonics, stack, superpose
+from fourierjax._style.characteristics import characteristic, common_harmonics, refuse_tangent, stack, superpose
 from fourierjax._style.distance import _pelvis, cycle_distance
 from fourierjax._style.space import _model_from_style_vector, style_vector_core
 from fourierjax.errors import UserError
@@ -75,6 +75,7 @@ def content_mean(models: Sequence[FourierModel]) -> FourierModel:
         if not isinstance(m, FourierModel):
             raise UserError(f"content_mean: `models[{i}]` is a {type(m).__name__}, not a FourierModel")
         check_compatible(models[0], m, names=("models[0]", f"models[{i}]"))
+    refuse_tangent("content_mean", models[0])
     models = list(common_harmonics(*models)) if len(models) > 1 else list(models)
     models = [check_models_omega("content_mean", model=m) for m in models]
     return _content_mean(models[0], stack(models))
@@ -133,6 +134,7 @@ def transfer(
         A FourierModel with the static fields of the target reference. Raises `UserError`
         for an unknown method, incompatible models or a non-finite weight.
     """
+    refuse_tangent("transfer", source)
     if method not in TRANSFER_METHODS:
         raise UserError(f"transfer: `method` must be one of {TRANSFER_METHODS}, got {method!r}")
     if isinstance(weight, str):
@@ -210,6 +212,8 @@ def fit_transfer_gains(
         `[C + 1]` gains: channels in order, then log ω; pass them as `transfer(..., gains=)`.
     """
     sources, targets = list(sources), list(targets)
+    for m in sources[:1] + targets[:1]:
+        refuse_tangent("fit_transfer_gains", m)
     if len(sources) != len(targets) or len(sources) < 2:
         raise UserError(f"fit_transfer_gains: `sources` and `targets` must be paired sequences of at least 2 "
                         f"models, got {len(sources)} and {len(targets)}")
@@ -287,6 +291,8 @@ def fit_transfer_weight(
         the median ratio of each weight.
     """
     sources, targets = list(sources), list(targets)
+    for m in sources[:1] + targets[:1]:
+        refuse_tangent("fit_transfer_weight", m)
     if len(sources) != len(targets) or len(sources) < 3:
         raise UserError(f"fit_transfer_weight: `sources` and `targets` must be paired sequences of at least 3 "
                         f"models, got {len(sources)} and {len(targets)}")

@@ -30,7 +30,7 @@ from fourierjax._style._common import (
     replace,
     show,
 )
-from fourierjax._style.characteristics import common_harmonics
+from fourierjax._style.characteristics import common_harmonics, refuse_tangent
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 from fourierjax.rotations import quat_slerp
@@ -202,6 +202,8 @@ def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: Arr
     Returns:
         `[C]` channel values in the models' units.
     """
+    refuse_tangent("blend_time_domain", a)
+    refuse_tangent("blend_time_domain", b)
     check_compatible(a, b)
     s = check_scalar("blend_time_domain", "s", s, "; vmap over s for several weights")
     phase = check_scalar("blend_time_domain", "phase", phase, "; vmap over phase for many frames")

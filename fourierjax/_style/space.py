@@ -24,7 +24,13 @@ from fourierjax._style._common import (
     replace,
     turns,
 )
-from fourierjax._style.characteristics import Characteristic, pad_harmonics, stack, stacked_characteristics
+from fourierjax._style.characteristics import (
+    Characteristic,
+    pad_harmonics,
+    refuse_tangent,
+    stack,
+    stacked_characteristics,
+)
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 
@@ -58,6 +64,7 @@ def style_vector(model: FourierModel) -> Float[Array, " dim"]:
         `[C (1 + 2N) + 1]`. Raises `UserError` when `model.omega` is not finite and > 0
         (`log ω` would be −inf or NaN; under jit, from `eqx.error_if`).
     """
+    refuse_tangent("style_vector", model)
     model = check_models_omega("style_vector", model=model)
     return _style_vector(model)
 
@@ -73,6 +80,7 @@ def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel
     Returns:
         A FourierModel.
     """
+    refuse_tangent("model_from_style_vector", like)
     c, n = like.amplitude.shape
     vector = jnp.asarray(vector, dtype=dtype_of(like))
     if vector.shape != (c * (1 + 2 * n) + 1,):
@@ -103,6 +111,7 @@ def style_matrix(models) -> Float[Array, "models dim"]:
     """
     if isinstance(models, Sequence):
         models = stack(models)
+    refuse_tangent("style_matrix", models)
     models = check_models_omega("style_matrix", models=models)
     return _style_matrix(models)
 
@@ -261,6 +270,8 @@ def fit_style_weights(
     Returns:
         `[K]` weights.
     """
+    refuse_tangent("fit_style_weights", base)
+    refuse_tangent("fit_style_weights", target)
     check_compatible(base, target, names=("base", "target"))
     chars = stacked_characteristics(characteristics)
     check_compatible(base, chars, names=("base", "characteristics"))

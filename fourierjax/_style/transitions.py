@@ -30,7 +30,7 @@ from fourierjax._style._common import (
     omega_mode_argument,
     on_branch_of,
 )
-from fourierjax._style.characteristics import common_harmonics
+from fourierjax._style.characteristics import common_harmonics, refuse_tangent
 from fourierjax._style.interpolation import interpolate_core
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
@@ -217,6 +217,8 @@ def transition(
         `[T, C]` channel values (model units), or `(values, s, theta)`. Raises `UserError` as
         `transition_schedule` does (and for a model whose ω is not > 0).
     """
+    refuse_tangent("transition", a)
+    refuse_tangent("transition", b)
     check_compatible(a, b)
     check_choice(ease, EASES, "ease", "transition")
     check_choice(method, METHODS, "method", "transition")
