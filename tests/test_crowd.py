@@ -212,7 +212,9 @@ def test_the_crowds_hold_step_is_footlocks_with_characters_last(P):
     weights = np.where(rng.uniform(size=(B, 2, P)) < 0.3, 0.0, rng.uniform(size=(B, 2, P))).astype(f)
     horizontal = jnp.asarray([1.0, 0.0, 1.0], jnp.float32)
     (t_ref, p_ref), s_ref = jax.jit(hold_step)((targets, planted), points, weights, horizontal)
-    last = (lambda x: np.moveaxis(x, 0, -1))
+    def last(x):  # characters as the last axis
+        return np.moveaxis(x, 0, -1)
+
     (t_row, p_row), s_row = jax.jit(crowdlock._hold_step_rows)(
         (last(targets), last(planted)), last(points), last(weights), horizontal)
     tol = 4e-7
