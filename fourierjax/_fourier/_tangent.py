@@ -18,11 +18,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._rotations._quat import nearest_rotation_vector
 from fourierjax.errors import UserError
 
 #: Suffix of the first channel of a joint's triple (``"<joint>.expmap_tangent0..2"``).
 _FIRST = ".expmap_tangent0"
-_TWO_PI = 2.0 * np.pi
 # Power iterations of the 4x4 scatter matrix after the sign-aligned start: the start is already
 # within a few degrees of the dominant eigenvector for a gait clip; each iteration shrinks the
 # error by the eigenvalue ratio (plain jnp: no batched LAPACK call, see STYLE "Known traps").
@@ -61,23 +61,15 @@ def check_frames(where: str, frames, num_channels: int, channel_names, lead: tup
         raise UserError(f"{where}: {K} `frames` need {3 * K} channels, the model has {num_channels}")
 
 
-def _normalize(q: Array) -> Array:
-    n2 = jnp.sum(q * q, axis=-1, keepdims=True)
-    # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.
-    small = n2 < 1e-30
-    return jnp.where(small, jnp.array([1.0, 0.0, 0.0, 0.0], q.dtype),
-                     q / jnp.sqrt(jnp.where(small, 1.0, n2)))
-
-
 def clip_means(q: Float[Array, "T K 4"], w: Float[Array, "T K"]) -> Float[Array, "K 4"]:
     """Weighted chordal mean of each joint's quaternions (the dominant eigenvector of
     ``sum_t w q q^T``, sign-invariant), ``w >= 0`` canonical; equivariant: ``mean(a q b) = a mean(q) b``.
     """
     ref = jnp.take_along_axis(q, jnp.argmax(w, axis=0)[None, :, None], axis=0)[0]  # [K, 4]
     s = jnp.where(jnp.sum(q * ref[None], axis=-1) < 0, -1.0, 1.0).astype(q.dtype)
-    m = _normalize(jnp.sum((w * s)[..., None] * q, axis=0))
+    m = rotations.quat_normalize(jnp.sum((w * s)[..., None] * q, axis=0))
     for _ in range(_POWER_STEPS):
-        m = _normalize(jnp.sum((w * jnp.sum(q * m[None], axis=-1))[..., None] * q, axis=0))
+        m = rotations.quat_normalize(jnp.sum((w * jnp.sum(q * m[None], axis=-1))[..., None] * q, axis=0))
     return jnp.where(m[..., :1] < 0, -m, m)
 
 
@@ -85,18 +77,6 @@ def _log_about(frames: Array, v: Array) -> Array:
     """``d = log(M^-1 exp(v))`` on the hemisphere of ``M`` (angle in [0, pi])."""
     q = rotations.quat_from_expmap(v)
     return rotations.expmap_from_quat(rotations.quat_multiply(rotations.quat_conjugate(frames), q))
-
-
-def _nearest_branch(v: Array, ref: Array) -> Array:
-    """Of ``v + 2 pi k v/|v|`` (one rotation), the one nearest ``ref``."""
-    n2 = jnp.sum(v * v, axis=-1, keepdims=True)
-    small = n2 < 1e-24
-    # Shim to avoid NaNs in jnp.where branches, which cause failures for reverse-mode AD.
-    norm = jnp.sqrt(jnp.where(small, 1.0, n2))
-    axis = jnp.where(small, 0.0, v / norm)
-    angle = jnp.where(small, 0.0, norm)[..., 0]
-    k = jax.lax.stop_gradient(jnp.round((jnp.sum(ref * axis, axis=-1) - angle) / _TWO_PI))
-    return v + (_TWO_PI * k)[..., None] * axis
 
 
 def to_tangent(features: Float[Array, "*B T C"], weights: Float[Array, "*B T K"],
@@ -121,7 +101,7 @@ def from_tangent(x: Float[Array, "*B T C"], frames: Float[Array, "*B K 4"],
     d = x[..., cols]  # [*B, T, K, 3]
     m = jnp.asarray(frames, x.dtype)[..., None, :, :]
     v = rotations.expmap_from_quat(rotations.quat_multiply(m, rotations.quat_from_expmap(d)))
-    v = _nearest_branch(v, rotations.expmap_from_quat(m))
+    v, _ = nearest_rotation_vector(rotations.expmap_from_quat(m), v)
     return x.at[..., cols.reshape(-1)].set(v.reshape(*v.shape[:-2], -1))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -357,3 +358,23 @@ def quat_slerp(
     return quat_multiply(q0, quat_power(delta, t))
 
 
+def nearest_rotation_vector(reference: Array, v: Array) -> tuple[Array, Array]:
+    """The rotation vector equivalent to `v` nearest `reference`: `v − 2πk·v/|v|` for the
+    integer k minimising the distance (k = 0 at |v| = 0), and the Jacobian factor `2πk/|v|`.
+
+    Arguments:
+        reference: `[..., 3]` rotation vectors (radians).
+        v: `[..., 3]`, the vectors to move.
+
+    Returns:
+        `(v' [..., 3], g [...])` with `v' = v − g·v`; `dv'/dv = (1 − g) I + g v̂v̂ᵀ`.
+    """
+    n2 = jnp.sum(v * v, axis=-1)
+    small = n2 < 1e-30
+    # Shim to avoid NaNs in jnp.where branches (v/|v| at 0), which cause failures for AD.
+    n = jnp.sqrt(jnp.where(small, 1.0, n2))
+    unit = v / n[..., None]
+    along = jnp.sum(reference * unit, axis=-1)
+    k = jax.lax.stop_gradient(jnp.where(small, 0.0, jnp.round((n - along) / (2 * jnp.pi))))
+    g = 2 * jnp.pi * k / n
+    return v - g[..., None] * v, g

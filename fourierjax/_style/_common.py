@@ -13,6 +13,7 @@ from jaxtyping import Array, Float
 
 from fourierjax._checks import concrete
 from fourierjax._math import wrap_angle
+from fourierjax._rotations._quat import nearest_rotation_vector
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel, angle_channel_mask
 
@@ -242,28 +243,6 @@ def channel_kinds(model) -> tuple[np.ndarray, np.ndarray]:
     euler = np.asarray(angle_channel_mask(names), bool)
     euler[triples.ravel()] = False
     return euler, triples
-
-
-def nearest_rotation_vector(reference: Array, v: Array) -> tuple[Array, Array]:
-    """The rotation vector equivalent to `v` nearest `reference`: `v − 2πk·v/|v|` for the
-    integer k minimising the distance (k = 0 at |v| = 0), and the Jacobian factor `2πk/|v|`.
-
-    Arguments:
-        reference: `[..., 3]` rotation vectors (radians).
-        v: `[..., 3]`, the vectors to move.
-
-    Returns:
-        `(v' [..., 3], g [...])` with `v' = v − g·v`; `dv'/dv = (1 − g) I + g v̂v̂ᵀ`.
-    """
-    n2 = jnp.sum(v * v, axis=-1)
-    small = n2 < _TINY
-    # Shim to avoid NaNs in jnp.where branches (v/|v| at 0), which cause failures for AD.
-    n = jnp.sqrt(jnp.where(small, 1.0, n2))
-    unit = v / n[..., None]
-    along = jnp.sum(reference * unit, axis=-1)
-    k = jax.lax.stop_gradient(jnp.where(small, 0.0, jnp.round((n - along) / (2 * jnp.pi))))
-    g = 2 * jnp.pi * k / n
-    return v - g[..., None] * v, g
 
 
 def turns(d: Array) -> Array:
