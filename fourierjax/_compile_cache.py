@@ -9,6 +9,14 @@ import sys
 #: calls of `enable_compile_cache` (the demo's, an experiment's) then do nothing.
 NO_CACHE_ENV = "FOURIERJAX_NO_CACHE"
 CACHE_DIR_ENV = "FOURIERJAX_CACHE_DIR"
+#: The cache folder's size budget in MiB (default `DEFAULT_MAX_MB`): past it, the least recently
+#: used files are removed when a command starts, down to `_PRUNE_TO` of the budget.
+CACHE_MAX_MB_ENV = "FOURIERJAX_CACHE_MAX_MB"
+DEFAULT_MAX_MB = 2048
+_PRUNE_TO = 0.8
+#: Files used less than this many seconds ago are never removed: another process may be writing
+#: or reading them (a temporary file before its rename, a program being loaded).
+_PRUNE_MIN_AGE_S = 600.0
 
 #: Whether `enable_compile_cache` turned the cache on in this process: saved programs
 #: (`fourierjax._saved`) are read and written only then.
@@ -77,6 +85,12 @@ def enable_compile_cache() -> bool:
     except OSError:
         return False
     _enabled = True
+    try:
+        limit = cache_max_bytes()
+    except ValueError:
+        limit = DEFAULT_MAX_MB * 2**20  # a malformed budget never fails a command
+    if cache_usage(path)[1] > limit:
+        prune_cache(limit, path)
     _set("jax_enable_compilation_cache", True)
     _set("jax_compilation_cache_dir", path)
     _set("jax_persistent_cache_min_compile_time_secs", 0.0)
@@ -94,6 +108,113 @@ def disable_compile_cache() -> None:
     _enabled = False
     os.environ[NO_CACHE_ENV] = "1"
     _set("jax_enable_compilation_cache", False)
+
+
+def cache_max_bytes() -> int:
+    """The cache folder's size budget: ``$FOURIERJAX_CACHE_MAX_MB`` MiB, else `DEFAULT_MAX_MB`.
+
+    Returns:
+        The budget in bytes.
+
+    Raises:
+        ValueError: the variable is not a positive number.
+    """
+    raw = os.environ.get(CACHE_MAX_MB_ENV, "").strip()
+    if not raw:
+        return DEFAULT_MAX_MB * 2**20
+    try:
+        mb = float(raw)
+    except ValueError:
+        mb = float("nan")
+    if not mb > 0 or mb == float("inf"):
+        raise ValueError(f"${CACHE_MAX_MB_ENV} must be a positive number of MiB, got {raw!r}")
+    return int(mb * 2**20)
+
+
+def _files(path: str) -> list[tuple[float, int, str]]:
+    """Every file under ``path`` as ``(last use, bytes, path)``; last use is the later of the
+    access and modification times (JAX's cache rewrites nothing on a read)."""
+    out = []
+    for root, _dirs, names in os.walk(path):
+        for name in names:
+            full = os.path.join(root, name)
+            try:
+                st = os.stat(full, follow_symlinks=False)
+            except OSError:  # removed meanwhile by another process
+                continue
+            out.append((max(st.st_atime, st.st_mtime), st.st_size, full))
+    return out
+
+
+def cache_usage(path: str | None = None) -> tuple[int, int]:
+    """How much the cache folder holds: JAX's compiled programs and the saved programs.
+
+    Arguments:
+        path: the folder (default `cache_dir()`).
+
+    Returns:
+        ``(files, bytes)``; ``(0, 0)`` when the folder does not exist.
+    """
+    files = _files(path or cache_dir())
+    return len(files), sum(size for _, size, _ in files)
+
+
+def prune_cache(max_bytes: int, path: str | None = None, *, min_age_s: float = _PRUNE_MIN_AGE_S,
+                now: float | None = None) -> tuple[int, int]:
+    """Keep the cache folder within a budget: when it holds more than ``max_bytes``, remove the
+    least recently used files until it holds at most 0.8 of it. Files used within the last
+    ``min_age_s`` seconds stay (another process may be writing or loading them), so the folder
+    can stay over budget until they age. A removed program is only compiled again when needed.
+
+    Arguments:
+        max_bytes: the budget in bytes.
+        path: the folder (default `cache_dir()`).
+        min_age_s: files used more recently than this are kept.
+        now: the current time in seconds since the epoch (default: `time.time()`).
+
+    Returns:
+        ``(files removed, bytes removed)``.
+    """
+    import time
+
+    files = sorted(_files(path or cache_dir()))
+    total = sum(size for _, size, _ in files)
+    if total <= max_bytes:
+        return 0, 0
+    cutoff = (time.time() if now is None else now) - min_age_s
+    target = _PRUNE_TO * max_bytes
+    removed = freed = 0
+    for used, size, full in files:  # oldest first
+        if total <= target or used > cutoff:
+            break
+        try:
+            os.remove(full)
+        except OSError:
+            continue
+        total -= size
+        removed += 1
+        freed += size
+    return removed, freed
+
+
+def clear_cache(path: str | None = None) -> tuple[int, int]:
+    """Remove every file of the cache folder (JAX's compiled programs and the saved programs).
+
+    Arguments:
+        path: the folder (default `cache_dir()`).
+
+    Returns:
+        ``(files removed, bytes removed)``.
+    """
+    removed = freed = 0
+    for _, size, full in _files(path or cache_dir()):
+        try:
+            os.remove(full)
+        except OSError:
+            continue
+        removed += 1
+        freed += size
+    return removed, freed
 
 
 def _set(option: str, value) -> None:

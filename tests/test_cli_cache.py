@@ -3,6 +3,7 @@
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -86,3 +87,72 @@ def test_a_second_stance_call_reads_its_saved_programs_instead_of_tracing(tmp_pa
     folder = os.path.join(env[_compile_cache.CACHE_DIR_ENV], "exported")
     names = {n.split("-")[0] for n in os.listdir(folder)}
     assert {"build", "solve_stance"} <= names, names
+
+
+def _fill(folder, ages_s, size=1000, now=1.0e9):
+    """Files of ``size`` bytes last used ``ages_s`` seconds before ``now``; returns their paths."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k, age in enumerate(ages_s):
+        p = folder / f"f{k}-cache"
+        p.write_bytes(b"x" * size)
+        os.utime(p, (now - age, now - age))
+        paths.append(p)
+    return paths
+
+
+def test_prune_removes_the_least_recently_used_files_down_to_080_of_the_budget(tmp_path):
+    now = 1.0e9
+    # Ten 1000-byte files, the oldest first in age; one saved program among them.
+    paths = _fill(tmp_path / "c", [10_000 - 900 * k for k in range(9)], now=now)
+    paths += _fill(tmp_path / "c" / "exported", [20_000], now=now)
+    assert _compile_cache.cache_usage(str(tmp_path / "c")) == (10, 10_000)
+    removed = _compile_cache.prune_cache(6000, str(tmp_path / "c"), now=now)
+    assert removed == (6, 6000)  # down to 4000 <= 0.8 x 6000: the saved program and f0..f4
+    left = sorted(p.name for p in (tmp_path / "c").rglob("*") if p.is_file())
+    assert left == [f"f{k}-cache" for k in range(5, 9)]
+    # Within budget: nothing happens.
+    assert _compile_cache.prune_cache(6000, str(tmp_path / "c"), now=now) == (0, 0)
+
+
+def test_prune_keeps_files_used_in_the_last_minutes(tmp_path):
+    now = 1.0e9
+    _fill(tmp_path / "c", [5.0, 10.0, 3600.0], now=now)  # two in use, one an hour old
+    assert _compile_cache.prune_cache(1000, str(tmp_path / "c"), now=now) == (1, 1000)
+    assert _compile_cache.cache_usage(str(tmp_path / "c")) == (2, 2000)  # over budget until they age
+
+
+def _cache_cli(tmp_path, *args, **env_extra):
+    env = {k: v for k, v in os.environ.items() if k not in (_compile_cache.NO_CACHE_ENV,
+                                                             _compile_cache.CACHE_MAX_MB_ENV)}
+    env.update({_compile_cache.CACHE_DIR_ENV: str(tmp_path / "c"), **env_extra})
+    return subprocess.run([sys.executable, "-m", "fourierjax", "cache", *args],
+                          capture_output=True, text=True, timeout=120, env=env)
+
+
+def test_the_cache_command_reports_prunes_on_start_and_clears(tmp_path):
+    import json
+
+    _fill(tmp_path / "c", [7200.0 + k for k in range(4)], size=2**19, now=time.time())  # 4 x 0.5 MiB
+    _fill(tmp_path / "c" / "exported", [60.0], size=2**19, now=time.time())  # in use: kept
+    proc = _cache_cli(tmp_path, "--json")
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == {"folder": str(tmp_path / "c"), "files": 5, "bytes": 5 * 2**19,
+                                       "budget_bytes": 2048 * 2**20, "on": True}
+    # A 2 MiB budget: the command's start removes the two oldest (2.5 -> 1.5 MiB <= 1.6).
+    proc = _cache_cli(tmp_path, "--json", FOURIERJAX_CACHE_MAX_MB="2")
+    assert json.loads(proc.stdout)["files"] == 3
+    assert sorted(p.name for p in (tmp_path / "c").glob("f*")) == ["f0-cache", "f1-cache"]
+    proc = _cache_cli(tmp_path, "--clear")
+    assert proc.returncode == 0, proc.stderr
+    assert "removed    3 files, 1.5 MiB" in proc.stdout and "holds      0 files" in proc.stdout
+    assert not [p for p in (tmp_path / "c").rglob("*") if p.is_file()]
+    assert "jax" not in proc.stderr
+
+
+@pytest.mark.parametrize("budget", ["x", "0", "-5", "inf", "nan"])
+def test_a_malformed_budget_is_one_error_line(tmp_path, budget):
+    proc = _cache_cli(tmp_path, FOURIERJAX_CACHE_MAX_MB=budget)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"fourierjax: error: $FOURIERJAX_CACHE_MAX_MB must be a positive number of MiB, got {budget!r}"]

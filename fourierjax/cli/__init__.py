@@ -23,6 +23,7 @@ COMMANDS: dict[str, str] = {
     "demo": "demo",
     "stance": "stance",
     "explore": "explore",
+    "cache": "cache",
 }
 
 
