@@ -106,7 +106,9 @@ def heading_of(motion, *, body_map=None) -> float:
     """Circular mean (radians) of the body's facing yaw, from the pelvis's world orientation.
 
     The facing is the pelvis-frame direction ``(left hip - right hip) x up`` of the body map
-    (CMU: the pelvis's local +Z), turned to world axes each frame and projected on the floor;
+    averaged over the clip (within a few degrees of CMU's local +Z, but not snapped to it, so that
+    every rig's joint frames give the same heading), turned to world axes each frame and
+    projected on the floor;
     ``psi = atan2(f_x, f_z)``, so a rotation by ``psi`` about +Y takes +Z to the facing.
 
     Arguments:

@@ -157,10 +157,6 @@ class RootJoints:
     facing_local: tuple[float, float, float] = (0.0, 0.0, 1.0)
 
 
-#: A pelvis-frame facing within this angle of a local axis is taken as that axis exactly.
-_SNAP_DEG = 15.0
-
-
 def root_joints(motion, body_map=None) -> RootJoints:
     """The root joints of a clip from its body map (inferred when None).
 
@@ -221,7 +217,9 @@ def relative_position(motion, base: int, joint: int) -> np.ndarray:
 
 def _facing_local(motion, bm) -> tuple[float, float, float]:
     """Where the body faces in the pelvis's frame: ``(left hip - right hip) x up``, averaged over
-    frames, snapped to a local axis within ``_SNAP_DEG`` (CMU: exactly +Z)."""
+    frames. Not snapped to a local axis: a change of the pelvis's joint frame ``C`` maps it to
+    ``C^T f``, so the world facing, and the heading, are the same on every rig (snapped, CMU's
+    was its local +Z, 0.21 degrees from the hips' on 07_01, while a rewrite's was not)."""
     _, q = world_pose(motion, bm.pelvis)
     lat = relative_position(motion, bm.pelvis, bm.left.hip) - relative_position(motion, bm.pelvis, bm.right.hip)
     conj = q * np.array([1.0, -1.0, -1.0, -1.0])
@@ -231,11 +229,6 @@ def _facing_local(motion, bm) -> tuple[float, float, float]:
     if not np.isfinite(n) or n < 1e-12:
         return (0.0, 0.0, 1.0)
     f = f / n
-    k = int(np.argmax(np.abs(f)))
-    if np.abs(f[k]) >= np.cos(np.radians(_SNAP_DEG)):
-        snapped = np.zeros(3)
-        snapped[k] = np.sign(f[k])
-        f = snapped
     return tuple(float(v) for v in f)  # type: ignore[return-value]
 
 

@@ -19,10 +19,6 @@ from fourierjax._fourier._layout import (
 from fourierjax._motion._segment import feature_mask, steady_from_positions
 from fourierjax.features import ROOT_CHANNELS, channel_names_for, check_static_above
 
-#: A pelvis-frame facing within this angle of a local axis is taken as that axis exactly (as
-#: `features.root_joints`).
-_SNAP_DEG = 15.0
-
 
 @dataclasses.dataclass
 class _Item:
@@ -199,8 +195,7 @@ def _segment_sums(v, starts):
 
 def _facing_locals(cat, starts, q, items) -> np.ndarray:
     """`RootJoints.facing_local` of each clip (`_fourier._layout.root_joints`): ``(left hip -
-    right hip) x up`` in the pelvis's frame averaged over the clip's frames, snapped to an
-    axis within `_SNAP_DEG`; ``[B, 3]``."""
+    right hip) x up`` in the pelvis's frame averaged over the clip's frames; ``[B, 3]``."""
     pelvis = items[0].body_map.pelvis
     hips = {(it.body_map.left.hip, it.body_map.right.hip) for it in items}
     lat = np.zeros((cat.num_frames, 3))
@@ -220,13 +215,7 @@ def _facing_locals(cat, starts, q, items) -> np.ndarray:
         if not np.isfinite(nrm) or nrm < 1e-12:
             out[k] = (0.0, 0.0, 1.0)
             continue
-        f = f / nrm
-        a = int(np.argmax(np.abs(f)))
-        if np.abs(f[a]) >= np.cos(np.radians(_SNAP_DEG)):
-            snapped = np.zeros(3)
-            snapped[a] = np.sign(f[a])
-            f = snapped
-        out[k] = f
+        out[k] = f / nrm
     return out
 
 
