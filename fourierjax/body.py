@@ -54,9 +54,21 @@ def infer_body_map(motion, *, up=None, overrides=None, max_frames: int = MAX_FRA
     from fourierjax import kinematics
 
     channels = np.asarray(motion.channels)
-    # Always `max_frames` rows (short clips repeat frames), so that FK compiles once per skeleton.
-    frames = np.linspace(0, len(channels) - 1, max_frames).round().astype(int)
-    fk = kinematics.fk_frames(motion.skeleton(), channels[frames])
+    fk = kinematics.fk_frames(motion.skeleton(), channels[_sampled_frames(len(channels), max_frames)])
+    return _infer_from_fk(motion, fk, up=up, overrides=overrides)
+
+
+def _sampled_frames(num_frames: int, max_frames: int = MAX_FRAMES) -> np.ndarray:
+    """The frames `infer_body_map` poses: always `max_frames` rows, evenly spaced (short clips
+    repeat frames), so that FK compiles once per skeleton."""
+    return np.linspace(0, num_frames - 1, max_frames).round().astype(int)
+
+
+def _infer_from_fk(motion, fk, *, up=None, overrides=None) -> BodyMap:
+    """`infer_body_map` of `motion` given `fk`, the FK of its `_sampled_frames` (anything with
+    `positions`, `end_site_positions` and `rotations`): for a caller that poses many clips at
+    once (`fourierjax._motion._batch`)."""
+    channels = np.asarray(motion.channels)
     topo = motion.topology
     offsets = topo.channel_offsets
     scale = 1e-6 * (1.0 + float(np.abs(channels).max(initial=0.0)))
