@@ -72,10 +72,11 @@ def _infer_from_fk(motion, fk, *, up=None, overrides=None) -> BodyMap:
     topo = motion.topology
     offsets = topo.channel_offsets
     scale = 1e-6 * (1.0 + float(np.abs(channels).max(initial=0.0)))
+    span = np.ptp(channels, axis=0) if len(channels) else np.zeros(channels.shape[1:])
     moving = []
     for j, chans in enumerate(topo.channels):
         idx = [offsets[j] + k for k, c in enumerate(chans) if c.endswith("position")]
-        if idx and float(np.ptp(channels[:, idx], axis=0).max()) > scale:
+        if idx and float(span[idx].max()) > scale:
             moving.append(j)
     return _infer(topo, np.asarray(fk.positions, np.float64), np.asarray(fk.end_site_positions, np.float64),
                   np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides)
