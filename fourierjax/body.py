@@ -54,16 +54,29 @@ def infer_body_map(motion, *, up=None, overrides=None, max_frames: int = MAX_FRA
     from fourierjax import kinematics
 
     channels = np.asarray(motion.channels)
-    # Always `max_frames` rows (short clips repeat frames), so that FK compiles once per skeleton.
-    frames = np.linspace(0, len(channels) - 1, max_frames).round().astype(int)
-    fk = kinematics.fk_frames(motion.skeleton(), channels[frames])
+    fk = kinematics.fk_frames(motion.skeleton(), channels[_sampled_frames(len(channels), max_frames)])
+    return _infer_from_fk(motion, fk, up=up, overrides=overrides)
+
+
+def _sampled_frames(num_frames: int, max_frames: int = MAX_FRAMES) -> np.ndarray:
+    """The frames `infer_body_map` poses: always `max_frames` rows, evenly spaced (short clips
+    repeat frames), so that FK compiles once per skeleton."""
+    return np.linspace(0, num_frames - 1, max_frames).round().astype(int)
+
+
+def _infer_from_fk(motion, fk, *, up=None, overrides=None) -> BodyMap:
+    """`infer_body_map` of `motion` given `fk`, the FK of its `_sampled_frames` (anything with
+    `positions`, `end_site_positions` and `rotations`): for a caller that poses many clips at
+    once (`fourierjax._motion._batch`)."""
+    channels = np.asarray(motion.channels)
     topo = motion.topology
     offsets = topo.channel_offsets
     scale = 1e-6 * (1.0 + float(np.abs(channels).max(initial=0.0)))
+    span = np.ptp(channels, axis=0) if len(channels) else np.zeros(channels.shape[1:])
     moving = []
     for j, chans in enumerate(topo.channels):
         idx = [offsets[j] + k for k, c in enumerate(chans) if c.endswith("position")]
-        if idx and float(np.ptp(channels[:, idx], axis=0).max()) > scale:
+        if idx and float(span[idx].max()) > scale:
             moving.append(j)
     return _infer(topo, np.asarray(fk.positions, np.float64), np.asarray(fk.end_site_positions, np.float64),
                   np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides)

@@ -272,15 +272,17 @@ def _fit_floor(h, hz, slow, threshold, iters=3):
         cov = np.cov((pts - centre).T) if len(pts) > 2 else np.zeros((2, 2))
         evals, evecs = np.linalg.eigh(cov)
         dirs = [evecs[:, k] for k in range(2) if 4 * np.sqrt(max(evals[k], 0)) > 10 * threshold]
-        A = np.zeros((T, F, P, F * P + len(dirs)))
-        A[..., : F * P] = np.eye(F * P).reshape(F, P, F * P)[None]
-        for k, d in enumerate(dirs):
-            A[..., F * P + k] = (hz - centre) @ d
+        _, fi, pi = np.nonzero(cand)
         used = np.zeros((F, P), bool)
-        used[np.nonzero(cand)[1:]] = True
+        used[fi, pi] = True
         if not used.all():
             break
-        sol = np.linalg.lstsq(A[cand], h[cand], rcond=None)[0]
+        # The rows of the candidates only: an intercept indicator per point, then the slopes.
+        A = np.zeros((len(fi), F * P + len(dirs)))
+        A[np.arange(len(fi)), fi * P + pi] = 1.0
+        for k, d in enumerate(dirs):
+            A[:, F * P + k] = ((hz - centre) @ d)[cand]
+        sol = np.linalg.lstsq(A, h[cand], rcond=None)[0]
         slope = sum((sol[F * P + k] * d for k, d in enumerate(dirs)), np.zeros(2))
         intercepts = sol[: F * P].reshape(F, P) - centre @ slope
         resid = h - intercepts - hz @ slope
@@ -323,7 +325,14 @@ def estimate_ground(
     Returns:
         A `GroundEstimate`.
     """
-    p = _as_points(foot_positions)
+    return _ground(_as_points(foot_positions), frame_time_s, up_axis, ground_height,
+                   height_threshold, speed_threshold)
+
+
+def _ground(p, frame_time_s, up_axis, ground_height, height_threshold, speed_threshold,
+            speed=None) -> GroundEstimate:
+    """`estimate_ground` of points ``p`` (`_as_points`), given their speeds (`_speeds`) where
+    the caller has them."""
     frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
     up_axis = _axis(up_axis)
     scale = _scale(p, up_axis)
@@ -337,7 +346,8 @@ def estimate_ground(
         ground_height = number(ground_height, "ground_height:")
         intercepts = np.maximum(np.percentile(h, 2, axis=0), ground_height)
         return GroundEstimate(intercepts, np.zeros(2), th, tv)
-    intercepts, slope = _fit_floor(h, hz, _speeds(p, frame_time_s) < tv, th)
+    speed = _speeds(p, frame_time_s) if speed is None else speed
+    intercepts, slope = _fit_floor(h, hz, speed < tv, th)
     return GroundEstimate(intercepts, slope, th, tv)
 
 
@@ -424,11 +434,11 @@ def foot_contacts_many(
     min_len = np.zeros(len(ps), int)
     max_gap = np.zeros(len(ps), int)
     for i, (p, dt) in enumerate(zip(ps, frame_times_s, strict=True)):
-        g = estimate_ground(p, dt, up_axis=up_axis, ground_height=ground_height,
-                            height_threshold=height_threshold, speed_threshold=speed_threshold)
-        dt, up = float(dt), int(up_axis)  # checked by estimate_ground
-        above = p[..., up] - g.intercepts - np.delete(p, up, axis=-1) @ g.slope
+        dt = number(dt, "frame_time_s:", positive=True)
         speed = _speeds(p, dt)
+        g = _ground(p, dt, up_axis, ground_height, height_threshold, speed_threshold, speed)
+        up = int(up_axis)  # checked by _ground
+        above = p[..., up] - g.intercepts - np.delete(p, up, axis=-1) @ g.slope
         n = len(p)
         enter[:n, i] = (above < g.height_threshold) & (speed < g.speed_threshold)
         stay[:n, i] = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)

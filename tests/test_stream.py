@@ -170,3 +170,17 @@ def test_prepare_chunk_equals_the_per_clip_path(chunk):
     # The chunk holds heel strikes. (Its 142_02 cut holds no glitch frame once segmented: the
     # glitch path of the continuity is tested on 142_02[1000:1300] above.)
     assert any(len(g.left) for g in got)
+
+
+def test_body_maps_of_a_chunk_are_each_clips_own(chunk):
+    # `_batch.infer_body_maps` poses all the clips of one skeleton in one FK: two cuts of one
+    # clip (one skeleton, other frames) and clips of other skeletons in the same chunk each get
+    # the map that inference of the clip alone gives.
+    from fourierjax._motion import _batch
+
+    clips = [chunk[0], data.load("07_01")[150:300], *chunk[1:]]
+    got = _batch.infer_body_maps(clips)
+    assert len({(c.topology, c.offsets.tobytes()) for c in clips}) >= 3
+    for c, g in zip(clips, got, strict=True):
+        assert g == infer_body_map(c)
+    assert got[0].to_dict() != got[1].to_dict()  # the same skeleton, its own motion's map

@@ -45,7 +45,6 @@ def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame
     per-clip path."""
     from fourierjax._motion._clip import _frame_range
     from fourierjax._motion._pipeline import _Clock, _prepare
-    from fourierjax.body import BodyMapError, infer_body_map
     from fourierjax.io.bvh import read_bvh
 
     clock = _Clock(timings)
@@ -53,19 +52,19 @@ def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame
                 start_frame=start_frame, stop_frame=stop_frame, timings=timings, passes=passes)
     done: dict[int, object] = {}
     groups: dict[tuple, list[_Item]] = {}
+    read = []
     for index, m, bm in entries:
         if isinstance(m, (str, os.PathLike)):
             m = read_bvh(m)
             clock("read")
         lo, hi = _frame_range(m, start_frame, stop_frame)
-        clip = m[lo:hi]
+        read.append((index, m, lo, m[lo:hi], bm))
+    inferred = iter(infer_body_maps([clip for _, _, _, clip, bm in read if bm is None]))
+    clock("body_map")
+    for index, m, lo, clip, bm in read:
         given = bm
         if bm is None:
-            try:
-                bm = infer_body_map(clip)
-            except BodyMapError:
-                bm = None
-        clock("body_map")
+            bm = next(inferred)
         if not _batchable(clip, bm, representation, passes, segment):
             done[index] = _prepare(index, m, bm if bm is not None else given, **opts)
             clock = _Clock(timings)
@@ -77,6 +76,43 @@ def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame
                                 timings=timings):
             done[c.index] = c
     return [done[index] for index, _, _ in entries]
+
+
+def infer_body_maps(clips) -> list:
+    """`fourierjax.body.infer_body_map` of each clip of ``clips`` (None where it raises a
+    `BodyMapError`: no legs), with the same maps: the frames it poses of all the clips that
+    share a skeleton (topology and offsets) go through FK together, in blocks of `ROW_BLOCK`
+    rows, straight to NumPy (one FK call per clip cost more in its dispatch and the copies of
+    its outputs than in the FK); each clip's map is then inferred from its own poses."""
+    import jax
+
+    from fourierjax.body import BodyMapError, _infer_from_fk, _sampled_frames
+    from fourierjax.kinematics import _fk_frames_jit
+
+    out: list = [None] * len(clips)
+    groups: dict[tuple, list[int]] = {}
+    for k, c in enumerate(clips):
+        groups.setdefault((c.topology, c.offsets.tobytes(), c.end_site_offsets.tobytes()),
+                          []).append(k)
+    for ks in groups.values():
+        frames = [_sampled_frames(clips[k].num_frames) for k in ks]
+        rows = np.concatenate([np.asarray(clips[k].channels)[f]
+                               for k, f in zip(ks, frames, strict=True)])
+        ch = np.zeros((-(-len(rows) // ROW_BLOCK) * ROW_BLOCK, rows.shape[1]),
+                      jax.dtypes.canonicalize_dtype(rows.dtype))  # FK's dtype, as fk_frames
+        ch[:len(rows)] = rows
+        skeleton = clips[ks[0]].skeleton()
+        blocks = [jax.tree.map(np.asarray, _fk_frames_jit(skeleton, ch[s:s + ROW_BLOCK]))
+                  for s in range(0, len(ch), ROW_BLOCK)]
+        fk = jax.tree.map(lambda *a: np.concatenate(a), *blocks)
+        starts = np.cumsum([0] + [len(f) for f in frames])
+        for i, k in enumerate(ks):
+            s = slice(starts[i], starts[i + 1])
+            try:
+                out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk))
+            except BodyMapError:
+                out[k] = None  # no legs: joint 0 carries the root, no contacts, no alignment
+    return out
 
 
 def _batchable(clip, bm, representation, passes, segment) -> bool:
@@ -253,28 +289,49 @@ def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
     cols = [_gradient(x_h, starts, dt_f), _gradient(z_h, starts, dt_f), pos[:, 1]]
     joints = rotation_joints(topo)
     blocks = {}
-    T = int(n.max())
-    rows = np.arange(T)[:, None]
-    index = np.minimum(rows, n[None, :] - 1) + starts[None, :-1]  # [T, B]: padded with the last
+    # Clips of similar lengths side by side (`_length_groups`): each column's continuity is its
+    # own, so grouping changes no value, only the padding the array ops carry.
+    layouts = []
+    for g in _length_groups(n):
+        rows = np.arange(int(n[g].max()))[:, None]
+        index = np.minimum(rows, n[g][None, :] - 1) + starts[g][None, :]  # [T, G]: padded with the last
+        layouts.append((index, rows < n[g][None, :]))
     for order in dict.fromkeys(o for _, o, _ in joints):
         group = [(j, idx) for j, o, idx in joints if o == order]
         members = [j for j, _ in group]
         e = np.radians(cat.channels[:, np.array([idx for _, idx in group])])
         if pelvis in members:
             e[:, members.index(pelvis)] = _rot("euler_from_quat", q_rel, order=order)
-        # [T, B * J_g, 3]: every clip's frames side by side; frames after a clip's end repeat
-        # its last and come after it, so they never serve as a reference.
-        padded = e[index].reshape(T, -1, 3)
-        ok = (~glitch[:, members])[index].reshape(T, -1)
-        ang = continuous(padded, rotations.euler_twin(padded.copy(), order), ok)
-        ang = ang.reshape(T, B, len(members), 3).transpose(1, 0, 2, 3)
-        flat = ang[(rows < n[None, :]).T]  # [N, J_g, 3]: back in clip order
+        ok_all = ~glitch[:, members]
+        flat = np.empty_like(e)
+        for index, valid in layouts:
+            # [T, G * J_g, 3]: the group's clips' frames side by side; frames after a clip's end
+            # repeat its last and come after it, so they never serve as a reference.
+            T = len(index)
+            padded = e[index].reshape(T, -1, 3)
+            ok = ok_all[index].reshape(T, -1)
+            ang = continuous(padded, rotations.euler_twin(padded.copy(), order), ok)
+            flat[index[valid]] = ang.reshape(T, index.shape[1], len(members), 3)[valid]
         for k, (j, _) in enumerate(group):
             blocks[j] = flat[:, k]
     for j, _, _ in joints:
         cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
     assert len(cols) == len(ROOT_CHANNELS) + 3 * len(joints)
     return np.stack(cols, axis=1)
+
+
+def _length_groups(n, *, slack=1.25, pad=16) -> list[np.ndarray]:
+    """The clips of lengths ``n [B]`` in groups of similar lengths (indices, ascending by
+    length): a group's longest is at most ``slack`` times its shortest plus ``pad`` frames, so
+    padding each group to its longest wastes little (one group for all of them padded 20 frames
+    to 401 of Bandai's gaits: 2.8x the frames)."""
+    order = np.argsort(n, kind="stable")
+    groups, first = [], 0
+    for k in range(1, len(order) + 1):
+        if k == len(order) or n[order[k]] > slack * n[order[first]] + pad:
+            groups.append(order[first:k])
+            first = k
+    return groups
 
 
 @dataclasses.dataclass(frozen=True)
