@@ -294,6 +294,20 @@ def _reach_on_floor(H, G, A, reach, upv):
     return H + v * u + h * (hn2 / jnp.maximum(hn, 1e-9))[:, None]
 
 
+def _toe_off(contact, heel_low, heel_still, late_frames):
+    """`(off, late)` `[T, 2]`: the stance weight from the first frame of a stance at which the heel
+    is down (low and still) to the stance's end (0 before: at the landing the tip swings in), and
+    the same held `late_frames` frames longer (a moving maximum towards later frames)."""
+    idx = jnp.arange(contact.shape[0])[:, None]
+    heel_down = jax.lax.cummax(jnp.where(heel_low & heel_still, idx, -1), axis=0)
+    stance_start = jax.lax.cummax(jnp.where(contact <= 0, idx, -1), axis=0)
+    off = contact * (heel_down > stance_start)
+    late = off
+    for k in range(1, late_frames + 1):
+        late = jnp.maximum(late, jnp.concatenate([jnp.repeat(off[:1], k, 0), off[:-k]], 0))
+    return off, late
+
+
 def _dilate(x, half):
     """A moving maximum over the first axis, `half` frames each side (edges held): eased by
     `_smooth` over the same frames, a lift never falls below what it was on any frame."""
@@ -342,6 +356,14 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     sliding = _smoothstep((SLIDING_SHARE - still_share) / (0.5 * SLIDING_SHARE))
     slide_w = contact * sliding  # [T, 2]
     still = jnp.maximum(still, slide_w[..., None])
+    # Toe-off: the low-harmonic foot slides forward on its tip before the tip lifts (02_03: up to
+    # 19 units/s inside the contact band), and a point that moves is let go. So once the heel was
+    # down in a stance, the toe's end point (the last foot point) is held for the rest of the
+    # phase's stance weight (`still_v`: the lift waits for it), and horizontally a few frames
+    # longer (`still`), so the tip rises before the foot swings on.
+    off, off_late = _toe_off(contact, rel[..., 0] <= band, still[..., 0] > 0.5, smooth_frames // 2)
+    still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
+    still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
     lam = hold_weights(rel, contact, band) * still
     # Tried for the landing (session 16, 02_03 / 09_01 against 0.39x / 0.50x skating, 28% / 25%
     # flight): counting a landing point still within 1 band of its planted target (or 0.5)
@@ -357,10 +379,10 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     shift = shift * (1.0 - upv)[None, None]
     # Vertically: the foot's lowest point onto the floor while held, never below it.
     gap = jnp.min(rel, axis=-1)  # [T, 2]
-    W = jnp.max(lam, axis=-1)
+    W = jnp.max(hold_weights(rel, contact, band) * still_v, axis=-1)
     dy = -gap * jnp.where(gap > 0, W, 1.0)
     # A sliding point is lifted to LIFT_BANDS bands over its floor, as far as the foot is not held.
-    need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still), axis=-1)  # [T, 2]
+    need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still_v), axis=-1)  # [T, 2]
     dy = jnp.maximum(dy, need * (1.0 - W))
     shift = shift + (sign * dy)[..., None] * upv[None, None]
     if smooth_frames > 0:
