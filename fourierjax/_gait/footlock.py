@@ -41,6 +41,9 @@ SLIDING_SHARE = 0.4
 SMOOTH_S = 0.04
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
+#: The toe's end point is held to the end of the stance at toe-off only with this many frames
+#: (or more) of easing on each side (`smooth_frames`).
+TOE_HOLD_FRAMES = 2
 
 
 def _smoothstep(x):
@@ -360,10 +363,15 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # 19 units/s inside the contact band), and a point that moves is let go. So once the heel was
     # down in a stance, the toe's end point (the last foot point) is held for the rest of the
     # phase's stance weight (`still_v`: the lift waits for it), and horizontally a few frames
-    # longer (`still`), so the tip rises before the foot swings on.
-    off, off_late = _toe_off(contact, rel[..., 0] <= band, still[..., 0] > 0.5, smooth_frames // 2)
-    still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
-    still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
+    # longer (`still`), so the tip rises before the foot swings on. Its release needs the easing:
+    # with one frame of it (Bandai-1 at 30 fps) the leg held at its reach let go at once and the
+    # knee popped (run_normal_001: 20.1 deg against 16.2 without the hold, the capture's 16.4),
+    # so below `TOE_HOLD_FRAMES` of easing the tip is not held longer.
+    still_v = still
+    if smooth_frames >= TOE_HOLD_FRAMES:
+        off, off_late = _toe_off(contact, rel[..., 0] <= band, still[..., 0] > 0.5, smooth_frames // 2)
+        still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
+        still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
     lam = hold_weights(rel, contact, band) * still
     # Tried for the landing (session 16, 02_03 / 09_01 against 0.39x / 0.50x skating, 28% / 25%
     # flight): counting a landing point still within 1 band of its planted target (or 0.5)
