@@ -196,11 +196,9 @@ def test_foot_lock_in_the_crowd_equals_lock_crowd_by_hand():
 
 @pytest.mark.parametrize("P", [2, 3])
 def test_the_crowds_hold_step_is_footlocks_with_characters_last(P):
-    # The crowd lock's per-row form of `footlock.hold_step` (characters as the minor axis) gives
-    # the same numbers on random holds (planted, landing and released points), to float32
-    # round-off: XLA fuses the two programs differently (measured: up to 1 ulp in 10 of 384
-    # shifts; the crowd's own lock matched the vmapped form bit for bit over 60 frames).
-    from fourierjax._gait import crowdlock
+    # `footlock.hold_step` in the crowd's layout (characters as the minor axis) gives the same
+    # numbers as in the per-character layout and as a plain NumPy hold on random holds (planted,
+    # landing and released points), to float32 round-off (XLA fuses the programs differently).
     from fourierjax._gait.footlock import hold_step
 
     rng = np.random.default_rng(7)
@@ -215,10 +213,20 @@ def test_the_crowds_hold_step_is_footlocks_with_characters_last(P):
     def last(x):  # characters as the last axis
         return np.moveaxis(x, 0, -1)
 
-    (t_row, p_row), s_row = jax.jit(crowdlock._hold_step_rows)(
-        (last(targets), last(planted)), last(points), last(weights), horizontal)
+    (t_row, p_row), s_row = jax.jit(hold_step, static_argnames="characters_last")(
+        (last(targets), last(planted)), last(points), last(weights), horizontal, characters_last=True)
     tol = 4e-7
     np.testing.assert_allclose(np.moveaxis(np.asarray(t_row), -1, 0), t_ref, rtol=tol, atol=tol)
     np.testing.assert_array_equal(np.moveaxis(np.asarray(p_row), -1, 0), p_ref)
     np.testing.assert_allclose(np.moveaxis(np.asarray(s_row), -1, 0), s_ref, rtol=tol, atol=tol)
+    # NumPy, in float64.
+    held = weights.astype(np.float64) * planted
+    err = (targets - points) * np.asarray(horizontal, np.float64)
+    mean = (held[..., None] * err).sum(-2) / np.maximum(held.sum(-1, keepdims=True), 1e-9)
+    shift = mean * held.max(-1, keepdims=True)
+    landed = (weights > 0) & (planted <= 0)
+    t_np = np.where(landed[..., None], points + shift[..., None, :], targets)
+    np.testing.assert_allclose(s_ref, shift, rtol=2e-6, atol=2e-6)
+    np.testing.assert_allclose(t_ref, t_np, rtol=2e-6, atol=2e-6)
+    np.testing.assert_array_equal(p_ref, (weights > 0).astype(f))
     assert 0 < float(np.asarray(p_ref).mean()) < 1 and float(np.abs(np.asarray(s_ref)).max()) > 0.1

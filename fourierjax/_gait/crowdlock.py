@@ -13,7 +13,9 @@ from fourierjax._gait.footlock import (
     CONTACT_HEIGHT_FRACTION,
     REACH_KNEE,
     REACH_LIMIT,
+    _over_axis,
     contact_weights,
+    hold_step,
     hold_weights,
 )
 from fourierjax._legik import safe_norm, soft_reach, sphere_circle_point
@@ -80,35 +82,6 @@ def _minor(f, in_axes=-1, out_axes=-1):
     return jax.vmap(f, in_axes=in_axes, out_axes=out_axes)
 
 
-def _over_points(op, x):
-    """`op` folded over axis 1 (the foot points, a static few) as elementwise ops on `[.., B]` rows
-    (a reduction is a kernel of its own)."""
-    out = x[:, 0]
-    for p in range(1, x.shape[1]):
-        out = op(out, x[:, p])
-    return out
-
-
-def _hold_step_rows(state, points, weights, horizontal):
-    """`footlock.hold_step` for every character with characters last: state `([2, P, 3, B],
-    [2, P, B])`, points `[2, P, 3, B]`, weights `[2, P, B]`; returns `(state, shift [2, 3, B])`.
-
-    The same operations in the same order (so the same values), on `[B]` rows: vmapped over the
-    minor axis, `hold_step`'s reductions over points and components took 0.8 ms at 10,000
-    characters (2 cores), most of the lock."""
-    targets, planted = state
-    held = weights * planted
-    err = (targets - points) * horizontal[None, None, :, None]
-    total = _over_points(jnp.add, held)  # [2, B]
-    mean = _over_points(jnp.add, held[:, :, None] * err) / jnp.maximum(total, 1e-9)[:, None]
-    shift = mean * _over_points(jnp.maximum, held)[:, None]
-    landed = (weights > 0) & (planted <= 0)
-    moved = points + shift[:, None]
-    targets = jnp.where(landed[:, :, None], moved, targets)
-    planted = jnp.where(weights > 0, 1.0, 0.0).astype(planted.dtype)
-    return (targets, planted), shift
-
-
 def _leg(H, K, A, G):
     # Two-bone leg IK on positions of one character: the knee on its circle, the goal eased
     # below the straight leg.
@@ -148,9 +121,9 @@ def lock_pose(
     # `hold_weights` is elementwise: the trailing axis of 1 lines `contact[..., None]` up with `rel`.
     lam = hold_weights(rel[..., None], contact[:, None, :], band)[..., 0]  # [2, P, B]
     horizontal = jnp.ones(3, pose.dtype).at[up].set(0.0)
-    state, shift = _hold_step_rows(state, feet, lam, horizontal)  # shift [2, 3, B]
-    gap = _over_points(jnp.minimum, rel)  # [2, B]
-    dy = -gap * jnp.where(gap > 0, _over_points(jnp.maximum, lam), 1.0)
+    state, shift = hold_step(state, feet, lam, horizontal, characters_last=True)  # shift [2, 3, B]
+    gap = _over_axis(jnp.minimum, rel, 1)  # [2, B]
+    dy = -gap * jnp.where(gap > 0, _over_axis(jnp.maximum, lam, 1), 1.0)
     shift = shift.at[:, up].add(sign * dy)
     # The pose as joint rows `[3, B]`, stacked once at the end: updating `[J, 3, B]` in place per
     # leg copied the whole pose three times a leg.
