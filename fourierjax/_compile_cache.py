@@ -89,8 +89,7 @@ def enable_compile_cache() -> bool:
         limit = cache_max_bytes()
     except ValueError:
         limit = DEFAULT_MAX_MB * 2**20  # a malformed budget never fails a command
-    if cache_usage(path)[1] > limit:
-        prune_cache(limit, path)
+    prune_cache(limit, path)  # one walk of the folder; removes nothing within the budget
     _set("jax_enable_compilation_cache", True)
     _set("jax_compilation_cache_dir", path)
     _set("jax_persistent_cache_min_compile_time_secs", 0.0)

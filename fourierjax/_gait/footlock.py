@@ -387,7 +387,8 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         off, off_late = _toe_off(contact, rel[..., 0] <= band, still[..., 0] > 0.5, smooth_frames // 2)
         still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
         still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
-    lam = hold_weights(rel, contact, band) * still
+    hold = hold_weights(rel, contact, band)
+    lam = hold * still
     # Tried for the landing (session 16, 02_03 / 09_01 against 0.39x / 0.50x skating, 28% / 25%
     # flight): counting a landing point still within 1 band of its planted target (or 0.5)
     # gave 0.43x / 0.56x (0.41x / 0.52x), flight 24% (27%); the heel then slides into the band at
@@ -402,7 +403,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     shift = shift * (1.0 - upv)[None, None]
     # Vertically: the foot's lowest point onto the floor while held, never below it.
     gap = jnp.min(rel, axis=-1)  # [T, 2]
-    W = jnp.max(hold_weights(rel, contact, band) * still_v, axis=-1)
+    W = jnp.max(hold * still_v, axis=-1)
     dy = -gap * jnp.where(gap > 0, W, 1.0)
     # A sliding point is lifted to LIFT_BANDS bands over its floor, as far as the foot is not held.
     need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still_v), axis=-1)  # [T, 2]
