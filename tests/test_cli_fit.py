@@ -155,3 +155,14 @@ def test_fit_z_up_blender_export_stop_frame_and_body_map(tmp_path, capsys):
     assert mf.stored_body_map.units == "m" and mf.stored_body_map.up_axis == 1
     assert main(["fit", str(zup), "--harmonics", "3", "--stop-frame", "99999"]) == 2
     assert "--stop-frame: 99999 is outside" in capsys.readouterr().err
+
+
+def test_fit_harmonics_default_is_the_style_commands_default():
+    # `fit X` then `transition` on its model equals `transition X.bvh` (both fit with the same N).
+    from fourierjax.cli import _build_parser
+    from fourierjax.cli._inputs import DEFAULT_HARMONICS
+
+    sub = next(a for a in _build_parser()._actions if a.dest == "command").choices
+    assert sub["fit"].parse_args(["x.bvh"]).harmonics == DEFAULT_HARMONICS
+    assert sub["transition"].get_default("harmonics") in (DEFAULT_HARMONICS, str(DEFAULT_HARMONICS))
+    assert sub["fit"].parse_args(["x.bvh", "--harmonics", "3"]).harmonics == 3

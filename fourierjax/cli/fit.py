@@ -10,6 +10,8 @@ import os
 import pathlib
 import sys
 
+from fourierjax.cli._inputs import DEFAULT_HARMONICS
+
 HELP = "Fit Fourier gait models (Unuma eq. 1) to BVH clips: fundamental three ways, fit quality."
 
 
@@ -17,8 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("files", nargs="+", metavar="FILE",
                         help="BVH files, folders of them (every *.bvh inside), or names of "
                         "bundled clips (e.g. 07_12)")
-    parser.add_argument("--harmonics", required=True, type=int, metavar="N",
-                        help="number of harmonics N (Tilmanne: 2; Unuma: 3 to 7)")
+    parser.add_argument("--harmonics", default=DEFAULT_HARMONICS, type=int, metavar="N",
+                        help=f"number of harmonics N (default {DEFAULT_HARMONICS}, as when `transition` "
+                        "or `interpolate` fit a BVH argument; Tilmanne: 2; Unuma: 3 to 7)")
     parser.add_argument("--representation", default="euler", choices=("euler", "expmap", "tangent"),
                         help="rotation channels: the file's Euler angles made continuous "
                         "(default), the continuous exponential map (Tilmanne), or tangent "
