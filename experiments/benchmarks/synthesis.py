@@ -74,6 +74,7 @@ def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
     NumPy, 247 us after itself). Not on CPU, where an extra call changes which output buffers
     the allocator hands back, and with them the page faults the write bound is made of (one
     2-core run: write bound 2.3 G/s instead of ~0.55, ours bimodal between 6 and 26 ms).
+    The order rotates from round to round, so no function always goes first.
     Returns `({name: stats as _common.timeit}, {name: [seconds]})`.
     """
     import time
@@ -85,8 +86,12 @@ def _interleaved(fns: dict, repeats: int, warmup: int = 1) -> tuple[dict, dict]:
             jax.block_until_ready(f())
     settle = jax.default_backend() != "cpu"
     times: dict[str, list[float]] = {k: [] for k in fns}
-    for _ in range(max(1, repeats)):
-        for k, f in fns.items():
+    names = list(fns)
+    for r in range(max(1, repeats)):
+        # Each round starts at a different function: the first call of a round was measured
+        # 1-2 us slower than the same call later in the round (single character, 2 cores).
+        for k in names[r % len(names):] + names[:r % len(names)]:
+            f = fns[k]
             if settle:
                 jax.block_until_ready(f())
             t0 = time.perf_counter()
