@@ -190,7 +190,8 @@ def _ground(ax, y: float, x0: float, x1: float) -> None:
 def plot_stick_figure(positions, parents: Sequence[int], *, names: Sequence[str] | None = None,
                       title: str | None = None, azimuth_deg: float = 25.0,
                       scale: float = CMU_UNIT_M, unit: str = "m", ground: float | None = None):
-    """One pose as a stick figure with labelled axes (Z forward, Y up).
+    """One pose as a stick figure with labelled axes (horizontal: the library's Z turned by
+    `azimuth_deg`; vertical: up, whatever the file's up axis was).
 
     Arguments:
         positions: ``[J, 3]`` joint positions (file units); parents: parent index per joint
@@ -209,8 +210,8 @@ def plot_stick_figure(positions, parents: Sequence[int], *, names: Sequence[str]
     _ground(ax, g, q[:, 0].min() - pad, q[:, 0].max() + pad)
     ax.set_ylim(g - 0.05 * pad, q[:, 1].max() + pad / 2)
     ax.set_aspect("equal")
-    ax.set_xlabel(f"forward, Z ({unit})")
-    ax.set_ylabel(f"up, Y ({unit})")
+    ax.set_xlabel(f"horizontal ({unit})")
+    ax.set_ylabel(f"up ({unit})")
     if title:
         ax.set_title(title, fontsize=10)
     return fig
@@ -252,7 +253,7 @@ def plot_stick_strip(poses: Sequence, parents: Sequence[int], labels: Sequence[s
     ax.set_ylim(ground - 0.2 * height, ground + 1.08 * height)
     ax.set_aspect("equal")
     ax.set_xticks([])
-    ax.set_ylabel(f"up, Y ({unit})")
+    ax.set_ylabel(f"up ({unit})")
     if title:
         ax.set_title(title, fontsize=10)
     return fig
