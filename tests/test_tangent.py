@@ -177,11 +177,10 @@ def test_interpolate_ends_reproduce_the_models(fits):
 def test_refusals_name_tangent(fits):
     _, _, tangent, _ = fits
     a = tangent["cmu"].model
-    # The style vectors and transfer read the coefficients as if they were angles (no frames):
-    # on a tangent model each would answer with the wrong motion, so each refuses.
-    for name, call in (("style_vector", lambda: style.style_vector(a)),
-                       ("style_matrix", lambda: style.style_matrix([a, a])),
-                       ("content_mean", lambda: style.content_mean([a, a]))):
+    # Style transfer reads the coefficients as if they were angles (no frames): on a tangent
+    # model it would answer with the wrong motion, so it refuses.
+    for name, call in (("content_mean", lambda: style.content_mean([a, a])),
+                       ("transfer", lambda: style.transfer(a, a, a))):
         with pytest.raises(UserError, match=f"{name}: tangent.*--representation euler"):
             call()
     with pytest.raises(UserError, match="frames"):
@@ -360,3 +359,29 @@ def test_cli_characteristic_and_transition_take_tangent_models(pair, fits, tmp_p
     assert main(["transition", "a.npz", "b.npz", "--seconds", "1", "--start", "0.2", "--duration", "0.5",
                  "--out", "t.bvh", "--no-root-motion"]) == 0
     assert read_bvh(tmp_path / "t.bvh").num_frames == 120
+
+
+def test_style_vectors_of_tangent_models(pair):
+    """Style vectors carry the frames as rotation vectors about a reference: they invert, their
+    distances are the same on the CMU and Bandai rigs, and `fit_style_weights` recovers the weight
+    of a phasor superposition (exact: linear in w)."""
+    _, _, ta, tb = pair
+    dists = {}
+    for key in ("cmu", "bandai"):
+        a, b = ta[key], tb[key]
+        rows = style.style_matrix([b, a])
+        k = a.frames.shape[0]
+        assert rows.shape == (2, a.offset.size * 7 + 3 * k + 1)
+        np.testing.assert_allclose(rows[0, -1 - 3 * k:-1], 0.0, atol=1e-6)  # b about itself
+        np.testing.assert_allclose(rows[1], style.style_vector(a, reference=b.frames), atol=1e-6)
+        back = style.model_from_style_vector(rows[1], b)
+        np.testing.assert_allclose(fourier.synthesize_phase(back, THETA), fourier.synthesize_phase(a, THETA),
+                                   atol=1e-4)
+        dists[key] = float(jnp.linalg.norm(rows[1] - rows[0]))
+    assert dists["bandai"] == pytest.approx(dists["cmu"], rel=1e-4)
+    a, b = ta["cmu"], tb["cmu"]
+    ch = style.characteristic(a, b)
+    target = style.superpose(b, ch, 0.37, method="phasor")
+    assert float(style.fit_style_weights(b, ch, target)[0]) == pytest.approx(0.37, abs=1e-4)
+    with pytest.raises(UserError, match="reference"):
+        style.style_vector(a, reference=jnp.zeros((3, 4)))

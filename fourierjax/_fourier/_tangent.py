@@ -218,3 +218,16 @@ def polar_superpose(z, phases, aligned, w):
     wa = w.reshape((-1,) + (1,) * (aligned.ndim - 1))
     wp = w.reshape((-1,) + (1,) * (phases.ndim - 1))
     return turn_phase(z + jnp.sum(wa * aligned, axis=0), jnp.sum(wp * phases, axis=0))
+
+
+def relative_rotvecs(reference: Float[Array, "*B K 4"], frames: Float[Array, "*B K 4"]) -> Float[Array, "*B K 3"]:
+    """``log(R^-1 M)`` per joint (angle <= pi): the frames as rotation vectors about a reference,
+    linear near it (a change of rig maps them as it maps ``d``)."""
+    q = rotations.quat_multiply(rotations.quat_conjugate(jnp.asarray(reference, frames.dtype)), frames)
+    return rotations.expmap_from_quat(q)
+
+
+def frames_from_rotvecs(reference: Float[Array, "*B K 4"], v: Float[Array, "*B K 3"]) -> Float[Array, "*B K 4"]:
+    """Inverse of `relative_rotvecs`: ``R exp(v)`` (wxyz, ``w >= 0``)."""
+    q = rotations.quat_multiply(jnp.asarray(reference, v.dtype), rotations.quat_from_expmap(v))
+    return canonical_frames(q)
