@@ -1,6 +1,8 @@
 """Issue #20: the "tangent" representation fits the same motion whatever the rig's joint frames,
 Euler orders or up axis (`fourierjax._fourier._tangent`)."""
 
+import re
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -177,11 +179,12 @@ def test_interpolate_ends_reproduce_the_models(fits):
 def test_refusals_name_tangent(fits):
     _, _, tangent, _ = fits
     a = tangent["cmu"].model
-    # Style transfer reads the coefficients as if they were angles (no frames): on a tangent
-    # model it would answer with the wrong motion, so it refuses.
-    for name, call in (("content_mean", lambda: style.content_mean([a, a])),
-                       ("transfer", lambda: style.transfer(a, a, a))):
-        with pytest.raises(UserError, match=f"{name}: tangent.*--representation euler"):
+    # Per-channel transfer gains do not commute with a change of joint frame (a gain per tangent
+    # channel), so they refuse tangent models.
+    for name, call in (("transfer(gains=)", lambda: style.transfer(a, [a, a], [a, a], method="content_mean",
+                                                                    gains=jnp.ones(a.offset.size + 1))),
+                       ("fit_transfer_gains", lambda: style.fit_transfer_gains([a, a], [a, a]))):
+        with pytest.raises(UserError, match=re.escape(name) + ": tangent.*--representation euler"):
             call()
     with pytest.raises(UserError, match="frames"):
         fourier.FourierModel(a.offset, a.amplitude, a.phase, a.omega, "tangent", a.channel_names)
@@ -385,3 +388,16 @@ def test_style_vectors_of_tangent_models(pair):
     assert float(style.fit_style_weights(b, ch, target)[0]) == pytest.approx(0.37, abs=1e-4)
     with pytest.raises(UserError, match="reference"):
         style.style_vector(a, reference=jnp.zeros((3, 4)))
+
+
+def test_content_mean_and_transfer_of_tangent_models(pair):
+    """The content mean of two tangent models is their phasor interpolation at 1/2 (phasors
+    averaged, frames slerped halfway, ω geometric); eq8 transfer of a's style onto b gives a."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    mean = style.content_mean([a, b])
+    half = style.interpolate(a, b, 0.5, method="phasor")
+    np.testing.assert_allclose(fourier.synthesize_phase(mean, THETA), fourier.synthesize_phase(half, THETA), atol=1e-5)
+    assert float(mean.omega) == pytest.approx(float(half.omega), rel=1e-6)
+    out = style.transfer(a, b, b)
+    np.testing.assert_allclose(fourier.synthesize_phase(out, THETA), fourier.synthesize_phase(a, THETA), atol=1e-4)

@@ -73,11 +73,13 @@ class Characteristic(eqx.Module):
 
 
 def refuse_tangent(where: str, model) -> None:
-    """Refuse a tangent model where the operation is defined on Euler and expmap coefficients only."""
+    """Refuse a tangent model where the operation is defined on Euler and expmap coefficients only
+    (per-channel transfer gains: a gain per tangent channel does not commute with a change of
+    joint frame)."""
     if getattr(model, "representation", "") == "tangent":
         raise UserError(f"{where}: tangent models (coefficients about each joint's clip mean) are "
-                        "not supported here; fit with --representation euler (or representation="
-                        "'euler')")
+                        "not supported here (per-channel gains); fit with --representation euler (or "
+                        "representation='euler')")
 
 
 def pad_harmonics(model, num_harmonics: int):
