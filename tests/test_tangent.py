@@ -1,14 +1,18 @@
 """Issue #20: the "tangent" representation fits the same motion whatever the rig's joint frames,
 Euler orders or up axis (`fourierjax._fourier._tangent`)."""
 
+import re
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import fourierjax.data
 from fourierjax import fourier, style
+from fourierjax._fourier import _tangent
 from fourierjax.body import infer_body_map
 from fourierjax.errors import UserError
 from fourierjax.features import features_from_motion, heading_of, root_relative_positions
@@ -175,18 +179,225 @@ def test_interpolate_ends_reproduce_the_models(fits):
 def test_refusals_name_tangent(fits):
     _, _, tangent, _ = fits
     a = tangent["cmu"].model
-    t = np.linspace(0.0, 1.0, 8)
-    # Every style operation but `interpolate` reads the coefficients as if they were angles:
-    # on a tangent model each would answer with the wrong motion, so each refuses.
-    for name, call in (("characteristic", lambda: style.characteristic(a, a)),
-                       ("transition", lambda: style.transition(a, a, t, 0.2, 0.5)),
-                       ("blend_time_domain", lambda: style.blend_time_domain(a, a, 0.5, 0.1)),
-                       ("style_vector", lambda: style.style_vector(a)),
-                       ("style_matrix", lambda: style.style_matrix([a, a])),
-                       ("content_mean", lambda: style.content_mean([a, a]))):
-        with pytest.raises(UserError, match=f"{name}: tangent.*--representation euler"):
+    # Per-channel transfer gains do not commute with a change of joint frame (a gain per tangent
+    # channel), so they refuse tangent models.
+    for name, call in (("transfer(gains=)", lambda: style.transfer(a, [a, a], [a, a], method="content_mean",
+                                                                    gains=jnp.ones(a.offset.size + 1))),
+                       ("fit_transfer_gains", lambda: style.fit_transfer_gains([a, a], [a, a]))):
+        with pytest.raises(UserError, match=re.escape(name) + ": tangent.*--representation euler"):
             call()
     with pytest.raises(UserError, match="frames"):
         fourier.FourierModel(a.offset, a.amplitude, a.phase, a.omega, "tangent", a.channel_names)
     with pytest.raises(UserError, match="frames"):
         fourier.FourierModel(a.offset, a.amplitude, a.phase, a.omega, "euler", (), a.frames)
+
+
+# ---------------------------------------------------------------- style algebra on tangent models
+
+RIGS3 = ("bandai", "zup", "rest_rotated")
+
+
+@pytest.fixture(scope="module")
+def pair(fits):
+    """07_01 (a) and 07_12 (b: the same subject and skeleton, so that bone-aligned rewrites turn
+    both alike) as tangent fits on the CMU rig and three rewrites (one `fit_batch` of four clips:
+    the program the `fits` fixture compiled)."""
+    m, rew, tangent, _ = fits
+    mb = fourierjax.data.load("07_12")[:200]
+    clips = [mb, convert(mb, "bandai"), to_y_up(convert(mb, "zup"), "z"), rest_rotated(mb)]
+    b = dict(zip(("cmu", *RIGS3), _fit(clips, "tangent")))
+    return m, rew, {k: tangent[k].model for k in b}, {k: f.model for k, f in b.items()}
+
+
+def _quat_r(q):
+    return Rotation.from_quat(np.asarray(q, np.float64).reshape(-1, 4)[:, [1, 2, 3, 0]])
+
+
+def _series(model, theta):
+    """NumPy Σ: offset + Σ_n A_n sin(nθ + φ_n) (the coefficients, before any frames)."""
+    n = np.arange(1, model.amplitude.shape[-1] + 1)
+    return np.asarray(model.offset) + np.sum(np.asarray(model.amplitude) * np.sin(n * theta + np.asarray(model.phase)),
+                                             axis=-1)
+
+
+@pytest.mark.parametrize("key", RIGS3)
+def test_style_algebra_is_rig_invariant(pair, key):
+    """#20 Done-when for the algebra: characteristic + superpose (b + 0.5 (a − b), polar and
+    phasor) and a transition a → b of tangent fits give the CMU rig's root-relative positions on
+    every rewrite. Measured 1e-5..5e-5 of leg length (polar per channel, before the per-joint
+    form: 0.059 Bandai, 0.093 rest-rotated; Euler fits: 0.07..0.70)."""
+    m, rew, ta, tb = pair
+    t = jnp.arange(0, 200, 8) * m.frame_time_s
+    leg = sum(np.linalg.norm(m.offsets[m.topology.names.index(n)]) for n in ("LeftLeg", "LeftFoot"))
+
+    def positions(k, motion):
+        a, b = ta[k], tb[k]
+        ch = style.characteristic(a, b)
+        xs = [fourier.synthesize(style.superpose(b, ch, 0.5, method=meth), t) for meth in ("polar", "phasor")]
+        xs.append(style.transition(a, b, t, 0.3, 1.5))
+        pelvis = infer_body_map(motion).pelvis
+        return [np.asarray(root_relative_positions(motion.skeleton(), x, "tangent", pelvis), np.float64) for x in xs]
+
+    r, names = rew[key]
+    ref = positions("cmu", m)
+    got = positions(key, r)
+    cols = [r.topology.names.index(n) for n in names]
+    for what, p0, p in zip(("superpose polar", "superpose phasor", "transition"), ref, got):
+        err = float(np.linalg.norm(p[:, cols] - p0, axis=-1).max() / leg)
+        assert err < 1e-3, (what, err)
+
+
+def test_frame_algebra_matches_scipy(pair):
+    """Δ = M_b⁻¹ M_a, M_b Δ^w and the blend's slerped frames against scipy's rotations."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    ch = style.characteristic(a, b)
+    delta = _quat_r(b.frames).inv() * _quat_r(a.frames)
+    assert (_quat_r(ch.frames) * delta.inv()).magnitude().max() < 1e-5
+    w = 0.37
+    ref = _quat_r(b.frames) * Rotation.from_rotvec(w * delta.as_rotvec())
+    assert (_quat_r(style.superpose(b, ch, w).frames) * ref.inv()).magnitude().max() < 1e-5
+    # blend_time_domain: the tangent coordinates blended, about the slerped clip means
+    s, theta = 0.3, 1.1
+    x = np.asarray(style.blend_time_domain(a, b, s, theta), np.float64)
+    d = (1 - s) * _series(a, theta) + s * _series(b, theta)
+    cols = _tangent.model_columns(a)
+    mean = _quat_r(a.frames) * Rotation.from_rotvec(s * (_quat_r(a.frames).inv() * _quat_r(b.frames)).as_rotvec())
+    ref = mean * Rotation.from_rotvec(d[cols])
+    assert (Rotation.from_rotvec(x[cols]) * ref.inv()).magnitude().max() < 1e-5
+    root = np.setdiff1d(np.arange(len(x)), cols.ravel())
+    np.testing.assert_allclose(x[root], d[root], rtol=1e-5, atol=1e-5)
+    # ... and it equals the phasor interpolation at θ (the docstring's rule)
+    np.testing.assert_allclose(
+        x, fourier.synthesize_phase(style.interpolate(a, b, s, method="phasor"), jnp.asarray([theta]))[0], atol=1e-5)
+
+
+def test_superpose_inverts_the_characteristic(pair):
+    """superpose(b, characteristic(a, b), 1) = a and w = 0 gives b (both methods); vmap over w."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    ch = style.characteristic(a, b)
+    for method in ("polar", "phasor"):
+        for w, ref in ((1.0, a), (0.0, b)):
+            out = style.superpose(b, ch, w, method=method)
+            np.testing.assert_allclose(fourier.synthesize_phase(out, THETA), fourier.synthesize_phase(ref, THETA),
+                                       atol=2e-5)
+            np.testing.assert_allclose(np.abs(np.sum(np.asarray(out.frames) * np.asarray(ref.frames), -1)), 1.0,
+                                       atol=1e-6)
+            assert float(out.omega) == pytest.approx(float(ref.omega), rel=1e-6)
+    ws = jnp.asarray([-0.5, 0.25, 1.5])
+    batch = jax.vmap(lambda w: style.superpose(b, ch, w))(ws)
+    for i, w in enumerate(ws):
+        one = style.superpose(b, ch, w)
+        np.testing.assert_allclose(batch.frames[i], one.frames, atol=1e-6)
+        np.testing.assert_allclose(batch.amplitude[i], one.amplitude, atol=1e-5)
+
+
+def test_superpose_gradient_in_w_is_finite_at_zero(pair):
+    """d/dw at w = 0 matches central differences, and stays finite at Δ = I (a − a)."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+
+    @eqx.filter_jit  # one program for every w and characteristic below
+    def f(w, ch):
+        return jax.value_and_grad(
+            lambda w: jnp.sum(jnp.sin(fourier.synthesize_phase(style.superpose(b, ch, w), THETA))))(w)
+
+    ch = style.characteristic(a, b)
+    h = jnp.float32(3e-3)  # float32: measured g = −60.809, central difference −60.793
+    _, g = f(jnp.float32(0.0), ch)
+    fd = (f(h, ch)[0] - f(-h, ch)[0]) / (2 * h)
+    assert float(g) == pytest.approx(float(fd), rel=2e-3)
+    assert np.isfinite(float(f(jnp.float32(1.0), ch)[1]))
+    same = style.characteristic(b, b)
+    same = eqx.tree_at(lambda c: c.frames, same, jnp.zeros_like(same.frames).at[:, 0].set(1.0))
+    assert np.isfinite(float(f(jnp.float32(0.0), same)[1]))
+
+
+def test_per_joint_polar_is_unuma_on_one_channel_and_commutes_with_frames():
+    """The per-joint polar form against closed forms: a joint moving on one channel follows
+    Unuma's per-channel polar eq. 3; turning the joint's frame (z → Cᵀz) turns the result."""
+    rng = np.random.default_rng(0)
+    K, N, s = 5, 3, 0.3
+    amp, ph = rng.uniform(0.1, 1.0, (2, K, N)), rng.uniform(-np.pi, np.pi, (2, K, N))
+    z = np.zeros((2, K, 3, N, 2))
+    z[:, :, 0, :, 0], z[:, :, 0, :, 1] = amp * np.cos(ph), amp * np.sin(ph)
+    out = np.asarray(_tangent.polar_interpolate(jnp.asarray(z[0]), jnp.asarray(z[1]), s))
+    d = np.angle(np.exp(1j * (ph[1] - ph[0])))
+    want = ((1 - s) * amp[0] + s * amp[1]) * np.exp(1j * (ph[0] + s * d))
+    np.testing.assert_allclose(out[:, 0, :, 0] + 1j * out[:, 0, :, 1], want, atol=1e-6)
+    np.testing.assert_allclose(out[:, 1:], 0.0, atol=1e-7)
+    # random joints, random frames
+    z = rng.normal(size=(3, K, 3, N, 2))
+    C = Rotation.random(K, random_state=1).as_matrix()
+    turn = lambda v: np.einsum("kji,kjnc->kinc", C, v)  # noqa: E731
+    np.testing.assert_allclose(_tangent.polar_interpolate(*map(jnp.asarray, (turn(z[0]), turn(z[1]))), s),
+                               turn(np.asarray(_tangent.polar_interpolate(jnp.asarray(z[0]), jnp.asarray(z[1]), s))),
+                               atol=1e-5)
+    d0, al0 = _tangent.polar_difference(jnp.asarray(z[0]), jnp.asarray(z[1]))
+    d1, al1 = _tangent.polar_difference(jnp.asarray(turn(z[0])), jnp.asarray(turn(z[1])))
+    np.testing.assert_allclose(d1, d0, atol=1e-5)
+    np.testing.assert_allclose(al1, turn(np.asarray(al0)), atol=1e-5)
+    back = _tangent.polar_superpose(jnp.asarray(z[1]), d0[None], al0[None], jnp.ones(1))
+    np.testing.assert_allclose(back, z[0], atol=1e-5)
+
+
+def test_cli_characteristic_and_transition_take_tangent_models(pair, fits, tmp_path, monkeypatch):
+    from fourierjax import _compile_cache
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import read_bvh
+    from fourierjax.model_io import load_characteristic
+
+    m, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    save_model(tmp_path / "a.npz", a, motion=m)
+    save_model(tmp_path / "b.npz", b, motion=m)
+    monkeypatch.setattr(_compile_cache, "enable_compile_cache", lambda: False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["characteristic", "a.npz", "b.npz", "--out", "c.npz"]) == 0
+    ch, _ = load_characteristic(tmp_path / "c.npz")
+    assert ch.representation == "tangent" and ch.frames.shape == a.frames.shape
+    back = style.superpose(b, jax.tree.map(jnp.asarray, ch), 1.0)
+    np.testing.assert_allclose(fourier.synthesize_phase(back, THETA), fourier.synthesize_phase(a, THETA), atol=1e-4)
+    assert main(["transition", "a.npz", "b.npz", "--seconds", "1", "--start", "0.2", "--duration", "0.5",
+                 "--out", "t.bvh", "--no-root-motion"]) == 0
+    assert read_bvh(tmp_path / "t.bvh").num_frames == 120
+
+
+def test_style_vectors_of_tangent_models(pair):
+    """Style vectors carry the frames as rotation vectors about a reference: they invert, their
+    distances are the same on the CMU and Bandai rigs, and `fit_style_weights` recovers the weight
+    of a phasor superposition (exact: linear in w)."""
+    _, _, ta, tb = pair
+    dists = {}
+    for key in ("cmu", "bandai"):
+        a, b = ta[key], tb[key]
+        rows = style.style_matrix([b, a])
+        k = a.frames.shape[0]
+        assert rows.shape == (2, a.offset.size * 7 + 3 * k + 1)
+        np.testing.assert_allclose(rows[0, -1 - 3 * k:-1], 0.0, atol=1e-6)  # b about itself
+        np.testing.assert_allclose(rows[1], style.style_vector(a, reference=b.frames), atol=1e-6)
+        back = style.model_from_style_vector(rows[1], b)
+        np.testing.assert_allclose(fourier.synthesize_phase(back, THETA), fourier.synthesize_phase(a, THETA),
+                                   atol=1e-4)
+        dists[key] = float(jnp.linalg.norm(rows[1] - rows[0]))
+    assert dists["bandai"] == pytest.approx(dists["cmu"], rel=1e-4)
+    a, b = ta["cmu"], tb["cmu"]
+    ch = style.characteristic(a, b)
+    target = style.superpose(b, ch, 0.37, method="phasor")
+    assert float(style.fit_style_weights(b, ch, target)[0]) == pytest.approx(0.37, abs=1e-4)
+    with pytest.raises(UserError, match="reference"):
+        style.style_vector(a, reference=jnp.zeros((3, 4)))
+
+
+def test_content_mean_and_transfer_of_tangent_models(pair):
+    """The content mean of two tangent models is their phasor interpolation at 1/2 (phasors
+    averaged, frames slerped halfway, ω geometric); eq8 transfer of a's style onto b gives a."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    mean = style.content_mean([a, b])
+    half = style.interpolate(a, b, 0.5, method="phasor")
+    np.testing.assert_allclose(fourier.synthesize_phase(mean, THETA), fourier.synthesize_phase(half, THETA), atol=1e-5)
+    assert float(mean.omega) == pytest.approx(float(half.omega), rel=1e-6)
+    out = style.transfer(a, b, b)
+    np.testing.assert_allclose(fourier.synthesize_phase(out, THETA), fourier.synthesize_phase(a, THETA), atol=1e-4)

@@ -130,3 +130,104 @@ def fit_inputs(name: str, features, mask, channel_names):
     if not traced:
         out, frames = np.asarray(out), np.asarray(frames)
     return out, frames
+
+
+# ------------------------------------------------------------------ style algebra on the frames
+# A change of rig maps the frames M' = C_p^T M C_j and the tangent coordinates d' = C_j^T d. The
+# frame difference Delta = M_b^-1 M_a maps to C_j^T Delta C_j, and so do its logarithm (a rotation
+# vector: log(C^T Delta C) = C^T log Delta) and every power of it: `frame_difference` and
+# `compose_frames` commute with the rewrite, as the linear algebra on d does.
+
+
+def canonical_frames(q: Array) -> Array:
+    """``q`` with ``w >= 0`` (the sign `clip_means` stores; ``q`` and ``-q`` are one rotation)."""
+    return jnp.where(q[..., :1] < 0, -q, q)
+
+
+def frame_difference(frames_a: Float[Array, "*B K 4"], frames_b: Float[Array, "*B K 4"]) -> Float[Array, "*B K 4"]:
+    """``Delta = M_b^-1 M_a`` per joint (wxyz, ``w >= 0``): ``M_b Delta = M_a``."""
+    d = rotations.quat_multiply(rotations.quat_conjugate(frames_b), frames_a)
+    return canonical_frames(rotations.quat_normalize(d))
+
+
+def compose_frames(frames: Float[Array, "K 4"], deltas: Float[Array, "N K 4"],
+                   weights: Float[Array, " N"]) -> Float[Array, "K 4"]:
+    """``M exp(sum_k w_k log Delta_k)`` per joint: for one difference the geodesic power
+    ``M Delta^w`` (``w = 0``: ``M``; ``w = 1``: ``M Delta``). The logs add, so several differences
+    commute and the result is smooth in ``w`` (finite derivatives at ``w = 0`` and at ``Delta = I``:
+    the library's Taylor-branch log and exp)."""
+    logs = rotations.expmap_from_quat(jnp.asarray(deltas, frames.dtype))  # [N, K, 3], angle <= pi
+    v = jnp.sum(jnp.asarray(weights, frames.dtype)[:, None, None] * logs, axis=0)
+    return canonical_frames(rotations.quat_multiply(frames, rotations.quat_from_expmap(v)))
+
+
+def features_at(d: Float[Array, "T C"], frames: Float[Array, "T K 4"], cols: np.ndarray) -> Float[Array, "T C"]:
+    """`from_tangent` with one set of frames per sample (a transition's slerped means)."""
+    return jax.vmap(lambda x, m: from_tangent(x[None], m, cols)[0])(d, frames)
+
+
+def model_columns(model) -> np.ndarray:
+    """Static ``[K, 3]`` tangent triples of a tangent model (or characteristic)."""
+    return triples(tuple(model.channel_names), model.offset.shape[-1], model.frames.shape[-2])
+
+
+# Unuma's polar form per joint. A joint's harmonic n is the complex 3-vector z = u + i v (the
+# channels' phasors `(A cos phi, A sin phi)`); a change of joint frame maps z to C^T z, which
+# leaves the Hermitian product <y, x> = sum_i x_i conj(y_i) alone. Its argument, the phase of x
+# relative to y, is the one phase per joint and harmonic that the polar form turns along the
+# shorter arc (for a single channel it is the wrapped phi_x - phi_y of Unuma's polar form), and
+# the rest moves linearly: so the polar algebra commutes with the rewrite, as the phasor one does.
+
+
+def joint_phasors(c: Float[Array, "*B C N 2"], cols: np.ndarray) -> Float[Array, "*B K 3 N 2"]:
+    """The channels' phasors grouped by joint triple."""
+    return c[..., cols, :, :]
+
+
+def relative_phase(x: Float[Array, "*B K 3 N 2"], y: Float[Array, "*B K 3 N 2"]) -> Float[Array, "*B K N"]:
+    """``arg <y, x>`` per joint and harmonic (0 where the product vanishes; finite gradients)."""
+    re = jnp.sum(x[..., 0] * y[..., 0] + x[..., 1] * y[..., 1], axis=-2)
+    im = jnp.sum(x[..., 1] * y[..., 0] - x[..., 0] * y[..., 1], axis=-2)
+    zero = re * re + im * im < 1e-30
+    # Shim to avoid NaNs in jnp.where branches (atan2 at the origin) for reverse-mode AD.
+    return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, im), jnp.where(zero, 1.0, re)))
+
+
+def turn_phase(z: Float[Array, "*B K 3 N 2"], angle: Float[Array, "*B K N"]) -> Float[Array, "*B K 3 N 2"]:
+    """``z e^{i angle}`` (every channel of a joint by the same angle)."""
+    c, s = jnp.cos(angle)[..., None, :], jnp.sin(angle)[..., None, :]
+    return jnp.stack([z[..., 0] * c - z[..., 1] * s, z[..., 0] * s + z[..., 1] * c], axis=-1)
+
+
+def polar_interpolate(za, zb, s):
+    """Per-joint polar eq. 3: ``e^{i s D} ((1 - s) z_a + s z_b e^{-i D})``, ``D = arg <z_a, z_b>``
+    (``s = 0``: ``z_a``; ``s = 1``: ``z_b``)."""
+    d = relative_phase(zb, za)
+    return turn_phase((1 - s) * za + s * turn_phase(zb, -d), s * d)
+
+
+def polar_difference(za, zb):
+    """Per-joint polar characteristic: ``(D, z_a e^{-i D} - z_b)``, ``D = arg <z_b, z_a>``."""
+    d = relative_phase(za, zb)
+    return d, turn_phase(za, -d) - zb
+
+
+def polar_superpose(z, phases, aligned, w):
+    """``e^{i sum w_k D_k} (z + sum_k w_k aligned_k)`` (phases ``[N_k, ...]``, aligned ``[N_k, ...]``):
+    ``z_b`` with one difference of ``(a, b)`` at weight 1 gives ``z_a``."""
+    wa = w.reshape((-1,) + (1,) * (aligned.ndim - 1))
+    wp = w.reshape((-1,) + (1,) * (phases.ndim - 1))
+    return turn_phase(z + jnp.sum(wa * aligned, axis=0), jnp.sum(wp * phases, axis=0))
+
+
+def relative_rotvecs(reference: Float[Array, "*B K 4"], frames: Float[Array, "*B K 4"]) -> Float[Array, "*B K 3"]:
+    """``log(R^-1 M)`` per joint (angle <= pi): the frames as rotation vectors about a reference,
+    linear near it (a change of rig maps them as it maps ``d``)."""
+    q = rotations.quat_multiply(rotations.quat_conjugate(jnp.asarray(reference, frames.dtype)), frames)
+    return rotations.expmap_from_quat(q)
+
+
+def frames_from_rotvecs(reference: Float[Array, "*B K 4"], v: Float[Array, "*B K 3"]) -> Float[Array, "*B K 4"]:
+    """Inverse of `relative_rotvecs`: ``R exp(v)`` (wxyz, ``w >= 0``)."""
+    q = rotations.quat_multiply(jnp.asarray(reference, v.dtype), rotations.quat_from_expmap(v))
+    return canonical_frames(q)

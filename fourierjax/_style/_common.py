@@ -258,8 +258,10 @@ def on_branch_of(a, b):
     shifts b's whole signal by whole turns. Exponential-map triples: the equivalent rotation vector
     nearest a's (`nearest_rotation_vector`), and b's harmonics mapped through the Jacobian of
     that change, so that b's rotations stay the same to first order in the amplitudes. Root
-    channels are left alone. Works for a stacked `b` against one `a` by broadcasting.
+    channels and tangent models are left alone. Works for a stacked `b` against one `a` by broadcasting.
     """
+    if getattr(a, "representation", "") == "tangent":
+        return b  # tangent coordinates are about each model's own clip means: no branch
     euler, triples = channel_kinds(a)
     if not euler.any() and not triples.size:
         return b

@@ -15,8 +15,6 @@ from fourierjax._style._common import (
     check_compatible,
     check_models_omega,
     on_branch_of,
-    polar_from_phasor,
-    replace,
 )
 from fourierjax._style.characteristics import characteristic, common_harmonics, refuse_tangent, stack, superpose
 from fourierjax._style.distance import _pelvis, cycle_distance
@@ -44,13 +42,10 @@ class TransferWeight(NamedTuple):
 
 @filter_jit
 def _content_mean(first, stacked):
-    vectors = eqx.filter_vmap(lambda m: style_vector_core(on_branch_of(first, m)))(stacked)
-    mean = jnp.mean(vectors, axis=0)
-    c, n = first.amplitude.shape
-    per_channel = jnp.reshape(mean[:-1], (c, 1 + 2 * n))
-    re_im = jnp.reshape(per_channel[:, 1:], (c, n, 2)) * jnp.sqrt(2.0)
-    amplitude, phase = polar_from_phasor(re_im)
-    return replace(first, offset=per_channel[:, 0], amplitude=amplitude, phase=phase, omega=jnp.exp(mean[-1]))
+    # Tangent models: the frames as rotation vectors about the first model's (`style_vector`),
+    # averaged, so the mean frames are `M_1 exp(mean_i log(M_1⁻¹ M_i))` (None otherwise).
+    vectors = eqx.filter_vmap(lambda m: style_vector_core(on_branch_of(first, m), first.frames))(stacked)
+    return _model_from_style_vector(jnp.mean(vectors, axis=0), first)
 
 
 def content_mean(models: Sequence[FourierModel]) -> FourierModel:
@@ -60,6 +55,9 @@ def content_mean(models: Sequence[FourierModel]) -> FourierModel:
     phase), ω geometrically, and angle offsets after every model is moved onto the first
     model's branch (Euler offsets of two clips can differ by whole turns and expmaps sit on
     antipodal branches; averaging across branches gives a pose that none of them has).
+    Tangent models average their tangent coordinates' phasors and their clip means as rotation
+    vectors about the first model's (`M_1 exp(mean_i log(M_1⁻¹ M_i))`, one step of the Karcher
+    mean), which commutes with a change of rig.
 
     Arguments:
         models: one or more compatible, phase-aligned FourierModels (a sequence; harmonic
@@ -75,7 +73,6 @@ def content_mean(models: Sequence[FourierModel]) -> FourierModel:
         if not isinstance(m, FourierModel):
             raise UserError(f"content_mean: `models[{i}]` is a {type(m).__name__}, not a FourierModel")
         check_compatible(models[0], m, names=("models[0]", f"models[{i}]"))
-    refuse_tangent("content_mean", models[0])
     models = list(common_harmonics(*models)) if len(models) > 1 else list(models)
     models = [check_models_omega("content_mean", model=m) for m in models]
     return _content_mean(models[0], stack(models))
@@ -130,11 +127,15 @@ def transfer(
             across the reference styles); `None`: all 1.
         skeleton, body_map, weight_grid: for `weight="cv"` only (see `fit_transfer_weight`).
 
+    Tangent models: eq8 and content_mean work through `characteristic`, `superpose` and
+    `content_mean` (the clip means' differences composed on the target's, rig-invariant);
+    per-channel `gains` are refused (a gain per tangent channel does not commute with a change
+    of joint frame).
+
     Returns:
         A FourierModel with the static fields of the target reference. Raises `UserError`
         for an unknown method, incompatible models or a non-finite weight.
     """
-    refuse_tangent("transfer", source)
     if method not in TRANSFER_METHODS:
         raise UserError(f"transfer: `method` must be one of {TRANSFER_METHODS}, got {method!r}")
     if isinstance(weight, str):
@@ -158,6 +159,8 @@ def transfer(
 
     if gains is not None and method != "content_mean":
         raise UserError("transfer: `gains` are a content_mean option")
+    if gains is not None:
+        refuse_tangent("transfer(gains=)", source)
     ms, mt = reference(source_reference, "source_reference"), reference(target_reference, "target_reference")
     if method == "eq8":
         return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None])
@@ -291,8 +294,6 @@ def fit_transfer_weight(
         the median ratio of each weight.
     """
     sources, targets = list(sources), list(targets)
-    for m in sources[:1] + targets[:1]:
-        refuse_tangent("fit_transfer_weight", m)
     if len(sources) != len(targets) or len(sources) < 3:
         raise UserError(f"fit_transfer_weight: `sources` and `targets` must be paired sequences of at least 3 "
                         f"models, got {len(sources)} and {len(targets)}")

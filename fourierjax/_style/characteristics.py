@@ -10,6 +10,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, PRNGKeyArray
 
+from fourierjax._fourier import _tangent
 from fourierjax._jit import filter_jit
 from fourierjax._math import wrap_angle
 from fourierjax._memory import check_bytes, resolve_limit
@@ -53,6 +54,11 @@ class Characteristic(eqx.Module):
         log_omega: `log(ω_A / ω_B)` (scalar).
         representation: static, copied from the models.
         channel_names: static, copied from the models.
+        frames: `[K, 4]` (wxyz) for tangent models, each joint's clip-mean difference
+            `Δ_j = M_B⁻¹ M_A` (so that `M_B Δ_j = M_A`); None for Euler and expmap models.
+        aligned: `[C, N, 2]` for tangent models, the per-joint polar difference: on each joint's
+            three channels `z_A e^{−iD} − z_B`, D the joint's `phase` (see `characteristic`);
+            None for Euler and expmap models.
     """
 
     offset: Float[Array, "*k channels"]
@@ -62,14 +68,18 @@ class Characteristic(eqx.Module):
     log_omega: Float[Array, "*k"]
     representation: str = eqx.field(static=True, default="")
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
+    frames: Float[Array, "*k joints 4"] | None = None
+    aligned: Float[Array, "*k channels harmonics 2"] | None = None
 
 
 def refuse_tangent(where: str, model) -> None:
-    """Style algebra other than `interpolate` is defined on Euler and expmap coefficients only."""
+    """Refuse a tangent model where the operation is defined on Euler and expmap coefficients only
+    (per-channel transfer gains: a gain per tangent channel does not commute with a change of
+    joint frame)."""
     if getattr(model, "representation", "") == "tangent":
         raise UserError(f"{where}: tangent models (coefficients about each joint's clip mean) are "
-                        "not supported here; fit with --representation euler (or representation="
-                        "'euler')")
+                        "not supported here (per-channel gains); fit with --representation euler (or "
+                        "representation='euler')")
 
 
 def pad_harmonics(model, num_harmonics: int):
@@ -103,6 +113,8 @@ def pad_harmonics(model, num_harmonics: int):
     fields = {"amplitude": pad(model.amplitude, 1), "phase": pad(model.phase, 1)}
     if isinstance(model, Characteristic):
         fields["phasor"] = pad(model.phasor, 2)
+        if model.aligned is not None:
+            fields["aligned"] = pad(model.aligned, 2)
     return replace(model, **fields)
 
 
@@ -124,6 +136,16 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
     `J.expmap0..2` after b's rotation vector is replaced by the equivalent one nearest a's
     (its harmonics follow to first order); `root.*` channels subtract plainly.
 
+    Tangent models (`representation="tangent"`, `R_j(t) = M_j exp(d_j(t))`): the coefficients of
+    the tangent coordinates `d` subtract as above but with no branch (they are about each
+    model's own clip means), and `frames` holds `Δ_j = M_B⁻¹ M_A`. Unuma's polar form is taken
+    per joint: each harmonic of a joint is a complex 3-vector `z` (its channels' phasors), its
+    `phase` difference is `D = arg Σ_i z_A,i conj(z_B,i)` on all three channels (a single channel
+    gives the wrapped `φ_A − φ_B`) and `aligned = z_A e^{−iD} − z_B`. A change of rig
+    (`M' = C_pᵀ M C_j`, `d' = C_jᵀ d`, `z' = C_jᵀ z`) maps `Δ` to `C_jᵀ Δ C_j`, leaves `D` alone
+    and maps `aligned` and `phasor` linearly, so the characteristic of two rewritten models is the
+    rewritten characteristic (`amplitude` is per channel and informative only).
+
     Arguments:
         a: a FourierModel.
         b: a compatible FourierModel (different harmonic counts are zero-padded).
@@ -134,7 +156,6 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
         be infinite; under jit the error comes from `eqx.error_if` when the program runs).
     """
     check_compatible(a, b)
-    refuse_tangent("characteristic", a)
     a, b = check_models_omega("characteristic", a=a, b=b)
     a, b = common_harmonics(a, b)
     return _characteristic(a, b)
@@ -142,15 +163,26 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
 
 @filter_jit
 def _characteristic(a, b):
-    b = on_branch_of(a, b)
+    tangent = getattr(a, "representation", "") == "tangent"
+    if not tangent:
+        b = on_branch_of(a, b)
+    phase = wrap_angle(a.phase - b.phase)
+    aligned = None
+    if tangent:
+        cols = _tangent.model_columns(a)
+        d, z = _tangent.polar_difference(*(_tangent.joint_phasors(phasor(m), cols) for m in (a, b)))
+        phase = phase.at[cols].set(jnp.broadcast_to(d[..., None, :], z.shape[:-1]))
+        aligned = (phasor(a) - phasor(b)).at[cols].set(z)
     return Characteristic(
         offset=a.offset - b.offset,
         amplitude=a.amplitude - b.amplitude,
-        phase=wrap_angle(a.phase - b.phase),
+        phase=phase,
         phasor=phasor(a) - phasor(b),
         log_omega=jnp.log(a.omega) - jnp.log(b.omega),
         representation=getattr(a, "representation", ""),
         channel_names=tuple(getattr(a, "channel_names", ())),
+        frames=_tangent.frame_difference(a.frames, b.frames) if tangent else None,
+        aligned=aligned,
     )
 
 
@@ -233,21 +265,33 @@ def _prepare_superposition(base, characteristics, weights):
 @filter_jit
 def _superpose(base, chars, weights, method: str, include_omega: bool):
     w = weights
+    tangent = base.representation == "tangent"
     euler, _ = channel_kinds(base)
-    # Characteristics written before offsets were compared on one branch may hold 2π too much.
-    char_offset = chars.offset - jnp.where(jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
+    # Characteristics written before offsets were compared on one branch may hold 2π too much
+    # (tangent coordinates have no branch).
+    char_offset = chars.offset if tangent else chars.offset - jnp.where(
+        jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
     offset = base.offset + jnp.sum(w[:, None] * char_offset, axis=0)
     if method == "polar":
         amplitude = base.amplitude + jnp.sum(w[:, None, None] * chars.amplitude, axis=0)
         phase = base.phase + jnp.sum(w[:, None, None] * chars.phase, axis=0)
         amplitude, phase = canonical(amplitude, phase)
+        if tangent:  # the joints' triples by the per-joint polar form (`characteristic`)
+            cols = _tangent.model_columns(base)
+            z = _tangent.polar_superpose(_tangent.joint_phasors(phasor(base), cols), chars.phase[:, cols[:, 0]],
+                                         _tangent.joint_phasors(chars.aligned, cols), w)
+            amp_t, phase_t = polar_from_phasor(z)
+            amplitude, phase = amplitude.at[cols].set(amp_t), phase.at[cols].set(phase_t)
     else:
         c = phasor(base) + jnp.sum(w[:, None, None, None] * chars.phasor, axis=0)
         amplitude, phase = polar_from_phasor(c)
     om = base.omega
     if include_omega:
         om = om * jnp.exp(jnp.sum(w * chars.log_omega))
-    return replace(base, offset=offset, amplitude=amplitude, phase=phase, omega=om)
+    out = replace(base, offset=offset, amplitude=amplitude, phase=phase, omega=om)
+    if tangent:
+        out = replace(out, frames=_tangent.compose_frames(base.frames, chars.frames, w))
+    return out
 
 
 def superpose(
@@ -287,9 +331,12 @@ def superpose(
         weights or log_omega and a base ω that is not > 0 (under jit, from `eqx.error_if`).
     """
     check_choice(method, METHODS, "method", "superpose")
-    refuse_tangent("superpose", base)
     base = check_models_omega("superpose", base=base)
     base, chars, weights = _prepare_superposition(base, characteristics, weights)
+    if base.representation == "tangent" and (chars.frames is None or chars.aligned is None):
+        raise UserError("superpose: the tangent characteristic has no `frames` or `aligned` (the "
+                        "clip-mean and per-joint polar differences); recompute it with "
+                        "style.characteristic(a, b)")
     chars = check_log_omega("superpose", chars)
     return _superpose(base, chars, weights, method, bool(include_omega))
 

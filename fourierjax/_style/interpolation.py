@@ -8,6 +8,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
+from fourierjax._fourier import _tangent
 from fourierjax._jit import filter_jit
 from fourierjax._math import wrap_angle
 from fourierjax._style._common import (
@@ -30,7 +31,7 @@ from fourierjax._style._common import (
     replace,
     show,
 )
-from fourierjax._style.characteristics import common_harmonics, refuse_tangent
+from fourierjax._style.characteristics import common_harmonics
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 from fourierjax.rotations import quat_slerp
@@ -101,6 +102,11 @@ def interpolate_core(a, b, s, method: str, omega_mode: str):
         amplitude = (1 - s) * a.amplitude + s * b.amplitude
         phase = a.phase + s * wrap_angle(b.phase - a.phase)
         amplitude, phase = canonical(amplitude, phase)
+        if a.representation == "tangent":  # a joint's triple by the per-joint polar form
+            cols = _tangent.model_columns(a)
+            z = _tangent.polar_interpolate(*(_tangent.joint_phasors(phasor(m), cols) for m in (a, b)), s)
+            amp_t, phase_t = polar_from_phasor(z)
+            amplitude, phase = amplitude.at[cols].set(amp_t), phase.at[cols].set(phase_t)
     else:
         amplitude, phase = polar_from_phasor((1 - s) * phasor(a) + s * phasor(b))
     om = omega_at(a.omega, b.omega, s, omega_mode)
@@ -140,7 +146,10 @@ def interpolate(
     its harmonics mapped to first order); `root.*` channels interpolate plainly. So `s = 1`
     gives b's motion on a's branch. Tangent models (`representation="tangent"`) interpolate
     their coefficients (the tangent coordinates) by eq. 3 and slerp the joints' clip means
-    (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`.
+    (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`. Their polar form is per joint:
+    each harmonic of a joint is a complex 3-vector `z`, turned along the shorter arc by
+    `s·D`, `D = arg Σ_i z_B,i conj(z_A,i)`, as `e^{isD}((1 − s) z_A + s z_B e^{−iD})` (a single
+    channel gives Unuma's form), so that a change of the rig's joint frames commutes with it.
 
     Which method: polar keeps each harmonic's amplitude between the two (a harmonic whose
     phases oppose does not cancel halfway, as it does with phasors) and is what Unuma
@@ -179,9 +188,14 @@ def interpolate(
 
 @filter_jit
 def _blend(a, b, s, theta):
-    return (1 - s) * evaluate(a.offset, a.amplitude, a.phase, theta) + s * evaluate(
+    x = (1 - s) * evaluate(a.offset, a.amplitude, a.phase, theta) + s * evaluate(
         b.offset, b.amplitude, b.phase, theta
     )
+    if a.representation != "tangent":
+        return x
+    # The tangent coordinates blend as above, about the clip means slerped by the same weight.
+    frames = quat_slerp(a.frames, b.frames, s)
+    return _tangent.from_tangent(x[None], frames, _tangent.model_columns(a))[0]
 
 
 def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: ArrayLike) -> Float[Array, " channels"]:
@@ -193,6 +207,10 @@ def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: Arr
     `interpolate(a, b, s, method="phasor")` evaluated at θ when the models' offsets are on one
     branch (this blend takes the signals as they are).
 
+    Tangent models: the tangent coordinates `d` blend as above and the joints' clip means are
+    slerped by the same weight (`s = 0`: a's frames, `s = 1`: b's); the result is expmap features
+    (what `fourier.synthesize_phase` returns), and still equals the phasor `interpolate` at θ.
+
     Arguments:
         a: FourierModel.
         b: a compatible FourierModel.
@@ -202,8 +220,6 @@ def blend_time_domain(a: FourierModel, b: FourierModel, s: ArrayLike, phase: Arr
     Returns:
         `[C]` channel values in the models' units.
     """
-    refuse_tangent("blend_time_domain", a)
-    refuse_tangent("blend_time_domain", b)
     check_compatible(a, b)
     s = check_scalar("blend_time_domain", "s", s, "; vmap over s for several weights")
     phase = check_scalar("blend_time_domain", "phase", phase, "; vmap over phase for many frames")

@@ -8,12 +8,15 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from fourierjax import rotations
 from fourierjax._checks import concrete
+from fourierjax._fourier import _tangent
 from fourierjax._jit import filter_jit
 from fourierjax._linalg import spd_solve
 from fourierjax._style._common import (
     channel_kinds,
     check_compatible,
+    check_finite,
     check_log_omega,
     check_models_omega,
     check_scalar,
@@ -27,7 +30,6 @@ from fourierjax._style._common import (
 from fourierjax._style.characteristics import (
     Characteristic,
     pad_harmonics,
-    refuse_tangent,
     stack,
     stacked_characteristics,
 )
@@ -35,17 +37,37 @@ from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 
 
-def style_vector_core(model):
-    """The style vector of one model (unchecked, not jitted)."""
+def style_vector_core(model, reference=None):
+    """The style vector of one model (unchecked, not jitted); a tangent model's frames as
+    rotation vectors about `reference` (`[K, 4]`, default its own frames)."""
     c = phasor(model) / jnp.sqrt(2.0)  # [C, N, 2]
     per_channel = jnp.concatenate([model.offset[:, None], jnp.reshape(c, (c.shape[0], -1))], axis=1)
-    return jnp.concatenate([jnp.reshape(per_channel, (-1,)), jnp.log(model.omega)[None]])
+    parts = [jnp.reshape(per_channel, (-1,))]
+    if model.representation == "tangent":
+        ref = model.frames if reference is None else reference
+        parts.append(jnp.reshape(_tangent.relative_rotvecs(ref, model.frames), (-1,)))
+    return jnp.concatenate([*parts, jnp.log(model.omega)[None]])
 
 
 _style_vector = filter_jit(style_vector_core)
 
 
-def style_vector(model: FourierModel) -> Float[Array, " dim"]:
+def _reference(where: str, model, reference):
+    """`reference` for a tangent model (None: keep the default), checked; None otherwise."""
+    if model.representation != "tangent":
+        if reference is not None:
+            raise UserError(f"{where}: `reference` (clip-mean frames) is for tangent models only")
+        return None
+    if reference is None:
+        return None
+    reference = jnp.asarray(reference, dtype=dtype_of(model))
+    if reference.shape != model.frames.shape[-2:]:
+        raise UserError(f"{where}: `reference` must be [K, 4] (wxyz, one per joint, like the "
+                        f"model's frames {model.frames.shape[-2:]}), got shape {reference.shape}")
+    return check_finite(where, "reference", reference)
+
+
+def style_vector(model: FourierModel, *, reference: Float[ArrayLike, "K 4"] | None = None) -> Float[Array, " dim"]:
     """The flat style vector of one model (Tilmanne & Dutoit §2.2: C × 5 + 1 = 271 numbers for
     54 channels and N = 2), in PHASOR coordinates.
 
@@ -57,68 +79,99 @@ def style_vector(model: FourierModel) -> Float[Array, " dim"]:
     ω, `|v_A − v_B|²` (without the last entry) is the mean over one cycle of
     `Σ_c (Θ_A,c(θ) − Θ_B,c(θ))²`. The fundamental enters as `log ω` (unscaled).
 
+    Tangent models (`representation="tangent"`, `R_j = M_j exp(d_j)`): the channels hold the
+    tangent coordinates `d`, and the joints' clip means follow as rotation vectors
+    `log(R_j⁻¹ M_j)` about a reference `R` (`[K · 3]`, before `log ω`), linear near it. Compare
+    or combine only vectors taken about one reference (`style_matrix` uses the first model's
+    frames); the default, the model's own frames, gives zeros there. A change of rig maps the
+    vector by a rotation per joint (`d' = C_jᵀ d`, `log' = C_jᵀ log`), so distances between
+    vectors, and PCA, are the same on every rig.
+
     Arguments:
         model: FourierModel with `C` channels and `N` harmonics.
+        reference: tangent models only: `[K, 4]` wxyz frames the clip means are taken about
+            (default the model's own).
 
     Returns:
-        `[C (1 + 2N) + 1]`. Raises `UserError` when `model.omega` is not finite and > 0
-        (`log ω` would be −inf or NaN; under jit, from `eqx.error_if`).
+        `[C (1 + 2N) + 1]` (tangent: `[C (1 + 2N) + 3K + 1]`). Raises `UserError` when
+        `model.omega` is not finite and > 0 (`log ω` would be −inf or NaN; under jit, from
+        `eqx.error_if`).
     """
-    refuse_tangent("style_vector", model)
+    reference = _reference("style_vector", model, reference)
     model = check_models_omega("style_vector", model=model)
-    return _style_vector(model)
+    return _style_vector(model, reference)
 
 
-def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel) -> FourierModel:
+def _vector_size(like) -> int:
+    c, n = like.amplitude.shape[-2:]
+    k = like.frames.shape[-2] if like.representation == "tangent" else 0
+    return c * (1 + 2 * n) + 3 * k + 1
+
+
+def model_from_style_vector(vector: Float[ArrayLike, " dim"], like: FourierModel, *,
+                            reference: Float[ArrayLike, "K 4"] | None = None) -> FourierModel:
     """Inverse of `style_vector`: a FourierModel shaped like `like` (channels, harmonics and
     static fields) from a style vector, e.g. a PCA reconstruction.
 
     Arguments:
-        vector: `[C (1 + 2N) + 1]`.
+        vector: `[C (1 + 2N) + 1]` (tangent: `[C (1 + 2N) + 3K + 1]`).
         like: a FourierModel giving C, N and the static fields.
+        reference: tangent models only: the frames the vector's rotation vectors are about
+            (default `like.frames`: `style_matrix`'s reference when `like` is its first model).
 
     Returns:
         A FourierModel.
     """
-    refuse_tangent("model_from_style_vector", like)
+    reference = _reference("model_from_style_vector", like, reference)
     c, n = like.amplitude.shape
     vector = jnp.asarray(vector, dtype=dtype_of(like))
-    if vector.shape != (c * (1 + 2 * n) + 1,):
+    size = _vector_size(like)
+    if vector.shape != (size,):
         raise UserError(
             f"model_from_style_vector: `vector` has shape {vector.shape}, expected "
-            f"({c * (1 + 2 * n) + 1},) for {c} channels and {n} harmonics"
+            f"({size},) for {c} channels and {n} harmonics"
+            + (f" and {like.frames.shape[-2]} joint frames" if like.representation == "tangent" else "")
         )
-    return _model_from_style_vector(vector, like)
+    return _model_from_style_vector(vector, like, reference)
 
 
 @filter_jit
-def _model_from_style_vector(vector, like):
+def _model_from_style_vector(vector, like, reference=None):
     c, n = like.amplitude.shape
-    per_channel = jnp.reshape(vector[:-1], (c, 1 + 2 * n))
+    per_channel = jnp.reshape(vector[: c * (1 + 2 * n)], (c, 1 + 2 * n))
     amplitude, phase = polar_from_phasor(jnp.reshape(per_channel[:, 1:], (c, n, 2)) * jnp.sqrt(2.0))
-    return replace(like, offset=per_channel[:, 0], amplitude=amplitude, phase=phase, omega=jnp.exp(vector[-1]))
+    out = replace(like, offset=per_channel[:, 0], amplitude=amplitude, phase=phase, omega=jnp.exp(vector[-1]))
+    if like.representation == "tangent":
+        ref = like.frames if reference is None else reference
+        v = jnp.reshape(vector[c * (1 + 2 * n):-1], (like.frames.shape[-2], 3))
+        out = replace(out, frames=_tangent.frames_from_rotvecs(ref, v))
+    return out
 
 
-def style_matrix(models) -> Float[Array, "models dim"]:
+def style_matrix(models, *, reference: Float[ArrayLike, "K 4"] | None = None) -> Float[Array, "models dim"]:
     """Stack models into a matrix of style vectors (one row per model, see `style_vector`).
 
     Arguments:
         models: a sequence of compatible FourierModels (harmonic counts are padded to the
             largest) or a stacked batch (leading axis).
+        reference: tangent models only: the frames every row's clip means are taken about
+            (default the first model's; `model_from_style_vector(row, like=models[0])` inverts).
 
     Returns:
-        `[M, C (1 + 2N) + 1]`.
+        `[M, C (1 + 2N) + 1]` (tangent: `[M, C (1 + 2N) + 3K + 1]`).
     """
     if isinstance(models, Sequence):
         models = stack(models)
-    refuse_tangent("style_matrix", models)
+    reference = _reference("style_matrix", models, reference)
+    if models.representation == "tangent" and reference is None:
+        reference = models.frames[0]
     models = check_models_omega("style_matrix", models=models)
-    return _style_matrix(models)
+    return _style_matrix(models, reference)
 
 
 @filter_jit
-def _style_matrix(models):
-    return eqx.filter_vmap(style_vector_core)(models)
+def _style_matrix(models, reference=None):
+    return eqx.filter_vmap(lambda m: style_vector_core(m, reference))(models)
 
 
 class StylePCA(eqx.Module):
@@ -224,14 +277,21 @@ def pca_reconstruct(pca: StylePCA, coords: Float[ArrayLike, "*batch k"]) -> Floa
 def _fit_style_weights(base, chars, target, ridge, include_omega: bool):
     scale = 1.0 / jnp.sqrt(2.0)
     k, c, n, _ = chars.phasor.shape
+    tangent = base.representation == "tangent"
     euler, _ = channel_kinds(base)
-    # Offsets on one branch, as `superpose` adds them.
-    char_offset = chars.offset - jnp.where(jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
+    # Offsets on one branch, as `superpose` adds them (tangent coordinates have none).
+    char_offset = chars.offset if tangent else chars.offset - jnp.where(
+        jnp.asarray(euler)[None, :], turns(chars.offset), 0.0)
     # Columns: style-space direction of each characteristic in phasor coordinates; the
     # phasor superposition is linear in w, so least squares is exact and closed form.
     cols = jnp.concatenate([char_offset[:, :, None], jnp.reshape(chars.phasor * scale, (k, c, 2 * n))], axis=2)
     cols = jnp.reshape(cols, (k, -1))
-    residual = style_vector_core(target)[:-1] - style_vector_core(base)[:-1]
+    reference = None
+    if tangent:
+        # Frames about the base's: superpose puts them at exp(Σ w_k log Δ_k), linear in w.
+        reference = base.frames
+        cols = jnp.concatenate([cols, jnp.reshape(rotations.expmap_from_quat(chars.frames), (k, -1))], axis=1)
+    residual = style_vector_core(target, reference)[:-1] - style_vector_core(base, reference)[:-1]
     if include_omega:
         cols = jnp.concatenate([cols, chars.log_omega[:, None]], axis=1)
         residual = jnp.concatenate([residual, (jnp.log(target.omega) - jnp.log(base.omega))[None]])
@@ -258,6 +318,9 @@ def fit_style_weights(
     `include_omega`. The problem is linear in `w`, so the solution is closed form (normal
     equations, `K × K`, solved without LAPACK); differentiable in every input. Fit the target
     clip first (`fourierjax.fourier`), aligned to the same gait event as the characteristics.
+    Tangent models: the frames enter as rotation vectors about the base's
+    (`log(M_base⁻¹ M_target)` against `Σ w_k log Δ_k`, what `superpose` composes), so the
+    problem stays linear and exact for a phasor superposition.
 
     Arguments:
         base: FourierModel the characteristics are added to.
@@ -270,11 +333,12 @@ def fit_style_weights(
     Returns:
         `[K]` weights.
     """
-    refuse_tangent("fit_style_weights", base)
-    refuse_tangent("fit_style_weights", target)
     check_compatible(base, target, names=("base", "target"))
     chars = stacked_characteristics(characteristics)
     check_compatible(base, chars, names=("base", "characteristics"))
+    if base.representation == "tangent" and chars.frames is None:
+        raise UserError("fit_style_weights: the tangent characteristics have no `frames`; recompute "
+                        "them with style.characteristic(a, b)")
     base, target = check_models_omega("fit_style_weights", base=base, target=target)
     chars = check_log_omega("fit_style_weights", chars)
     n = max(num_harmonics(base), num_harmonics(chars), num_harmonics(target))

@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._checks import concrete
+from fourierjax._fourier import _tangent
 from fourierjax._jit import filter_jit
 from fourierjax._saved import saved
 from fourierjax._style._common import (
@@ -30,10 +31,11 @@ from fourierjax._style._common import (
     omega_mode_argument,
     on_branch_of,
 )
-from fourierjax._style.characteristics import common_harmonics, refuse_tangent
+from fourierjax._style.characteristics import common_harmonics
 from fourierjax._style.interpolation import interpolate_core
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
+from fourierjax.rotations import quat_slerp
 
 # Gauss-Legendre nodes on [-1, 1] for the phase integral over the transition window; the
 # integrand ω(s(u)) is smooth there, so 16 nodes are exact to rounding in float64.
@@ -173,7 +175,12 @@ def _transition(a, b, t_s, start, duration, ease_kind: str, method: str, omega_m
         m = interpolate_core(a, b, s_i, method, omega_mode)
         return evaluate(m.offset, m.amplitude, m.phase, theta_i)
 
-    return jax.vmap(frame)(s, theta), s, theta
+    x = jax.vmap(frame)(s, theta)
+    if a.representation == "tangent":
+        # The tangent coordinates blend as above; each frame's clip means are slerped by its s.
+        frames = jax.vmap(lambda s_i: quat_slerp(a.frames, b.frames, s_i))(s)
+        x = _tangent.features_at(x, frames, _tangent.model_columns(a))
+    return x, s, theta
 
 
 def transition(
@@ -201,6 +208,13 @@ def transition(
     `interpolate`), so an Euler thigh at +179° going to −179° turns by 2°, not 358°. Choose
     `start_s` at a gait event (θ a multiple of 2π) to begin the change at a foot strike.
 
+    Tangent models (`representation="tangent"`): the tangent coordinates blend as above (no
+    branch) and each frame's joint clip means are slerped by the same `s(t)` (a's frames before
+    the window, b's after it); the values are expmap features, as `fourier.synthesize` returns.
+    A change of rig maps every frame's rotations as it maps the models', so the transition of
+    two rewritten models is the rewritten transition (exactly with `method="phasor"`; polar
+    mixes each joint's three channels' phases differently in each frame).
+
     Arguments:
         a: FourierModel of the start gait.
         b: compatible FourierModel of the end gait, aligned to the same gait event.
@@ -217,8 +231,6 @@ def transition(
         `[T, C]` channel values (model units), or `(values, s, theta)`. Raises `UserError` as
         `transition_schedule` does (and for a model whose ω is not > 0).
     """
-    refuse_tangent("transition", a)
-    refuse_tangent("transition", b)
     check_compatible(a, b)
     check_choice(ease, EASES, "ease", "transition")
     check_choice(method, METHODS, "method", "transition")

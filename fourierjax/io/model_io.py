@@ -40,6 +40,9 @@ _MAX_ELEMENTS = 1 << 28
 
 _MODEL_ARRAYS = ("offset", "amplitude", "phase", "omega")
 _CHARACTERISTIC_ARRAYS = ("offset", "amplitude", "phase", "phasor", "log_omega")
+#: Written only for tangent characteristics (`style.characteristic`): ``frames [K, 4]`` (wxyz
+#: clip-mean differences M_B^-1 M_A) and ``aligned [C, N, 2]`` (per-joint polar differences).
+_TANGENT_CHARACTERISTIC_ARRAYS = ("frames", "aligned")
 
 
 class ModelFileError(UserError):
@@ -558,7 +561,9 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
     ``alignment``, and float64 arrays ``offset [C]`` (A0_A - A0_B), ``amplitude [C, N]``
     (A_A - A_B, may be negative), ``phase [C, N]`` (phi_A - phi_B wrapped to (-pi, pi]),
     ``phasor [C, N, 2]`` (c_A - c_B with c = (A cos phi, A sin phi)), ``log_omega []``
-    (log omega_A / omega_B). Apply one with ``style.superpose(base, [char], [weight])``.
+    (log omega_A / omega_B); tangent characteristics also ``frames [K, 4]`` (wxyz, M_B^-1 M_A)
+    and ``aligned [C, N, 2]`` (per-joint polar differences, `style.characteristic`). Apply one
+    with ``style.superpose(base, [char], [weight])``.
 
     Arguments:
         path: output file (conventionally ``*.npz``).
@@ -570,6 +575,9 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
     header = _header(CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION, char,
                      "characteristic", a=a, b=b, alignment=alignment)
     arrays = {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS}
+    for k in _TANGENT_CHARACTERISTIC_ARRAYS:  # tangent characteristics only
+        if getattr(char, k, None) is not None:
+            arrays[k] = getattr(char, k)
     _refuse_non_finite("save_characteristic", "char", arrays, path)
     _write_archive(path, header, arrays)
 
@@ -593,7 +601,8 @@ def load_characteristic(path):
     names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
                                                 "phase": ("C", "N"), "phasor": ("C", "N", 2),
                                                 "log_omega": ()})
-    char = Characteristic(**{k: data[k] for k in _CHARACTERISTIC_ARRAYS},
+    extra = {k: data[k] for k in _TANGENT_CHARACTERISTIC_ARRAYS if k in data}
+    char = Characteristic(**{k: data[k] for k in _CHARACTERISTIC_ARRAYS}, **extra,
                           representation=str(header.get("representation", "")),
                           channel_names=names)
     return char, header
