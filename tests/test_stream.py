@@ -42,6 +42,7 @@ def test_a_generator_in_chunks_fits_as_a_list(clips):
 
 def test_iter_fit_motions_yields_each_chunk_as_it_is_fitted(clips):
     ms, bm = clips
+    ms = ms + ms[:3]  # 8 clips, 4 chunks of 2
     pulled = []
 
     def gen():
@@ -52,7 +53,9 @@ def test_iter_fit_motions_yields_each_chunk_as_it_is_fitted(clips):
     it = M.iter_fit_motions(gen(), 2, body_map=bm, chunk_size=2, **OPTS)
     first = next(it)
     assert first.successful
-    assert len(pulled) < len(ms)  # the last chunk is not read yet
+    # Chunk 0's clips wait one chunk for more of their length bucket (a batch is 16 clips):
+    # they are fitted with chunk 1 while chunk 2 is read; chunk 3 is not read yet.
+    assert len(pulled) <= 6
     rest = list(it)
     assert len(rest) == len(ms) - 1 and pulled == list(range(len(ms)))
 
