@@ -189,27 +189,26 @@ def test_body_maps_of_a_chunk_are_each_clips_own(chunk):
     assert got[0].to_dict() != got[1].to_dict()  # the same skeleton, its own motion's map
 
 
-def test_a_clips_fit_does_not_depend_on_the_clips_fitted_with_it():
-    # A run cut to 120 frames (length bucket 128) fitted alone, and streamed with a 200-frame cut
-    # (bucket 256) in one chunk: each clip is padded to its own bucket, so the short clip's fit
-    # is the same. The last session's stream padded it to 256 frames with its chunk's longest,
-    # which moves its spectral ω grid (the FFT length follows the padded length) and its fit.
+def test_a_clips_fit_does_not_depend_on_the_clips_fitted_with_it(monkeypatch):
+    # A run cut to 120 frames (length bucket 128) fitted alone, and streamed with the whole run
+    # (173 frames: bucket 256) in one chunk: each clip is padded to its own bucket (the last session's
+    # stream padded it to its chunk's longest), and the short clip's fit is the same.
     m = data.load("02_03")
     bm = infer_body_map(m)
     short, long = m[:120], m[:200]
     alone = M.fit_motions([short], 2, body_map=bm, **OPTS)[0]
+    batches = []
+    fit_chunk = _pipeline._fit_chunk
+
+    def spy(chunk, *args):
+        batches.append(({c.index for c in chunk}, max(len(c.features) for c in chunk)))
+        return fit_chunk(chunk, *args)
+
+    monkeypatch.setattr(_pipeline, "_fit_chunk", spy)
     paired = M.fit_motions([short, long], 2, body_map=bm, **OPTS)
+    assert sorted(batches, key=lambda b: b[1]) == [({0}, 120), ({1}, 173)]  # one batch each
     assert all(f.successful for f in (alone, *paired))
     a, b = alone.raw_model, paired[0].raw_model
     np.testing.assert_allclose(paired[0].omega_spectral, alone.omega_spectral, rtol=1e-7)
     np.testing.assert_allclose(paired[0].omega_fit, alone.omega_fit, rtol=1e-7)
     np.testing.assert_allclose(b.amplitude, a.amplitude, rtol=1e-6, atol=1e-6)
-    # The old stream (each chunk sorted by length, a batch padded to its longest clip's bucket).
-    saved = (_pipeline._group_key, _pipeline.STREAM_HOLD)
-    _pipeline._group_key = lambda c, kw: (*saved[0](c, kw)[:2], 0)
-    _pipeline.STREAM_HOLD = False
-    try:
-        old = M.fit_motions([short, long], 2, body_map=bm, **OPTS)[0]
-    finally:
-        _pipeline._group_key, _pipeline.STREAM_HOLD = saved
-    assert abs(old.omega_spectral / alone.omega_spectral - 1) > 1e-5
