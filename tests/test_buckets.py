@@ -119,3 +119,25 @@ def test_batch_sizes_through_the_whole_pipeline_compile_nothing_new(walk):
         counts[size] = (count.programs, dict(count.where))
         assert all(f.successful for f in fits)
     assert all(n == 0 for n, _ in counts.values()), counts
+
+
+def test_padding_a_clip_leaves_its_fit_alone():
+    """A clip padded with masked frames (as a bucket pads it) is fitted as the clip alone: the
+    spectral peak is looked for on the grid of the clip's own length, not of the padded one
+    (600 frames: an FFT 4x longer, whose extra bins moved the refined peak by 5e-5)."""
+    from fourierjax import fourier
+    from fourierjax.features import features_from_motion
+
+    m = data.load("02_03")
+    x, names = features_from_motion(m[:150], "euler")
+    x = np.asarray(x, np.float32)
+    out = []
+    for T in (150, 600):
+        f = np.repeat(x[-1:][None], T, axis=1)
+        f[0, :150] = x
+        mask = np.arange(T)[None, :] < 150
+        out.append(fourier.fit_batch(f, m.frame_time_s, 2, mask=mask, channel_names=names))
+    a, b = out
+    np.testing.assert_allclose(b.omega_spectral, a.omega_spectral, rtol=1e-6)
+    np.testing.assert_allclose(b.omega_fit, a.omega_fit, rtol=2e-5)
+    np.testing.assert_allclose(b.model.amplitude, a.model.amplitude, atol=2e-4)

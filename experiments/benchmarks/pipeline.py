@@ -109,6 +109,41 @@ def per_clip_pipeline():
         _pipeline.prepare_chunk, _eulerscan.continuous, C.foot_contacts = saved
 
 
+@contextlib.contextmanager
+def per_chunk_stream():
+    """`fit_motions`' stream as in the last session, for a baseline in the same run: each
+    chunk's clips sorted by length on their own and cut into batches, every clip padded to the
+    bucket of its batch's longest (no length grouping, nothing held back for the next chunk)."""
+    from fourierjax._motion import _pipeline
+
+    saved = (_pipeline._group_key, _pipeline.STREAM_HOLD)
+
+    def layout_only(c, fit_kwargs):
+        return (*saved[0](c, fit_kwargs)[:2], 0)
+
+    _pipeline._group_key, _pipeline.STREAM_HOLD = layout_only, False
+    try:
+        yield
+    finally:
+        _pipeline._group_key, _pipeline.STREAM_HOLD = saved
+
+
+def _companions(motions, fits, N, ctx) -> dict:
+    """How much a clip's fit depends on the clips fitted with it: the first 100 clips fitted
+    alone against the same clips in the whole run (``fits``), under ``ctx``'s stream."""
+    from fourierjax import motion as M
+
+    n = min(100, len(motions))
+    with ctx:
+        alone = M.fit_motions(motions[:n], N)
+    om = [abs(a.omega_fit / b.omega_fit - 1) for a, b in zip(alone, fits, strict=False)]
+    amp = [float(np.max(np.abs(np.asarray(a.raw_model.amplitude) - np.asarray(b.raw_model.amplitude))))
+           for a, b in zip(alone, fits, strict=False)]
+    return {"clips": n, "omega_fit_max_rel_diff": float(np.max(om)),
+            "clips_omega_differs": int(np.sum(np.array(om) > 0)),
+            "amplitude_max_abs_diff": float(np.max(amp))}
+
+
 def _fit_batch_alone(prepared, num_harmonics, dtype, chunk=128) -> float:
     """Seconds of `fit_batch` on the pipeline's features and masks, in chunks of ``chunk`` clips
     of similar lengths (padded like the pipeline's), warm."""
@@ -200,19 +235,31 @@ def run(size: str) -> list[Record]:
     cold = time.perf_counter() - t0
     with per_clip_pipeline():
         M.fit_motions(motions[: min(num, 16)], N)  # warm the per-clip path's small programs
+    with per_chunk_stream():
+        M.fit_motions(motions, N)  # warm the per-chunk stream's buckets
     runs = {}
-    for name in ("before", "after", "before_again", "after_again"):  # interleaved: load drifts
+    # Interleaved (load drifts): the last session's per-chunk stream and this one; the per-clip
+    # path of two sessions ago once.
+    for name in ("chunk", "after", "chunk_again", "after_again", "before"):
         timings: dict = {}
-        ctx = per_clip_pipeline() if name.startswith("before") else contextlib.nullcontext()
+        ctx = (per_clip_pipeline() if name == "before" else per_chunk_stream()
+               if name.startswith("chunk") else contextlib.nullcontext())
         with ctx:
             t0 = time.perf_counter()
             fits = M.fit_motions(motions, N, timings=timings)
             runs[name] = (time.perf_counter() - t0, timings, fits)
+    runs["before_again"] = runs["before"]
     wall = min(runs["after"][0], runs["after_again"][0])
     wall_before = min(runs["before"][0], runs["before_again"][0])
+    wall_chunk = min(runs["chunk"][0], runs["chunk_again"][0])
     timings = min((runs["after"], runs["after_again"]), key=lambda r: r[0])[1]
     timings_before = min((runs["before"], runs["before_again"]), key=lambda r: r[0])[1]
+    timings_chunk = min((runs["chunk"], runs["chunk_again"]), key=lambda r: r[0])[1]
     fits = runs["after"][2]
+    fits_chunk = runs["chunk"][2]
+    om = [abs(a.omega_fit / b.omega_fit - 1) for a, b in zip(fits, fits_chunk, strict=True)]
+    companions = {"bucketed_stream": _companions(motions, fits, N, contextlib.nullcontext()),
+                  "per_chunk_stream": _companions(motions, fits_chunk, N, per_chunk_stream())}
     same = all(a.frame_start == b.frame_start and a.frame_stop == b.frame_stop
                and a.left_heel_strikes == b.left_heel_strikes and a.omega_fit == b.omega_fit
                for a, b in zip(fits, runs["before"][2], strict=True))
@@ -223,8 +270,10 @@ def run(size: str) -> list[Record]:
     sizes = (8, 13, 50, 120, 500) if size == "full" else (2,)
     compiles = _sweep_compiles(motions, infer_body_map(motions[0]), sizes)
     print(f"    pipeline: {num} clips in {wall:.2f} s warm ({num / wall:.1f} clips/s; per-clip "
-          f"path {num / wall_before:.1f} clips/s; first call {cold:.1f} s); fit_batch alone "
-          f"{fit_alone:.2f} s; stages {timings}; per-clip stages {timings_before}", flush=True)
+          f"path {num / wall_before:.1f} clips/s; per-chunk stream {num / wall_chunk:.1f} "
+          f"clips/s; first call {cold:.1f} s); fit_batch alone {fit_alone:.2f} s; stages "
+          f"{timings}; per-chunk stages {timings_chunk}; per-clip stages {timings_before}; "
+          f"companions {companions}", flush=True)
 
     def per_clip_ms(t):
         return {k: round(1e3 * v / num, 3) for k, v in sorted(t.items(), key=lambda kv: -kv[1])}
@@ -249,9 +298,19 @@ def run(size: str) -> list[Record]:
                 "stage_ms_per_clip": per_clip_ms(timings_before),
                 "speedup_of_the_chunked_path": round(wall_before / wall, 3),
                 "same_segments_strikes_and_omega": bool(same)},
+            "per_chunk_stream": {
+                "clips_per_s": round(num / wall_chunk, 3),
+                "seconds_end_to_end": round(wall_chunk, 3),
+                "stage_seconds": {k: round(v, 3) for k, v in sorted(
+                    timings_chunk.items(), key=lambda kv: -kv[1])},
+                "speedup_of_the_bucketed_stream": round(wall_chunk / wall, 3),
+                "omega_fit_max_rel_diff_to_bucketed": float(np.max(om))},
+            "fit_stage_over_fit_batch_alone": round(timings.get("fit", 0.0) / fit_alone, 3),
+            "a_clip_alone_vs_in_the_run": companions,
             "stage_note": "stages before 'fit' run in the reader thread, overlapping the fit "
                           "of the chunk before; their sum can exceed the wall time. Each wall "
-                          "time is the faster of two interleaved runs",
+                          "time is the faster of two interleaved runs (the per-clip path: one "
+                          "run)",
             "xla_compiles_per_batch_size": compiles,
             "xla_compiles_batch_size_sweep": int(sum(compiles.values())),
             "glitch_masks": _glitch_figures(),

@@ -79,13 +79,24 @@ def _spectral_omega(features, frame_time_s, mask, channel_weights, f_min_hz, f_m
     power = _mm(jnp.abs(spec) ** 2, cw)
     # In the features' dtype: rfftfreq is float64 under jax_enable_x64 whatever the data.
     freqs = jnp.fft.rfftfreq(nfft, d=1.0).astype(features.dtype) / frame_time_s
-    band = (freqs >= f_min_hz) & (freqs <= f_max_hz)
-    i = jnp.argmax(jnp.where(band, power, -jnp.inf))
-    i = jnp.clip(i, 1, power.shape[0] - 2)
-    lp = jnp.log(jnp.maximum(power[jnp.stack([i - 1, i, i + 1])], 1e-30))
+    # The peak is looked for on the grid of the clip's own length (through its last used
+    # frame), not of the padded T: frames after it are zeros, so that grid is every
+    # `stride`-th bin of this one, and a clip padded to any length finds the same peak.
+    own = 2 ** jnp.ceil(jnp.log2(jnp.maximum(last + 1.0, 2.0) * pad_factor))
+    stride = jnp.maximum(nfft // own.astype(jnp.int32), 1)
+    j = jnp.arange(power.shape[0])
+    idx = jnp.minimum(j * stride, power.shape[0] - 1)
+    p_own = power[idx]
+    bins = (power.shape[0] - 1) // stride + 1  # bins of the clip's own grid
+    df = freqs[1] * stride.astype(freqs.dtype)
+    f_own = j.astype(freqs.dtype) * df
+    band = (f_own >= f_min_hz) & (f_own <= f_max_hz) & (j < bins)
+    i = jnp.argmax(jnp.where(band, p_own, -jnp.inf))
+    i = jnp.clip(i, 1, bins - 2)
+    lp = jnp.log(jnp.maximum(p_own[jnp.stack([i - 1, i, i + 1])], 1e-30))
     denom = lp[0] - 2 * lp[1] + lp[2]
     delta = jnp.where(denom < 0, 0.5 * (lp[0] - lp[2]) / jnp.where(denom < 0, denom, -1.0), 0.0)
-    f_peak = (i + jnp.clip(delta, -0.5, 0.5)) * (freqs[1] - freqs[0])
+    f_peak = (i + jnp.clip(delta, -0.5, 0.5)) * df
     return 2 * jnp.pi * f_peak, freqs, power
 
 

@@ -109,37 +109,74 @@ class _Clock:
             self.t = now
 
 
-def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings) -> list[ClipFit]:
-    """The batched fit of prepared clips: grouped by channel layout, sorted by length, cut into
-    bucketed chunks (`_fourier._buckets`), then aligned and scored; one ClipFit per clip, in
-    order."""
+def _group_key(c: _Clip, fit_kwargs) -> tuple:
+    """The clips that one compiled fit program can take together: the same channel layout,
+    the same ω-search weights and the same length bucket (so that a clip is padded to its own
+    bucket, whichever clips share its batch)."""
+    from fourierjax._fourier._buckets import length_bucket
+
+    w = None if "channel_weights" in fit_kwargs else _search_weights(c.features, c.names,
+                                                                     c.mask.any(axis=1))
+    return c.names, w, length_bucket(len(c.features))
+
+
+def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
+               keys=None) -> list[ClipFit]:
+    """The batched fit of prepared clips: grouped by channel layout, search weights and length
+    bucket (`_group_key`; ``keys``: theirs when known), cut into bucketed chunks
+    (`_fourier._buckets`), then aligned and scored; one ClipFit per clip, in order."""
     from fourierjax import fourier as fr
     from fourierjax._fourier._buckets import batch_plan, length_bucket
     from fourierjax._memory import fit_bytes_per_clip, resolve_limit
 
     limit = resolve_limit("fit_motions: max_memory", fit_kwargs.get("max_memory"))
+    keys = keys or {}
     groups: dict[tuple, list[_Clip]] = {}
     for c in clips:
-        w = None if "channel_weights" in fit_kwargs else _search_weights(c.features, c.names,
-                                                                         c.mask.any(axis=1))
-        groups.setdefault((c.names, w), []).append(c)
+        key = keys.get(c.index) or _group_key(c, fit_kwargs)
+        groups.setdefault(key, []).append(c)
     out: dict[int, ClipFit] = {}
     itemsize = jnp.zeros((), dtype).dtype.itemsize
-    for (names, weights), group in groups.items():
+    for (names, weights, _), group in groups.items():
         kw = dict(fit_kwargs)
         if weights is not None:
             kw["channel_weights"] = jnp.asarray(weights, dtype)
         group = sorted(group, key=lambda c: len(c.features))
-        C = len(names)
-        per_clip = fit_bytes_per_clip(length_bucket(len(group[-1].features)), C, num_harmonics,
-                                      itemsize)
+        C, longest = len(names), len(group[-1].features)
+        per_clip = fit_bytes_per_clip(length_bucket(longest), C, num_harmonics, itemsize)
         for start, size in batch_plan(len(group), per_clip, limit, name=(
-                f"fit_motions: a clip of {len(group[-1].features)} frames x {C} channels")):
+                f"fit_motions: a clip of {longest} frames x {C} channels")):
             chunk = group[start:start + size]
             for r in _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw,
                                 timings, fr, length_bucket):
                 out[r[0]] = r[1]
     return [out[c.index] for c in clips]
+
+
+def _hold_back(held, new, fit_kwargs, final) -> tuple[list[_Clip], list[_Clip], dict]:
+    """What the stream fits now and what it holds back for the next chunk: ``(now, keep,
+    keys)``. Clips are grouped as the fit groups them (`_group_key`); of a group that only
+    the newest chunk ``new`` holds, whole batches of `LARGE_BATCH` clips are fitted now and
+    the rest waits for clips of its bucket from the next chunk. A group that holds a clip
+    held back before (``held``), and every group at the end of the stream (``final``), is
+    fitted whole: a clip waits at most one chunk, so the stream holds at most one chunk's
+    clips back."""
+    from fourierjax._fourier._buckets import LARGE_BATCH
+
+    keys = {c.index: _group_key(c, fit_kwargs) for c in (*held, *new)}
+    groups: dict[tuple, list[_Clip]] = {}
+    for c in (*held, *new):
+        groups.setdefault(keys[c.index], []).append(c)
+    old = {c.index for c in held}
+    now, keep = [], []
+    for group in groups.values():
+        if final or not STREAM_HOLD or any(c.index in old for c in group):
+            now += group
+        else:
+            n = len(group) - len(group) % LARGE_BATCH
+            now += group[:n]
+            keep += group[n:]
+    return now, keep, keys
 
 
 def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, timings, fr,
@@ -291,6 +328,10 @@ def _clip_fit(c: _Clip, k, res, raw, shifted, names, pve, fr) -> ClipFit:
 #: Clips per streamed chunk of `fit_motions` (fewer when the memory budget asks for it).
 STREAM_CHUNK = 256
 
+#: Whether the stream holds clips back for one chunk to fill whole batches of their length
+#: bucket (`_hold_back`); False fits each chunk's clips as the chunk arrives.
+STREAM_HOLD = True
+
 
 def iter_fit_motions(
     motions,
@@ -327,8 +368,12 @@ def iter_fit_motions(
     Feet, legs, pelvis and trajectory come from each clip's body map.
 
     ``motions`` is read as a stream, ``chunk_size`` clips at a time: the next chunk is read and
-    prepared in a background thread while the current one is fitted, so a generator that reads
-    the files of a large folder (or the paths themselves) never holds more than two chunks.
+    prepared in a background thread while the current one is fitted. Each clip is fitted with
+    the clips of its length bucket: of the clips of a bucket that a chunk brings, whole batches
+    are fitted at once and the rest waits one chunk for more of its bucket (`STREAM_HOLD`), so
+    a clip is padded to its own bucket and batches are full. ClipFits come out in the input
+    order; a generator that reads the files of a large folder (or the paths themselves) never
+    holds more than three chunks (the one being read, the newest one and the clips held back).
 
     Arguments:
         motions: an iterable of Motions (e.g. after dropping a rest frame) or BVH paths (read
@@ -339,7 +384,7 @@ def iter_fit_motions(
             (``fourierjax.body.infer_body_map``).
         start_frame, stop_frame: only frames ``[start_frame, stop_frame)`` of each clip are
             used (the steady segment is looked for inside them); None: the clip's ends.
-        chunk_size: clips per streamed chunk (default `STREAM_CHUNK`, fewer when two chunks'
+        chunk_size: clips per streamed chunk (default `STREAM_CHUNK`, fewer when three chunks'
             features would not fit the memory budget, ``max_memory``).
         progress: show a tqdm progress bar on stderr (None: only when stderr is a terminal).
         timings: a dict that receives the seconds spent per stage (``read``, ``body_map``,
@@ -403,15 +448,22 @@ def iter_fit_motions(
           tqdm(total=total, unit="clip", desc="fit_motions", disable=_no_bar(progress),
                leave=False) as bar):
         ahead = pool.submit(read_chunk)
+        held: list[_Clip] = []
+        done: dict[int, ClipFit] = {}
         while True:
             chunk = ahead.result()
+            if chunk:
+                ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
+            now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk)
+            fits = _fit_clips(now, num_harmonics, representation, dtype, fit_kwargs, timings,
+                              keys) if now else []
+            done.update(zip((c.index for c in now), fits))
+            bar.update(len(fits))
+            while yielded in done:  # in the input order
+                yield done.pop(yielded)
+                yielded += 1
             if not chunk:
                 break
-            ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
-            fits = _fit_clips(chunk, num_harmonics, representation, dtype, fit_kwargs, timings)
-            bar.update(len(chunk))
-            yielded += len(fits)
-            yield from fits
     if not yielded:
         raise UserError("fit_motions: no motions given")
     if not isinstance(maps, itertools.repeat) and next(maps, None) is not None:
@@ -452,7 +504,7 @@ def _no_bar(progress) -> bool | None:
 
 
 def _stream_chunk(first: _Clip, num_harmonics: int, max_memory) -> int:
-    """Clips per streamed chunk: `STREAM_CHUNK`, fewer when two chunks of clips like ``first``
+    """Clips per streamed chunk: `STREAM_CHUNK`, fewer when three chunks of clips like ``first``
     (features and masks on the host, in float64, and the fit's working memory) exceed the
     budget; a multiple of the fit's batch buckets where it can be."""
     from fourierjax._fourier._buckets import LARGE_BATCH, SMALL_BATCH, length_bucket
@@ -460,7 +512,7 @@ def _stream_chunk(first: _Clip, num_harmonics: int, max_memory) -> int:
 
     limit = resolve_limit("fit_motions: max_memory", max_memory)
     T, C = length_bucket(len(first.features)), first.features.shape[1]
-    per_clip = 2 * (9 * T * C + first.motion.channels.nbytes) + fit_bytes_per_clip(
+    per_clip = 3 * (9 * T * C + first.motion.channels.nbytes) + fit_bytes_per_clip(
         T, C, num_harmonics, 8)
     n = max(1, min(STREAM_CHUNK, int(limit // max(per_clip, 1))))
     for step in (LARGE_BATCH, SMALL_BATCH):
