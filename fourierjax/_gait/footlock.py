@@ -41,9 +41,11 @@ SLIDING_SHARE = 0.4
 SMOOTH_S = 0.04
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
-#: The toe's end point is held to the end of the stance at toe-off only with this many frames
-#: (or more) of easing on each side (`smooth_frames`).
-TOE_HOLD_FRAMES = 2
+#: The toe's end point is held to the end of the stance at toe-off (horizontally and vertically)
+#: with this many frames (or more) of easing on each side (`smooth_frames`); with fewer (but
+#: some), horizontally only, faded out where it would stretch the leg by over `TOE_REACH_FADE`
+#: of its length (thigh + shin) beyond the unheld foot's.
+TOE_HOLD_FRAMES, TOE_REACH_FADE = 2, 0.03
 
 
 def _smoothstep(x):
@@ -381,11 +383,13 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # longer (`still`), so the tip rises before the foot swings on. Its release needs the easing:
     # with one frame of it (Bandai-1 at 30 fps) the leg held at its reach let go at once and the
     # knee popped (run_normal_001: 20.1 deg against 16.2 without the hold, the capture's 16.4),
-    # so below `TOE_HOLD_FRAMES` of easing the tip is not held longer.
-    still_v = still
-    if smooth_frames >= TOE_HOLD_FRAMES:
+    # so below `TOE_HOLD_FRAMES` of easing the tip is held horizontally only, not longer, and
+    # faded where it stretches the leg (below: knee 16.1 deg, skating 0.231x -> 0.227x).
+    still_v = still_free = still
+    if smooth_frames >= 1:
         off, off_late = _toe_off(contact, rel[..., 0] <= band, still[..., 0] > 0.5, smooth_frames // 2)
-        still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
+        if smooth_frames >= TOE_HOLD_FRAMES:
+            still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
         still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
     hold = hold_weights(rel, contact, band)
     lam = hold * still
@@ -397,10 +401,24 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # the capture's 5.3; 09_01 13.4 against 8.2); eased in over 0.1-0.3 s it kept the knee but
     # skated 0.49-0.70x. Planting earlier needs the leg to reach forward faster than the bound.
     # Down: within the band; in stance (the phase's weight) also a foot that hovers under twice it.
-    low = (rel <= band) | ((contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True))
-    low = low & (still > 0.5)
+    hover = (contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True)
+    low_in = (rel <= band) | hover
+    low = low_in & (still > 0.5)
     shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f]) for f in range(2)], 1)
     shift = shift * (1.0 - upv)[None, None]
+    if 1 <= smooth_frames < TOE_HOLD_FRAMES:
+        # With one frame of easing (30 fps) the tip is held horizontally only, and only as far
+        # as it keeps the leg short of its reach: held on, the knee froze straight and then
+        # caught up with the swing in one frame (the pop above). The shift the hold adds is faded
+        # out (smoothstep) as it stretches the hip-to-ankle distance by up to `TOE_REACH_FADE`
+        # of the leg's length over the unheld foot's.
+        low_free = low_in & (still_free > 0.5)
+        free = jnp.stack([_plant(feet_pts[:, f], (hold * still_free)[:, f], low_free[:, f]) for f in range(2)], 1)
+        free = free * (1.0 - upv)[None, None]
+        H, K, A = (jnp.stack([pts[:, leg[k][0]] for leg in legs], 1) for k in range(3))  # [T, 2, 3]
+        reach = safe_norm(K - H) + safe_norm(A - K)
+        excess = safe_norm(A + shift - H) - safe_norm(A + free - H)
+        shift = free + (shift - free) * _smoothstep(1.0 - excess / (TOE_REACH_FADE * reach))[..., None]
     # Vertically: the foot's lowest point onto the floor while held, never below it.
     gap = jnp.min(rel, axis=-1)  # [T, 2]
     W = jnp.max(hold * still_v, axis=-1)
