@@ -105,6 +105,12 @@ def test_conventions_give_the_cmu_results(convention_fits, convention):
     assert r.omega_fit == pytest.approx(ref.omega_fit, rel=0.01)
     d = np.angle(np.exp(1j * (r.phase_shift - ref.phase_shift)))
     assert abs(d) < 0.01 * 2 * np.pi  # aligned phases within 1% of a cycle
+    # The fit names the joints whose Euler angles wind (CMU's: none; the Bandai rewrite's left
+    # upper arm, whose bone along local X puts 07_01's arm swing near gimbal lock in ZXY).
+    assert ref.winding_joints == ()
+    if convention == "bandai":
+        assert "UpperArm_L" in r.winding_joints
+        assert r.summary()["winding_joints"] == list(r.winding_joints)
 
 
 @needs_bandai
@@ -197,7 +203,7 @@ def test_bandai_steady_segment_is_steady(bandai_fits):
 def test_winding_joints_leave_the_omega_search():
     """A joint whose Euler angles wind round the pole near gimbal lock (hundreds of degrees: a
     Bandai `Spine` spanned 1,680) is left out of the ω search; the others keep their weights."""
-    from fourierjax._motion._clip import _search_weights
+    from fourierjax._motion._clip import _search_weights, winding_joints
 
     names = ("root.vx", "root.vz", "root.y", "Hips.Zrotation", "Hips.Xrotation", "Hips.Yrotation",
              "Spine.Zrotation", "Spine.Xrotation", "Spine.Yrotation")
@@ -209,6 +215,13 @@ def test_winding_joints_leave_the_omega_search():
     x[:, 6] += np.radians(1680) * t / t[-1]  # the winding of walk_proud_001's Spine
     x[:, 8] -= np.radians(1680) * t / t[-1]
     assert _search_weights(x, names, keep) == (0, 0, 0, 1, 1, 1, 0, 0, 0)
+    assert winding_joints(x, names, keep) == ("Spine",)
+    assert winding_joints(x, names, np.zeros(len(t), bool)) == ()
+    # Expmap channels are never reported as winding Euler angles (the ω search still drops them).
+    expmap = tuple(n.replace("rotation", "").replace(".Z", ".expmap0").replace(".X", ".expmap1")
+                   .replace(".Y", ".expmap2") for n in names)
+    assert winding_joints(x, expmap, keep) == ()
+    assert _search_weights(x, expmap, keep) == (0, 0, 0, 1, 1, 1, 0, 0, 0)
     # No bundled CMU clip winds but 142_02, whose left arm (the one with the capture glitch, near
     # gimbal lock) spans 220-240 degrees on its steady segment.
     for name in fourierjax.data.list():

@@ -166,3 +166,15 @@ def test_fit_harmonics_default_is_the_style_commands_default():
     assert sub["fit"].parse_args(["x.bvh"]).harmonics == DEFAULT_HARMONICS
     assert sub["transition"].get_default("harmonics") in (DEFAULT_HARMONICS, str(DEFAULT_HARMONICS))
     assert sub["fit"].parse_args(["x.bvh", "--harmonics", "3"]).harmonics == 3
+
+
+def test_winding_joints_get_one_notice_naming_them(capsys):
+    from fourierjax.cli.fit import _warn_if_poor
+
+    row = {"variance_explained_angles": 0.9, "fundamental_hz": 1.0, "fundamental_hz_steps": 1.0}
+    _warn_if_poor("a.bvh", {**row, "winding_joints": []})
+    assert capsys.readouterr().err == ""
+    _warn_if_poor("a.bvh", {**row, "winding_joints": ["Spine", "UpperArm_L", "a", "b", "c"]})
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "Spine, UpperArm_L, a, b and 1 more" in err[0]
+    assert "--representation tangent" in err[0] and err[0].startswith("fourierjax: notice: a.bvh")

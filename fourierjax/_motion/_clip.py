@@ -27,7 +27,9 @@ class ClipFit:
     ``result`` is the clip's `fourier.FitStatus` name in lower case (``"successful"``, else e.g.
     ``"too_few_cycles"``; the model and metrics are then meaningless) and ``message`` says what
     is wrong, naming the clip's file. ``body_map`` is the clip's `fourierjax.body.BodyMap` (None
-    for a skeleton without recognisable legs).
+    for a skeleton without recognisable legs). ``winding_joints`` names the joints whose Euler
+    channels span more than 180 degrees over the fitted frames (near gimbal lock; always empty
+    for expmap and tangent fits): their series depend on the rig's joint frames.
     """
 
     source: str | None
@@ -52,6 +54,7 @@ class ClipFit:
     result: str = "successful"
     message: str = ""
     body_map: object = None
+    winding_joints: tuple[str, ...] = ()
 
     @property
     def successful(self) -> bool:
@@ -91,6 +94,7 @@ class ClipFit:
             "right_heel_strikes": list(self.right_heel_strikes),
             "masked_glitch_frames": self.masked_frames,
             "masked_glitch_entries": self.masked_entries,
+            "winding_joints": list(self.winding_joints),
         }
 
 
@@ -170,6 +174,23 @@ def closed_loop(motion) -> bool:
 _WINDING_SPAN = np.pi
 
 
+def winding_joints(x, names, keep, *, euler_only: bool = True) -> tuple[str, ...]:
+    """Joints whose continuous Euler channels (``*rotation``; with ``euler_only=False`` any
+    channel but ``root.*``) span more than `_WINDING_SPAN` over the kept frames: they pass near
+    gimbal lock, so their Fourier series depend on the rig's joint frames and fit poorly
+    (``representation="tangent"`` has no such joints)."""
+    if not np.any(keep):
+        return ()
+    span = np.ptp(x[np.asarray(keep, bool)], axis=0)
+    out = []
+    for n, sp in zip(names, span):
+        joint = n.rsplit(".", 1)[0]
+        angle = n.endswith("rotation") if euler_only else not n.startswith("root.")
+        if angle and sp > _WINDING_SPAN and joint not in out:
+            out.append(joint)
+    return tuple(out)
+
+
 def _search_weights(x, names, keep) -> tuple[float, ...] | None:
     """Channel weights of the ω search: ``fourier.fit_batch``'s default (1 for rotations, 0 for
     ``root.*``), and 0 for every channel of a joint whose Euler angles wind near gimbal lock
@@ -177,8 +198,7 @@ def _search_weights(x, names, keep) -> tuple[float, ...] | None:
     from fourierjax.fourier import angle_channel_mask
 
     w = np.asarray(angle_channel_mask(names), float)
-    span = np.ptp(x[np.asarray(keep, bool)], axis=0) if np.any(keep) else np.zeros(len(names))
-    joints = {n.rsplit(".", 1)[0] for n, sp, a in zip(names, span, w) if a and sp > _WINDING_SPAN}
+    joints = set(winding_joints(x, names, keep, euler_only=False))
     if not joints:
         return None
     w = np.where([n.rsplit(".", 1)[0] in joints for n in names], 0.0, w)

@@ -24,6 +24,7 @@ from fourierjax._motion._clip import (
     _search_weights,
     _steps,
     closed_loop,
+    winding_joints,
 )
 from fourierjax._motion._poses import _position_ve, _position_ve_impl, foot_contacts_of
 from fourierjax._motion._segment import feature_mask, glitch_joints, steady_segment
@@ -322,6 +323,7 @@ def _clip_fit(c: _Clip, k, res, raw, shifted, names, pve, fr) -> ClipFit:
         right_heel_strikes=tuple(int(v) for v in c.right),
         masked_frames=int(np.sum(~c.mask.all(axis=1))), masked_entries=int(np.sum(~c.mask)),
         result=status.name.lower(), message=message, body_map=c.body_map,
+        winding_joints=winding_joints(c.features, c.names, c.mask.any(axis=1)),
     )
 
 

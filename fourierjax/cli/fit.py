@@ -102,6 +102,12 @@ def _warn_if_poor(text: str, row: dict) -> None:
     f_fit, f_steps = row.get("fundamental_hz"), row.get("fundamental_hz_steps")
     if f_steps is not None and f_fit and abs(f_fit / f_steps - 1) > 0.25:
         reasons.append(f"its fundamental {f_fit:.3f} Hz is far from the steps' {f_steps:.3f} Hz")
+    winding = row.get("winding_joints") or []
+    if winding:
+        shown = ", ".join(winding[:4]) + (f" and {len(winding) - 4} more" if len(winding) > 4 else "")
+        print(f"fourierjax: notice: {text}: the Euler angles of {shown} pass near gimbal lock "
+              "(a channel spans more than 180 degrees); their series depend on the rig's joint "
+              "frames: --representation tangent fits the same rotations on any rig", file=sys.stderr)
     if reasons:
         print(f"fourierjax: warning: {text}: the fit looks poor ({'; '.join(reasons)}); check the "
               "clip is a steady periodic gait (try --all-frames, --start-frame, another "
