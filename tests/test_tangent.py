@@ -119,6 +119,18 @@ def test_euler_fails_the_same_check(fits):
     assert _error(euler, m, rew, "bandai", "euler") > 0.1  # measured 0.52 of leg length
 
 
+@pytest.mark.parametrize("representation", ["tangent", "expmap"])
+def test_features_under_x64_equal_float32(representation):
+    """With float64 on (`jax.enable_x64`), the pelvis rows written into the converted quaternions
+    used to hit a read-only view ("assignment destination is read-only"): the same features."""
+    m = fourierjax.data.load("07_01")[:64]
+    x32, names = features_from_motion(m, representation)
+    with jax.enable_x64(True):
+        x64, names64 = features_from_motion(m, representation)
+    assert names64 == names
+    np.testing.assert_allclose(x64, x32, atol=1e-5)
+
+
 def test_model_file_round_trip(fits, tmp_path):
     m, _, tangent, euler = fits
     model = tangent["cmu"].model

@@ -45,7 +45,8 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
         "--representation",
         default="euler",
         metavar="REP",
-        help="channel representation when fitting a BVH argument: euler (default), expmap or tangent",
+        help="channel representation when fitting a BVH argument: euler (default; Unuma's "
+        "per-channel joint-angle series), expmap or tangent (rig-invariant)",
     )
 
 
