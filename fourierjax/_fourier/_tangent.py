@@ -18,6 +18,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from fourierjax import rotations
+from fourierjax._rotations._common import _safe_atan2
 from fourierjax._rotations._quat import nearest_rotation_vector
 from fourierjax.errors import UserError
 
@@ -70,7 +71,7 @@ def clip_means(q: Float[Array, "T K 4"], w: Float[Array, "T K"]) -> Float[Array,
     m = rotations.quat_normalize(jnp.sum((w * s)[..., None] * q, axis=0))
     for _ in range(_POWER_STEPS):
         m = rotations.quat_normalize(jnp.sum((w * jnp.sum(q * m[None], axis=-1))[..., None] * q, axis=0))
-    return jnp.where(m[..., :1] < 0, -m, m)
+    return canonical_frames(m)
 
 
 def _log_about(frames: Array, v: Array) -> Array:
@@ -188,9 +189,7 @@ def relative_phase(x: Float[Array, "*B K 3 N 2"], y: Float[Array, "*B K 3 N 2"])
     """``arg <y, x>`` per joint and harmonic (0 where the product vanishes; finite gradients)."""
     re = jnp.sum(x[..., 0] * y[..., 0] + x[..., 1] * y[..., 1], axis=-2)
     im = jnp.sum(x[..., 1] * y[..., 0] - x[..., 0] * y[..., 1], axis=-2)
-    zero = re * re + im * im < 1e-30
-    # Shim to avoid NaNs in jnp.where branches (atan2 at the origin) for reverse-mode AD.
-    return jnp.where(zero, 0.0, jnp.arctan2(jnp.where(zero, 0.0, im), jnp.where(zero, 1.0, re)))
+    return _safe_atan2(im, re)
 
 
 def turn_phase(z: Float[Array, "*B K 3 N 2"], angle: Float[Array, "*B K N"]) -> Float[Array, "*B K 3 N 2"]:
