@@ -1,7 +1,5 @@
 """`python -m fourierjax` runs the command line."""
 
-import sys
+from fourierjax.cli import console
 
-from fourierjax.cli import main
-
-sys.exit(main())
+console()

@@ -68,9 +68,10 @@ def rot(name: str, *arrays, **static) -> np.ndarray:
                                for s in range(0, F, ROW_BLOCK)])
     Fp = bucket(F)
     padded = [np.concatenate([a, np.repeat(a[-1:], Fp - F, axis=0)]) for a in arrays]
-    # A copy, writable: under x64 `np.asarray` of a float64 JAX array is a read-only view
-    # (callers write into the result, e.g. the pelvis's rows of `quat_from_euler`).
-    return np.array(fn(*padded)[:F], dtype=np.float64)
+    # Sliced in NumPy (slicing the JAX array is one more eager op per call), then a copy,
+    # writable: under x64 `np.asarray` of a float64 JAX array is a read-only view (callers write
+    # into the result, e.g. the pelvis's rows of `quat_from_euler`).
+    return np.array(np.asarray(fn(*padded))[:F], dtype=np.float64)
 
 
 def yaw_quat(psi: np.ndarray) -> np.ndarray:
