@@ -43,7 +43,7 @@ t4 = time.perf_counter()
 print(json.dumps({"import_s": t1 - t0, "parse_s": t2 - t1, "skeleton_s": t3 - t2, "fk_s": t4 - t3}))
 """
 
-#: The least a process that runs JAX pays: one op on the CPU backend (its start and teardown).
+#: The least a process that runs JAX pays: one op on the CPU backend.
 ONE_OP_SCRIPT = "import jax.numpy as jnp; jnp.ones(3).block_until_ready()"
 
 PYMOTION_SCRIPT = """
@@ -210,8 +210,8 @@ def run(size: str) -> list[Record]:
             jnp_t.append(_wall([py, "-c", "import jax.numpy"], env, tmp)[0])
             op_t.append(_wall([py, "-c", ONE_OP_SCRIPT], env, tmp)[0])
         details = {f"median_{k}": round(statistics.median(p[k] for p in phases), 4) for k in phases[0]}
-        # What any process pays once JAX runs one op: the CPU backend's start and its teardown
-        # at the interpreter's exit (0.2-0.35 s of the latter measured on 2 cores).
+        # What any process pays once JAX runs one op: the CPU backend's start (the exit's
+        # finalization of JAX, 0.25-0.35 s on 2 cores, is in both baselines).
         details["one_jax_op_extra_s"] = round(statistics.median(op_t) - statistics.median(jnp_t), 4)
         details["extra_over_one_jax_op_s"] = round(statistics.median(fk_t) - statistics.median(op_t), 4)
         from fourierjax import data
