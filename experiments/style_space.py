@@ -6,7 +6,9 @@ cached on disk). Recognition: nearest class mean, shrinkage LDA, logistic regres
 on feature sets (style vectors, joint-angle and body-space harmonics), leaving one take out,
 in PCA spaces, and across contents. Transfer from one content to another (walk -> run ...):
 eq. 8 and the method-search variants against the baseline, scored by ``style.cycle_distance``
-to the real target and by classifiers trained on real target-content clips only. Writes CSV,
+to the real target and by classifiers trained on real target-content clips only, once per
+channel representation of the config (Euler, expmap, tangent; on tangent models the per-channel
+gain methods get a "skipped" row, `fit_transfer_gains` refusing them). Writes CSV,
 Markdown and JSON tables, ``summary.json`` and PNG figures under ``<out>/style_space``.
 """
 
