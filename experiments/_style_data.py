@@ -27,7 +27,8 @@ def _save(path: pathlib.Path, ok, models) -> None:
              offset=np.stack([np.asarray(m.offset) for m in models]),
              amplitude=np.stack([np.asarray(m.amplitude) for m in models]),
              phase=np.stack([np.asarray(m.phase) for m in models]),
-             omega=np.stack([np.asarray(m.omega) for m in models]))
+             omega=np.stack([np.asarray(m.omega) for m in models]),
+             **({"frames": np.stack([np.asarray(m.frames) for m in models])} if models[0].frames is not None else {}))
 
 
 def _load(path: pathlib.Path, representation: str):
@@ -39,7 +40,8 @@ def _load(path: pathlib.Path, representation: str):
     names = tuple(str(s) for s in z["names"])
     models = [fourier.FourierModel(jnp.asarray(z["offset"][i]), jnp.asarray(z["amplitude"][i]),
                                    jnp.asarray(z["phase"][i]), jnp.asarray(z["omega"][i]),
-                                   representation=representation, channel_names=names)
+                                   representation=representation, channel_names=names,
+                                   frames=jnp.asarray(z["frames"][i]) if "frames" in z else None)
               for i in range(len(z["ok"]))]
     return np.asarray(z["ok"], bool), models
 

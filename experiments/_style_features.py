@@ -73,13 +73,21 @@ def _position_harmonics(model, skeleton, body_map, num_harmonics: int, num_sampl
 
 
 def _angle_harmonics(model, skip):
-    """Per rotation channel: the offset (wrapped to (-pi, pi]) and the harmonics' phasors."""
+    """Per rotation channel: the offset (wrapped to (-pi, pi]) and the harmonics' phasors; a tangent
+    model's channels are about each joint's clip mean, so its clip means follow (each as the first
+    two columns of its matrix, continuous at any angle)."""
+    from fourierjax import rotations
+
     off = np.asarray(model.offset, float)
     amp, ph = np.asarray(model.amplitude, float), np.asarray(model.phase, float)
     keep = np.array([not any(n.startswith(s) for s in skip) for n in model.channel_names])
     off = np.angle(np.exp(1j * off))
     re, im = amp * np.cos(ph), amp * np.sin(ph)
-    return np.concatenate([off[:, None], re, im], axis=1)[keep]
+    out = np.concatenate([off[:, None], re, im], axis=1)[keep].ravel()
+    if model.frames is None:
+        return out
+    r = np.asarray(rotations.matrix_from_quat(model.frames), float)  # [K, 3, 3]
+    return np.concatenate([out, r[..., :, 0].ravel(), r[..., :, 1].ravel()])
 
 
 def _timing(model, body_map):
@@ -95,14 +103,15 @@ def _timing(model, body_map):
 def features(model, skeleton, body_map, *, num_harmonics: int | None = None) -> dict[str, np.ndarray]:
     """The feature groups of one fitted clip (flat arrays, see `GROUPS`).
 
-    ``angles``: the joint-angle channels (the root's velocity and height channels left out);
+    ``angles``: the joint-angle channels (the root's velocity and height channels left out; a
+    tangent model's tangent coordinates and its joints' clip means);
     ``positions``: body-space harmonics of the pelvis-relative joint positions through FK, per
     leg length (rig- and unit-independent); ``timing``: cadence, stride and root height;
     ``quat`` and ``sixd``: harmonics of the joints' rotations as quaternions and in 6-D.
     """
     n = model.amplitude.shape[1] if num_harmonics is None else num_harmonics
     rot = _rotation_harmonics(model, skeleton, body_map, n)
-    return {"angles": _angle_harmonics(model, ("root.",)).ravel(),
+    return {"angles": _angle_harmonics(model, ("root.",)),
             "positions": _position_harmonics(model, skeleton, body_map, n).ravel(),
             "timing": _timing(model, body_map),
             **{k: rot[k].ravel() for k in ROTATION_KINDS}}

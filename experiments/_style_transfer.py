@@ -15,10 +15,30 @@ METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_rati
 def branch_vectors(models, reference):
     """Style vectors (phasor coordinates, `style.style_vector`) with every model's angle
     offsets first moved onto ``reference``'s branch, so that means and regressions over clips
-    compare angles on one branch."""
+    compare angles on one branch. Tangent models have no branch: their clip means are taken
+    as rotation vectors about ``reference``'s frames (`style.style_matrix(reference=)`), so
+    `style.model_from_style_vector(v, reference)` inverts a row."""
     from fourierjax import style
 
+    if reference.representation == "tangent":
+        return np.asarray(style.style_matrix(list(models), reference=reference.frames), float)
     return np.asarray(style.style_matrix([_on_branch(reference, m) for m in models]), float)
+
+
+def vector_layout(model, body_map, topology) -> tuple[np.ndarray, np.ndarray]:
+    """Harmonic (0 offset, 1..N, N + 1 log omega) and joint group (`channel_groups`, 3 for log
+    omega) of every style-vector entry of ``model``; a tangent model's clip-mean rotation vectors
+    (3 per joint, before log omega) count as offsets of their joint's group."""
+    c, n = model.amplitude.shape
+    harm = [np.tile(np.array([0] + [1 + k // 2 for k in range(2 * n)]), c)]
+    groups = [np.repeat(channel_groups(model, body_map, topology), 1 + 2 * n)]
+    if model.representation == "tangent":
+        names = [nm for nm in model.channel_names if nm.endswith(".expmap_tangent0")]
+        g = channel_groups(model, body_map, topology)
+        first = [list(model.channel_names).index(nm) for nm in names]
+        harm.append(np.zeros(3 * len(first), int))
+        groups.append(np.repeat(g[first], 3))
+    return np.concatenate([*harm, [n + 1]]), np.concatenate([*groups, [3]])
 
 
 def _on_branch(reference, model):

@@ -6,7 +6,9 @@ cached on disk). Recognition: nearest class mean, shrinkage LDA, logistic regres
 on feature sets (style vectors, joint-angle and body-space harmonics), leaving one take out,
 in PCA spaces, and across contents. Transfer from one content to another (walk -> run ...):
 eq. 8 and the method-search variants against the baseline, scored by ``style.cycle_distance``
-to the real target and by classifiers trained on real target-content clips only. Writes CSV,
+to the real target and by classifiers trained on real target-content clips only, once per
+channel representation of the config (Euler, expmap, tangent; on tangent models the per-channel
+gain methods get a "skipped" row, `fit_transfer_gains` refusing them). Writes CSV,
 Markdown and JSON tables, ``summary.json`` and PNG figures under ``<out>/style_space``.
 """
 
@@ -25,8 +27,8 @@ from experiments._style_transfer import (
     METHODS,
     amplitude_ratio,
     branch_vectors,
-    channel_groups,
     max_jump,
+    vector_layout,
     vector_methods,
 )
 from experiments._util import ROOT, parse, run_main, write_table
@@ -45,6 +47,20 @@ PREVIOUS_FEATURES = "angles+positions"
 #: Feature sets of the ceiling search.
 CEILING_SETS = ("style_vector", "angles", "positions", "angles+positions", "quat", "sixd", "quat+positions",
                 "sixd+positions", "all")
+
+
+#: The transfer methods that need `style.fit_transfer_gains`, which refuses tangent models.
+GAIN_METHODS = ("content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv")
+GAINS_SKIPPED = ("skipped: style.fit_transfer_gains refuses tangent models (a gain per tangent "
+                 "channel does not commute with a change of joint frames)")
+
+
+def _skipped_row(rows, representation, transfer, method, note) -> dict:
+    """A summary row for a method not run on this representation: the columns of a full row
+    (`rows`' keys where there are any), None but the labels and the note."""
+    keys = rows[0].keys() if rows else ("representation", "transfer", "method", "note")
+    return {**dict.fromkeys(keys), "representation": representation, "transfer": transfer, "method": method,
+            "n": 0, "note": note}
 
 
 def sweep_weights(cfg) -> list[float]:
@@ -233,7 +249,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
     y = np.array([c["style"] for c in clips], object)
     trows, flips, wrows, gain_omega, ftrows = [], [], [], [], []
     fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
-    harm = None
+    # per-channel gains are refused on tangent models (`style.fit_transfer_gains`): a gain per
+    # tangent channel does not commute with a change of joint frames; those methods get a row
+    # saying so instead of numbers
+    skipped = {m: GAINS_SKIPPED for m in GAIN_METHODS} if representation == "tangent" else {}
     for src, dst in cfg["transfers"]:
         sty = [s for s in styles if (src, s) in first_take and (dst, s) in first_take]
         if normal not in sty or len(sty) < 4:
@@ -242,11 +261,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         ref = models[g[(dst, normal)]]
         vs = dict(zip(sty, branch_vectors([models[g[(src, s)]] for s in sty], ref), strict=True))
         vt = dict(zip(sty, branch_vectors([models[g[(dst, s)]] for s in sty], ref), strict=True))
-        if harm is None:  # the harmonic of every style-vector entry: 0 offset, 1..N, N + 1 log omega
-            c_, n_ = ref.amplitude.shape
-            harm = np.concatenate([np.tile(np.array([0] + [1 + k // 2 for k in range(2 * n_)]), c_), [n_ + 1]])
-        groups = np.concatenate([np.repeat(channel_groups(ref, maps[g[(dst, normal)]], skels[0].topology),
-                                           1 + 2 * ref.amplitude.shape[1]), [3]])
+        # the harmonic (0 offset, 1..N, N + 1 log omega) and joint group of every style-vector entry
+        harm, groups = vector_layout(ref, maps[g[(dst, normal)]], skels[0].topology)
         # classifier of the transferred models: real target-content clips only, one take per style
         # (the first; a second take, where there is one, is the oracle and must not be in it)
         real = [g[(dst, s)] for s in sty]
@@ -294,24 +310,28 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                                              held_out=[k for k, x in enumerate(rest) if x != normal],
                                              body_map=bm, num_samples=ns).weight
             cand["content_mean_cv"] = style.transfer(a, others_src, others_dst, method="content_mean", weight=w_cv)
-            # per-channel gains (and log omega's) fitted across the other styles: how much of a style's
-            # offset from the source content's mean reappears in the target content
-            gains = style.fit_transfer_gains(others_src, others_dst)
-            gain_omega.append(float(gains[-1]))
-            cand["content_mean_gains"] = style.transfer(a, others_src, others_dst, method="content_mean", gains=gains)
-            cand["content_mean_gains_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
-                                                           gains=gains, weight=w_cv)
-            # the cadence gain alone (every channel's at 1): what made the limbs fast above w = 1
-            cadence = style.fit_transfer_gains(others_src, others_dst, cadence_only=True)
-            cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
-                                                             gains=cadence, weight=w_cv)
+            gains = None
+            if not skipped:
+                # per-channel gains (and log omega's) fitted across the other styles: how much of a
+                # style's offset from the source content's mean reappears in the target content
+                gains = style.fit_transfer_gains(others_src, others_dst)
+                gain_omega.append(float(gains[-1]))
+                cand["content_mean_gains"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                            gains=gains)
+                cand["content_mean_gains_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                               gains=gains, weight=w_cv)
+                # the cadence gain alone (every channel's at 1): what made the limbs fast above w = 1
+                cadence = style.fit_transfer_gains(others_src, others_dst, cadence_only=True)
+                cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                                 gains=cadence, weight=w_cv)
             # the weight sweep: recognition rises with w, the distance is best near 0.5
             sweep = {}
             for w in sweep_weights(cfg):
                 sweep[("content_mean", w)] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                             weight=w)
-                sweep[("content_mean_gains", w)] = style.transfer(a, others_src, others_dst, method="content_mean",
-                                                                  gains=gains, weight=w)
+                if gains is not None:
+                    sweep[("content_mean_gains", w)] = style.transfer(a, others_src, others_dst,
+                                                                      method="content_mean", gains=gains, weight=w)
             # oracle: another take of the real target, where the target content has one
             other = [i for (c2, s2, t2), i in lab.items() if c2 == dst and s2 == s and i != i_t]
             if other:
@@ -384,6 +404,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
     for tname in dict.fromkeys(r["transfer"] for r in trows):
         for mth in [*METHODS, "oracle_other_take"]:
             rs = [r for r in trows if r["transfer"] == tname and r["method"] == mth]
+            if mth in skipped:
+                srows.append(_skipped_row(srows, representation, tname, mth, skipped[mth]))
             if not rs:
                 continue
             fl = [f for f in flips if f["transfer"] == tname and f["method"] == mth]
@@ -398,18 +420,22 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           "flip_free": all(f["ok"] for f in fl) if fl else None,
                           "max_jump_ratio": max((f["ratio"] for f in fl), default=None),
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
-                          "n": len(rs)})
+                          "n": len(rs), "note": ""})
     wsum = []
     for tname in dict.fromkeys(r["transfer"] for r in wrows):
         for mth in ("content_mean", "content_mean_gains"):
             for w in sweep_weights(cfg):
                 rs = [r for r in wrows if r["transfer"] == tname and r["method"] == mth and r["weight"] == w]
+                if mth in skipped:
+                    wsum.append({**_skipped_row(wsum, representation, tname, mth, skipped[mth]), "weight": w})
+                    continue
                 wsum.append({"representation": representation, "transfer": tname, "method": mth, "weight": w,
                              "median_ratio": float(np.median([r["ratio"] for r in rs])),
                              **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                                 for c in CLASSIFIERS},
                              "recognised_oc_ncm": float(np.mean([r["recognised_oc_ncm"] for r in rs])),
-                             "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs)})
+                             "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs),
+                             "note": ""})
     for tname in dict.fromkeys(r["transfer"] for r in ftrows):
         for mth in dict.fromkeys(r["map"] for r in ftrows):
             rs = [r for r in ftrows if r["transfer"] == tname and r["map"] == mth]

@@ -376,3 +376,56 @@ def test_rotation_features_see_rotations_not_angle_branches(cmu):
     assert np.abs(fs["quat"][:, :, 1:]).max() < 1e-5 and np.abs(fs["sixd"][:, :, 1:]).max() < 1e-5
     np.testing.assert_allclose(np.linalg.norm(fs["quat"][:, :, 0], axis=1), 1.0, atol=1e-5)
     assert np.abs(fa["quat"][:, :, 1:]).max() > 1e-2  # a moving model has harmonics
+
+
+def random_tangent_model(topology, seed, scale=0.3, n=3):
+    """A tangent model (`R_j = M_j exp(d_j)`) with random coefficients and random clip means."""
+    names = channel_names_for(topology, "tangent")
+    a = random_model(names, seed, scale, n)
+    k = sum(nm.endswith(".expmap_tangent0") for nm in names)
+    q = np.random.default_rng(seed + 100).normal(size=(k, 4))
+    q = q / np.linalg.norm(q, axis=1, keepdims=True) * np.sign(q[:, :1])
+    return fourier.FourierModel(a.offset, a.amplitude, a.phase, a.omega, representation="tangent",
+                                channel_names=names, frames=jnp.asarray(q))
+
+
+def test_tangent_style_vectors_of_the_transfer_invert_about_the_base(cmu, tmp_path):
+    """The experiment's tangent path: every clip's style vector is taken about the BASE's clip means
+    (`branch_vectors`), so `model_from_style_vector(row, base)` gives back the clip itself (the same
+    joint rotations at every phase, an independent check of the frames); the vector's layout (harmonic,
+    joint group) covers the clip-mean entries; the fit cache keeps the frames."""
+    from scipy.spatial.transform import Rotation
+
+    from experiments._style_data import _load, _save
+    from experiments._style_transfer import branch_vectors, vector_layout
+    from fourierjax._fourier import _tangent
+    from fourierjax.body import infer_body_map
+
+    motion, skel, _ = cmu
+    bm = infer_body_map(motion)
+    base, *ms = (random_tangent_model(skel.topology, s) for s in (1, 2, 3))
+    v = branch_vectors(ms, base)
+    phase = jnp.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+    cols = _tangent.triples(base.channel_names, base.num_channels)
+
+    def joint_rotations(x):  # R_j = M_j exp(d_j) by scipy, d from the coefficients as plain series
+        series = fourier.FourierModel(x.offset, x.amplitude, x.phase, x.omega, representation="expmap")
+        d = np.asarray(fourier.synthesize_phase(series, phase))[:, cols]
+        q = np.asarray(x.frames)[None].repeat(len(phase), 0)
+        r = Rotation.from_quat(q[..., [1, 2, 3, 0]].reshape(-1, 4)) * Rotation.from_rotvec(d.reshape(-1, 3))
+        return r.as_matrix()
+
+    for row, m in zip(v, ms, strict=True):
+        back = style.model_from_style_vector(jnp.asarray(row, jnp.float32), base)
+        np.testing.assert_allclose(joint_rotations(back), joint_rotations(m), atol=2e-4)  # every joint, phase
+    harm, groups = vector_layout(base, bm, skel.topology)
+    k = base.frames.shape[0]
+    assert len(harm) == len(groups) == v.shape[1]
+    assert (harm[-3 * k - 1:-1] == 0).all() and harm[-1] == base.amplitude.shape[1] + 1 and groups[-1] == 3
+    assert set(groups[-3 * k - 1:-1]) <= {0, 1, 2}
+    _save(tmp_path / "f.npz", [True, True], ms)
+    ok, again = _load(tmp_path / "f.npz", "tangent")
+    assert ok.all()
+    for a, b in zip(ms, again, strict=True):
+        np.testing.assert_allclose(a.frames, b.frames)
+        np.testing.assert_allclose(a.amplitude, b.amplitude)
