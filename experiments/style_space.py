@@ -8,7 +8,7 @@ in PCA spaces, and across contents. Transfer from one content to another (walk -
 eq. 8 and the method-search variants against the baseline, scored by ``style.cycle_distance``
 to the real target and by classifiers trained on real target-content clips only, once per
 channel representation of the config (Euler, expmap, tangent; on tangent models the per-channel
-gain methods get a "skipped" row, `fit_transfer_gains` refusing them). Writes CSV,
+gain methods get a "skipped" row, `fit_transfer_gains` refusing them; the cadence gain runs). Writes CSV,
 Markdown and JSON tables, ``summary.json`` and PNG figures under ``<out>/style_space``.
 """
 
@@ -49,10 +49,11 @@ CEILING_SETS = ("style_vector", "angles", "positions", "angles+positions", "quat
                 "sixd+positions", "all")
 
 
-#: The transfer methods that need `style.fit_transfer_gains`, which refuses tangent models.
-GAIN_METHODS = ("content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv")
-GAINS_SKIPPED = ("skipped: style.fit_transfer_gains refuses tangent models (a gain per tangent "
-                 "channel does not commute with a change of joint frames)")
+#: The transfer methods with per-channel gains, which `style.fit_transfer_gains` refuses for
+#: tangent models (their log-omega gain alone, `content_mean_cadence_cv`, is allowed).
+GAIN_METHODS = ("content_mean_gains", "content_mean_gains_cv")
+GAINS_SKIPPED = ("skipped: style.fit_transfer_gains refuses per-channel gains on tangent models (a gain per "
+                 "tangent channel does not commute with a change of joint frames)")
 
 
 def _skipped_row(rows, representation, transfer, method, note) -> dict:
@@ -315,15 +316,16 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 # per-channel gains (and log omega's) fitted across the other styles: how much of a
                 # style's offset from the source content's mean reappears in the target content
                 gains = style.fit_transfer_gains(others_src, others_dst)
-                gain_omega.append(float(gains[-1]))
                 cand["content_mean_gains"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                             gains=gains)
                 cand["content_mean_gains_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                                gains=gains, weight=w_cv)
-                # the cadence gain alone (every channel's at 1): what made the limbs fast above w = 1
-                cadence = style.fit_transfer_gains(others_src, others_dst, cadence_only=True)
-                cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
-                                                                 gains=cadence, weight=w_cv)
+            # the cadence gain alone (every channel's at 1; rig-invariant, so tangent takes it too):
+            # what made the limbs fast above w = 1
+            cadence = style.fit_transfer_gains(others_src, others_dst, cadence_only=True)
+            gain_omega.append(float(cadence[-1]))
+            cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                             gains=cadence, weight=w_cv)
             # the weight sweep: recognition rises with w, the distance is best near 0.5
             sweep = {}
             for w in sweep_weights(cfg):

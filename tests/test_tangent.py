@@ -193,8 +193,9 @@ def test_refusals_name_tangent(fits):
     a = tangent["cmu"].model
     # Per-channel transfer gains do not commute with a change of joint frame (a gain per tangent
     # channel), so they refuse tangent models.
+    # channel gains other than 1 (the log-omega gain alone is allowed: `test_cadence_gain_on_tangent`)
     for name, call in (("transfer(gains=)", lambda: style.transfer(a, [a, a], [a, a], method="content_mean",
-                                                                    gains=jnp.ones(a.offset.size + 1))),
+                                                                    gains=jnp.ones(a.offset.size + 1).at[3].set(2.0))),
                        ("fit_transfer_gains", lambda: style.fit_transfer_gains([a, a], [a, a]))):
         with pytest.raises(UserError, match=re.escape(name) + ": tangent.*--representation euler"):
             call()
@@ -413,3 +414,46 @@ def test_content_mean_and_transfer_of_tangent_models(pair):
     assert float(mean.omega) == pytest.approx(float(half.omega), rel=1e-6)
     out = style.transfer(a, b, b)
     np.testing.assert_allclose(fourier.synthesize_phase(out, THETA), fourier.synthesize_phase(a, THETA), atol=1e-4)
+
+
+def test_cadence_gain_on_tangent(pair, fits):
+    """The log-omega gain (the only rig-invariant one) on tangent models: `fit_transfer_gains(
+    cadence_only=True)` is the shrunk least-squares slope of the targets' log omega on the sources'
+    (closed form in NumPy; Euler models with the same omegas give the same gain), and the gained
+    transfer is the plain one with omega `w_t (w_s / w_ms)^(g w)`. A channel gain is refused,
+    also traced."""
+    _, _, ta, tb = pair
+    a, b = ta["cmu"], tb["cmu"]
+    e = fits[3]["cmu"].model
+    scale_s, scale_t = np.array([1.0, 0.8, 1.15, 1.3]), np.array([1.0, 0.9, 1.05, 1.2])
+
+    def with_omega(m, f):
+        return eqx.tree_at(lambda x: x.omega, m, m.omega * f)
+
+    src = [with_omega(a if k % 2 else b, f) for k, f in enumerate(scale_s)]
+    tgt = [with_omega(b if k % 2 else a, f) for k, f in enumerate(scale_t)]
+    ridge = 0.25
+    lx = np.log([float(m.omega) for m in src])
+    ly = np.log([float(m.omega) for m in tgt])
+    dx, dy = lx - lx.mean(), ly - ly.mean()
+    want = np.clip((dx @ dy + ridge * dx @ dx) / ((1 + ridge) * dx @ dx), 0.0, 2.0)
+    g = np.asarray(style.fit_transfer_gains(src, tgt, ridge=ridge, cadence_only=True))
+    assert g.shape == (a.offset.size + 1,) and np.all(g[:-1] == 1.0)
+    assert abs(g[-1] - want) < 1e-5 and abs(want - 1) > 0.1, (g[-1], want)
+    g_euler = np.asarray(style.fit_transfer_gains([with_omega(e, float(m.omega / e.omega)) for m in src],
+                                                  [with_omega(e, float(m.omega / e.omega)) for m in tgt],
+                                                  ridge=ridge, cadence_only=True))
+    assert abs(g_euler[-1] - want) < 1e-5, (g_euler[-1], want)
+
+    source, refs_s, refs_t, w = src[0], src[1:], tgt[1:], 0.7
+    plain = style.transfer(source, refs_s, refs_t, method="content_mean", weight=w)
+    gained = style.transfer(source, refs_s, refs_t, method="content_mean", weight=w, gains=jnp.asarray(g))
+    ms, mt = style.content_mean(refs_s), style.content_mean(refs_t)
+    want_omega = float(mt.omega) * (float(source.omega) / float(ms.omega)) ** (g[-1] * w)
+    assert abs(float(gained.omega) / want_omega - 1) < 1e-5
+    for field in ("offset", "amplitude", "phase", "frames"):
+        np.testing.assert_allclose(getattr(gained, field), getattr(plain, field), atol=1e-6)
+    bad = jnp.asarray(g).at[0].set(1.5)
+    with pytest.raises(RuntimeError, match=r"transfer\(gains=\): tangent models take the log-omega gain only"):
+        jax.block_until_ready(jax.jit(lambda gg: style.transfer(source, refs_s, refs_t, method="content_mean",
+                                                                weight=w, gains=gg).omega)(bad))

@@ -10,11 +10,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from fourierjax._checks import concrete
 from fourierjax._jit import filter_jit
 from fourierjax._style._common import (
     check_compatible,
     check_models_omega,
     on_branch_of,
+    replace,
 )
 from fourierjax._style.characteristics import characteristic, common_harmonics, refuse_tangent, stack, superpose
 from fourierjax._style.distance import _pelvis, cycle_distance
@@ -128,9 +130,11 @@ def transfer(
         skeleton, body_map, weight_grid: for `weight="cv"` only (see `fit_transfer_weight`).
 
     Tangent models: eq8 and content_mean work through `characteristic`, `superpose` and
-    `content_mean` (the clip means' differences composed on the target's, rig-invariant);
-    per-channel `gains` are refused (a gain per tangent channel does not commute with a change
-    of joint frame).
+    `content_mean` (the clip means' differences composed on the target's, rig-invariant).
+    Their `gains` may hold a log-ω gain only (`fit_transfer_gains(..., cadence_only=True)`):
+    the transfer's ω is then `ω_t (ω_s / ω_ms)^(g w)`. A channel gain other than 1 is refused
+    (a gain per tangent channel does not commute with a change of joint frame). On Bandai-1,
+    tangent transfers come within 0.03 of Euler's distance ratios (`docs/findings.md`, section 4).
 
     Returns:
         A FourierModel with the static fields of the target reference. Raises `UserError`
@@ -159,13 +163,13 @@ def transfer(
 
     if gains is not None and method != "content_mean":
         raise UserError("transfer: `gains` are a content_mean option")
-    if gains is not None:
-        refuse_tangent("transfer(gains=)", source)
     ms, mt = reference(source_reference, "source_reference"), reference(target_reference, "target_reference")
     if method == "eq8":
         return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None])
     if gains is None:
         return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None], method="phasor")
+    if getattr(source, "representation", "") == "tangent":
+        return _cadence_transfer(source, ms, mt, gains, weight)
     check_compatible(mt, source, names=("target_reference", "source"))
     check_compatible(mt, ms, names=("target_reference", "source_reference"))
     source, ms, mt = common_harmonics(source, ms, mt)
@@ -174,6 +178,30 @@ def transfer(
         raise UserError(f"transfer: `gains` must have shape ({mt.offset.shape[0] + 1},) (channels, then log omega), "
                         f"got {gains.shape}")
     return _gain_transfer(source, ms, mt, gains, jnp.asarray(weight, dtype=mt.amplitude.dtype))
+
+
+_TANGENT_GAINS = ("transfer(gains=): tangent models take the log-omega gain only (every channel's gain 1: "
+                  "a gain per tangent channel does not commute with a change of joint frame); fit it with "
+                  "fit_transfer_gains(..., cadence_only=True), or fit with --representation euler "
+                  "(representation='euler')")
+
+
+def _cadence_transfer(source, ms, mt, gains, weight):
+    """The content-mean transfer of tangent models with a log-ω gain: the plain transfer (phasor
+    form, clip means composed by `superpose`), its ω `ω_t (ω_s / ω_ms)^(g w)`. Channel gains
+    other than 1 are refused (concrete: `UserError`; traced: `eqx.error_if`)."""
+    gains = jnp.asarray(gains, dtype=mt.amplitude.dtype)
+    if gains.shape != (mt.offset.shape[0] + 1,):
+        raise UserError(f"transfer: `gains` must have shape ({mt.offset.shape[0] + 1},) (channels, then log omega), "
+                        f"got {gains.shape}")
+    g = concrete(gains)
+    if g is not None and not np.all(g[:-1] == 1.0):
+        raise UserError(_TANGENT_GAINS)
+    gains = eqx.error_if(gains, jnp.any(gains[:-1] != 1.0), _TANGENT_GAINS)
+    weight = jnp.asarray(weight, dtype=mt.amplitude.dtype)
+    char = characteristic(source, ms)
+    out = superpose(mt, [char], weight[None], method="phasor", include_omega=False)
+    return replace(out, omega=mt.omega * jnp.exp(gains[-1] * weight * char.log_omega))
 
 
 @filter_jit
@@ -210,13 +238,15 @@ def fit_transfer_gains(
         cadence_only: fit the log-ω gain only and leave every channel's at 1: the cause of
             the fast limbs above w = 1 without the channel gains' cost in distance (on
             Bandai-1 run -> walk, the channel gains moved the median ratio from 0.74 to 0.82).
+            The only form tangent models take (log ω is rig-invariant; a channel gain is not).
 
     Returns:
         `[C + 1]` gains: channels in order, then log ω; pass them as `transfer(..., gains=)`.
     """
     sources, targets = list(sources), list(targets)
-    for m in sources[:1] + targets[:1]:
-        refuse_tangent("fit_transfer_gains", m)
+    if not cadence_only:
+        for m in sources[:1] + targets[:1]:
+            refuse_tangent("fit_transfer_gains", m)
     if len(sources) != len(targets) or len(sources) < 2:
         raise UserError(f"fit_transfer_gains: `sources` and `targets` must be paired sequences of at least 2 "
                         f"models, got {len(sources)} and {len(targets)}")
@@ -229,6 +259,11 @@ def fit_transfer_gains(
                          "fit_transfer_gains: `ridge` must be >= 0")
     models = list(common_harmonics(*sources, *targets))
     k = len(sources)
+    if cadence_only and getattr(targets[0], "representation", "") == "tangent":
+        log_w = jnp.log(jnp.stack([m.omega for m in models]))  # the only rig-invariant gain
+        dx, dy = (v - jnp.mean(v) for v in (log_w[:k], log_w[k:]))
+        g = _shrunk_slope(jnp.sum(dx * dy), jnp.sum(dx * dx), ridge, float(max_gain))
+        return jnp.ones(targets[0].offset.shape[0] + 1, dtype=g.dtype).at[-1].set(g)
     gains = _fit_gains(stack(models[:k]), stack(models[k:]), models[0], models[k], ridge, float(max_gain))
     if cadence_only:
         return jnp.ones_like(gains).at[-1].set(gains[-1])
@@ -249,7 +284,11 @@ def _fit_gains(sources, targets, first_s, first_t, ridge, max_gain):
         z = jnp.sum(z, axis=0)
         return jnp.concatenate([jnp.sum(jnp.reshape(z[:-1], (c, 1 + 2 * n)), axis=1), z[-1:]])
 
-    sxy, sxx = per_channel(dx * dy), per_channel(dx * dx)
+    return _shrunk_slope(per_channel(dx * dy), per_channel(dx * dx), ridge, max_gain)
+
+
+def _shrunk_slope(sxy, sxx, ridge, max_gain):
+    """`(S_xy + ridge S_xx) / ((1 + ridge) S_xx)` clipped to `[0, max_gain]`; 1 where `S_xx` is 0."""
     flat = sxx <= 1e-12 * jnp.maximum(jnp.max(sxx), 1e-30)
     sxx_safe = jnp.where(flat, 1.0, sxx)  # shim: no division by zero in the branch not taken
     g = (sxy + ridge * sxx_safe) / ((1 + ridge) * sxx_safe)
