@@ -5,7 +5,7 @@ measures it with an independent FK of that motion (`motion_joint_positions`): sk
 synthesized motion against the captured clip's (`gait.contact_skating`, target <= 0.25x), the
 depth of the lowest foot point below the floor (target <= 0.5 cm) and the largest
 frame-to-frame knee change (target <= the capture's). Usage:
-``python -m experiments.footlock_bounds [--bandai] [--path circle:3] [CLIP ...]``.
+``python -m experiments.footlock_bounds [--bandai] [--path circle:3] [--breakdown] [CLIP ...]``.
 """
 
 from __future__ import annotations
@@ -78,6 +78,30 @@ def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
             "result": r, "motion": out}
 
 
+def skating_breakdown(positions, frame_time_s, body_map):
+    """`[P, 3]` each foot point's share of `gait.contact_skating`'s mean speed (file units / s,
+    summing to it), by the part of its run of contact frames: the first quarter (landing), the
+    middle half, the last quarter (release); both feet together. Same contact rule (each point's
+    5th-percentile height as its floor, 2% of the body height)."""
+    from fourierjax.contacts import point_speeds
+
+    p = np.asarray(positions)
+    y = p[..., body_map.up_axis] * body_map.up_sign
+    on = (y - np.percentile(y, 5.0, axis=0)[None]) < 0.02 * float(body_map.height)
+    v = np.asarray(point_speeds(p, frame_time_s, up_axis=int(body_map.up_axis)))
+    T, _, P = on.shape
+    out = np.zeros((P, 3))
+    for f in range(2):
+        for q in range(P):
+            o = np.concatenate([[False], on[:, f, q], [False]])
+            starts, stops = np.flatnonzero(o[1:] & ~o[:-1]), np.flatnonzero(~o[1:] & o[:-1])
+            for a, b in zip(starts, stops, strict=True):
+                k = np.arange(b - a)
+                part = np.where(k < (b - a) / 4, 0, np.where(k >= 3 * (b - a) / 4, 2, 1))
+                np.add.at(out[q], part, v[a:b, f, q])
+    return out / max(int(on.sum()), 1)
+
+
 def met(row) -> bool:
     return (row["ratio"] <= 0.25 and row["depth_m"] <= 0.005
             and row["knee_step_synth_deg"] <= row["knee_step_capture_deg"])
@@ -109,6 +133,8 @@ def main(argv=None) -> int:
     ap.add_argument("--path", default=None, help="e.g. circle:3 (metres)")
     ap.add_argument("--out", default=None, help="JSON file")
     ap.add_argument("--cache", default=None, help="folder of pickled fits (development)")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also print the synthesized skating by foot point and by landing / mid / release")
     args = ap.parse_args(argv)
     names = list(args.clips)
     if args.bandai:
@@ -125,7 +151,12 @@ def main(argv=None) -> int:
 
             path = parse_path(args.path, f.body_map.metres_per_unit)
         row = measure(m, f, path=path)
-        row.pop("result"), row.pop("motion")
+        _, mot = row.pop("result"), row.pop("motion")
+        if args.breakdown:
+            from fourierjax import motion as M
+
+            row["breakdown"] = skating_breakdown(M.foot_positions_of(mot, body_map=f.body_map), m.frame_time_s,
+                                                 f.body_map).tolist()
         row["clip"] = pathlib.Path(n).stem.replace("dataset-1_", "")
         row["met"] = met(row)
         rows.append(row)
@@ -134,6 +165,9 @@ def main(argv=None) -> int:
               f"{row['knee_step_synth_deg']:5.1f} vs {row['knee_step_capture_deg']:5.1f} deg  flight "
               f"{100 * row['flight_synth']:3.0f}% vs {100 * row['flight_capture']:3.0f}%  "
               f"{'met' if row['met'] else 'NOT met'}", flush=True)
+        if args.breakdown:
+            for q, parts in enumerate(row["breakdown"]):
+                print(f"    foot point {q}: landing {parts[0]:.3f}  mid {parts[1]:.3f}  release {parts[2]:.3f} units/s")
     print(f"{sum(r['met'] for r in rows)}/{len(rows)} met, {time.perf_counter() - t0:.0f} s")
     if args.out:
         pathlib.Path(args.out).write_text(json.dumps(rows, indent=1))

@@ -46,6 +46,10 @@ CONTACT_HEIGHT_FRACTION = 0.02
 #: some), horizontally only, faded out where it would stretch the leg by over `TOE_REACH_FADE`
 #: of its length (thigh + shin) beyond the unheld foot's.
 TOE_HOLD_FRAMES, TOE_REACH_FADE = 2, 0.03
+#: With `TOE_HOLD_FRAMES` or more of easing, outside stance the foot turns toes up about its
+#: ankle (at most `TOE_CLEAR_MAX` radians, eased over `TOE_CLEAR_SMOOTH` times the frames) so that
+#: the toe's end point clears `LIFT_BANDS` contact bands (`_toe_clearance`).
+TOE_CLEAR_MAX, TOE_CLEAR_SMOOTH = 0.35, 2
 
 
 def _smoothstep(x):
@@ -328,6 +332,25 @@ def _toe_off(contact, heel_low, heel_still, late_frames):
     return off, late
 
 
+def _toe_clearance(P, A, G, contact, floor, band, up, sign, reach, smooth):
+    """`(q [T, 4], angle [T])`: the world rotation of one foot about its ankle, toes up, that lifts
+    the toe's end point (the last of the foot points `P [T, P, 3]`) to `LIFT_BANDS` bands over its
+    `floor` (height along the up axis `up`) outside stance (weight `1 - contact`), once the ankle
+    moved from `A` to `G` (`[T, 3]`); the angle is eased over `smooth` frames each side (a
+    triangular moving average). The identity where the tip is higher or the foot in stance."""
+    from fourierjax._legik import cross, safe_normalize
+
+    tip = P[:, -1] - A  # [T, 3] ankle to tip
+    h = sign * (G[:, up] + tip[:, up]) - floor
+    need = jnp.maximum(LIFT_BANDS * band - h, 0.0) * (1.0 - contact)
+    fwd = tip.at[:, up].set(0.0)
+    angle = jnp.minimum(need / jnp.maximum(safe_norm(fwd), 1e-3 * reach), TOE_CLEAR_MAX)
+    angle = _smooth(angle, smooth)
+    upv = jnp.zeros_like(fwd).at[:, up].set(sign)
+    axis = cross(safe_normalize(fwd, jnp.zeros_like(fwd)), upv)
+    return rotations.quat_from_expmap(axis * angle[:, None]), angle
+
+
 def _dilate(x, half):
     """A moving maximum over the first axis, `half` frames each side (edges held): eased by
     `_smooth` over the same frames, a lift never falls below what it was on any frame."""
@@ -456,6 +479,21 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         # floor); elsewhere an unreachable goal is eased along the leg, as before: on walks,
         # sliding on the floor there instead skated 0.98x the capture on 07_01 (0.07x lifted).
         G = G + slide_w[:, f, None] * (_reach_on_floor(H, G, A, l1 + l2, upv) - G)
+        # Toe clearance (120 fps): the low-harmonic model's toe tip drags on the floor after the
+        # stance (02_03: at up to 30 units/s, its height 0), and the lift (a moving maximum,
+        # eased so the knee does not pop) takes it up through the band at 4-21 units/s. Outside
+        # stance the foot turns toes up about its ankle instead, which the knee never sees, and
+        # the ankle's goal moves back by as much as the turn moves the tip forward (about the
+        # ankle it moves the tip forward by its depth under the ankle times the angle: the foot
+        # is steep at toe-off). Eased over `smooth_frames` only, it popped 09_02's knee (8.2 deg
+        # against 7.1); not moved back, it skated more (02_03 0.41x against 0.37x).
+        if smooth_frames >= TOE_HOLD_FRAMES:
+            q_clear, phi = _toe_clearance(P, A, G, contact[:, f], ground + clearance[f, -1], band, up, sign,
+                                          l1 + l2, TOE_CLEAR_SMOOTH * smooth_frames)
+            tip = P[:, -1] - A
+            G = G - (rotations.quat_apply(q_clear, tip) - tip) * (1.0 - upv)[None]
+        else:
+            q_clear = None
         HG = G - H
         d = safe_norm(HG)
         G = H + HG * (soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H)) / jnp.maximum(d, 1e-9))[:, None]
@@ -466,8 +504,11 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         Q = quats
         q_hip = qm(qc(Q[:, parents[hip]]), qm(R1, Q[:, hip]))
         q_knee = qm(qc(Q[:, parents[knee]]), qm(qc(R1), qm(R2, qm(R1, Q[:, knee]))))
-        q_ankle = qm(qc(Q[:, parents[ankle]]), qm(qc(R1), qm(qc(R2), Q[:, ankle])))
+        q_foot = Q[:, ankle] if q_clear is None else qm(q_clear, Q[:, ankle])
+        q_ankle = qm(qc(Q[:, parents[ankle]]), qm(qc(R1), qm(qc(R2), q_foot)))
         active = (W[:, f] > 0) | (gap[:, f] < 0) | jnp.any(shift[:, f] != 0, -1)
+        if q_clear is not None:
+            active = active | (phi > 0)
         for q, col, order in ((q_hip, c_hip, o_hip), (q_knee, c_knee, o_knee), (q_ankle, c_ankle, o_ankle)):
             old = out[:, col:col + 3]
             if order == "expmap":
@@ -475,8 +516,13 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
             else:
                 new = _nearest_euler(rotations.euler_from_quat(q, order), old, order)
             out = out.at[:, col:col + 3].set(jnp.where(active[:, None], new, old))
-        # The foot below the ankle keeps its world orientation: its points move with the ankle.
-        feet_out.append(P + jnp.where(active[:, None, None], (G - A)[:, None, :], 0.0))
+        # The foot below the ankle keeps its world orientation (but for the toe clearance's
+        # turn): its points move with the ankle.
+        if q_clear is None:
+            feet_out.append(P + jnp.where(active[:, None, None], (G - A)[:, None, :], 0.0))
+        else:
+            moved = G[:, None, :] + rotations.quat_apply(q_clear[:, None, :], P - A[:, None, :])
+            feet_out.append(jnp.where(active[:, None, None], moved, P))
     return out, jnp.stack(feet_out, axis=1), lam
 
 
@@ -503,8 +549,12 @@ def lock_feet(
     where the synthesis put it; the knee goes on the circle of valid knee positions on the side
     it bent to (`_legik.sphere_circle_point`, shared with the stance lower body); goals past the
     leg's reach are eased short of it, so the knee never straightens fully, never hyperextends
-    and never snaps. The foot keeps its world orientation; its lowest point is put on the floor
-    in contact and is never below it. Frames without contact keep their features exactly.
+    and never snaps. The foot keeps its world orientation, except that with `smooth_frames` of
+    `TOE_HOLD_FRAMES` or more it turns toes up about its ankle outside stance where its toe's end
+    point would pass under `LIFT_BANDS` contact bands (toe clearance: the ankle angle only, the
+    ankle held where the turn leaves the tip); its lowest point is put on the floor in contact
+    and is never below it. Frames the lock leaves alone (no contact, lift or turn) keep their
+    features exactly.
 
     Arguments:
         features: `[T, C]` feature frames (`fourier` layout), the root already grounded
