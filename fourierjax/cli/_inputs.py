@@ -46,10 +46,11 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--representation",
-        default="euler",
+        default="tangent",
         metavar="REP",
-        help="channel representation when fitting a BVH argument: euler (default; Unuma's "
-        "per-channel joint-angle series), expmap or tangent (rig-invariant)",
+        help="channel representation when fitting a BVH argument: tangent (default; "
+        "rig-invariant), euler (Unuma's per-channel joint-angle series; depends on the rig's "
+        "joint frames) or expmap",
     )
 
 
