@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from fourierjax._gait.common import RULES, deprecated_cmu_groins, feet_of, groin_joints, model_body_map
+from fourierjax._gait.contactphase import blend_contact_intervals
 from fourierjax._gait.crowdlock import lock_crowd
 from fourierjax._gait.fit import HipFit, fit_hip_rule
 from fourierjax._gait.footlock import (
@@ -58,6 +59,7 @@ __all__ = [
     "HipRule",
     "SkatingStats",
     "apply_step",
+    "blend_contact_intervals",
     "circle_path",
     "contact_flight_fraction",
     "contact_height",

@@ -208,3 +208,45 @@ def fit_contact_intervals(fit, motion) -> Float[np.ndarray, "2 2"] | None:
                            contacts=foot_contacts_of(sub, body_map=fit.body_map),
                            frame_time_s=fit.frame_time_s, phase_shift=fit.phase_shift)
     return np.asarray(iv, np.float64)
+
+
+def blend_contact_intervals(
+    intervals_a: Float[ArrayLike, "*B 2 2"], intervals_b: Float[ArrayLike, "*B 2 2"], s: Float[ArrayLike, "*#B"]
+) -> Float[Array, "*B 2 2"]:
+    """Contact intervals of a blend of two gaits (`style.interpolate`), from its sources' (pure jnp).
+
+    A blend's stance belongs to its sources: estimated from the blend's own cycle instead
+    (`intervals_from_model`), the stance of two walks with different duty factors, which polar
+    interpolation makes slide, is cut short and the foot lock lifts the sliding foot. Per foot,
+    the start moves by s along the shorter arc, as polar interpolation moves a phase,
+    `start = start_A + s wrap(start_B − start_A)`, and the duration `(end − start) mod 2π` moves
+    linearly (clipped inside (0, 2π) when extrapolated): the end moves along its shorter arc
+    too whenever the ends are closer than π, and the interval never flips to its complement.
+    Both sources' phases must mean the same gait event (aligned fits, e.g. the left heel strike).
+
+    Arguments:
+        intervals_a: `[..., 2, 2]` (left, right) × (start, end) phases of A (radians;
+            `contact_intervals`, stored in model files).
+        intervals_b: B's, the same shape.
+        s: the blend parameter of `style.interpolate` (0 gives A, 1 gives B; outside extrapolates),
+            broadcastable to the leading dimensions.
+
+    Returns:
+        `[..., 2, 2]` phases in [0, 2π).
+    """
+    from fourierjax._math import wrap_angle
+
+    a, b = jnp.asarray(intervals_a), jnp.asarray(intervals_b)
+    if a.shape[-2:] != (2, 2) or b.shape != a.shape:
+        raise UserError("blend_contact_intervals: both intervals must be [..., 2, 2] (foot, start/end) of "
+                        f"the same shape, got {a.shape} and {b.shape}")
+    dtype = jnp.result_type(a, b, jnp.asarray(s))
+    if not jnp.issubdtype(dtype, jnp.floating):
+        dtype = jnp.result_type(float)
+    a, b = a.astype(dtype), b.astype(dtype)
+    s = jnp.asarray(s, dtype)[..., None]  # [..., 1] against the feet
+    start = a[..., 0] + s * wrap_angle(b[..., 0] - a[..., 0])
+    dur_a, dur_b = (jnp.mod(m[..., 1] - m[..., 0], TWO_PI) for m in (a, b))
+    tiny = TWO_PI / 1024
+    duration = jnp.clip((1 - s) * dur_a + s * dur_b, tiny, TWO_PI - tiny)
+    return jnp.mod(jnp.stack([start, start + duration], axis=-1), TWO_PI)

@@ -11,6 +11,7 @@ from fourierjax._checks import concrete
 from fourierjax._fourier import _tangent
 from fourierjax._jit import filter_jit
 from fourierjax._math import wrap_angle
+from fourierjax._rotations._common import _safe_atan2
 from fourierjax._style._common import (
     METHODS,
     Method,
@@ -94,6 +95,16 @@ def check_linear_omega(where: str, omega_a, omega_b, s, omega_mode: str):
     return s
 
 
+def _body_polar(za, zb, s):
+    """Eq. 3 with one phase turn per harmonic for the whole body (`[..., K, 3, N, 2]` joint
+    phasors): `e^{isD}((1 − s) z_A + s z_B e^{−iD})`, `D = arg Σ_j <z_A,j, z_B,j>` (the per-joint
+    `_tangent.polar_interpolate` summed over the joints; 0 where the sum vanishes)."""
+    re = jnp.sum(zb[..., 0] * za[..., 0] + zb[..., 1] * za[..., 1], axis=(-3, -2))
+    im = jnp.sum(zb[..., 1] * za[..., 0] - zb[..., 0] * za[..., 1], axis=(-3, -2))
+    d = jnp.broadcast_to(_safe_atan2(im, re)[..., None, :], za.shape[:-3] + za.shape[-2:-1])
+    return _tangent.turn_phase((1 - s) * za + s * _tangent.turn_phase(zb, -d), s * d)
+
+
 def interpolate_core(a, b, s, method: str, omega_mode: str):
     """Eq. 3 at one `s`, `b` already on `a`'s branch (not jitted: the transition calls it per frame)."""
     offset = (1 - s) * a.offset + s * b.offset
@@ -104,7 +115,7 @@ def interpolate_core(a, b, s, method: str, omega_mode: str):
         amplitude, phase = canonical(amplitude, phase)
         if a.representation == "tangent":  # a joint's triple by the per-joint polar form
             cols = _tangent.model_columns(a)
-            z = _tangent.polar_interpolate(*(_tangent.joint_phasors(phasor(m), cols) for m in (a, b)), s)
+            z = _body_polar(*(_tangent.joint_phasors(phasor(m), cols) for m in (a, b)), s)
             amp_t, phase_t = polar_from_phasor(z)
             amplitude, phase = amplitude.at[cols].set(amp_t), phase.at[cols].set(phase_t)
     else:
@@ -146,10 +157,13 @@ def interpolate(
     its harmonics mapped to first order); `root.*` channels interpolate plainly. So `s = 1`
     gives b's motion on a's branch. Tangent models (`representation="tangent"`) interpolate
     their coefficients (the tangent coordinates) by eq. 3 and slerp the joints' clip means
-    (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`. Their polar form is per joint:
-    each harmonic of a joint is a complex 3-vector `z`, turned along the shorter arc by
-    `s·D`, `D = arg Σ_i z_B,i conj(z_A,i)`, as `e^{isD}((1 − s) z_A + s z_B e^{−iD})` (a single
-    channel gives Unuma's form), so that a change of the rig's joint frames commutes with it.
+    (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`. Their polar form turns the
+    whole body: each harmonic of a joint is a complex 3-vector `z`, turned along the shorter arc
+    by `s·D`, `D = arg Σ_j Σ_i z_B,ji conj(z_A,ji)` over all the joints `j`, as
+    `e^{isD}((1 − s) z_A + s z_B e^{−iD})` (a single channel gives Unuma's form), so that a
+    change of the rig's joint frames commutes with it. One `D` per joint broke the pelvis and
+    legs' coordination: the stance foot slid (issue 20: Bandai walk_normal/walk_old at s = 0.5,
+    0.33 of the root speed against 0.10/0.21 in the sources; one `D` for the body, 0.17).
 
     Which method: polar keeps each harmonic's amplitude between the two (a harmonic whose
     phases oppose does not cancel halfway, as it does with phasors) and is what Unuma

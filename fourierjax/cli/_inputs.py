@@ -28,6 +28,9 @@ class Gait:
     source: str
     provenance: dict
     alignment: str = "none"
+    #: `[2, 2]` (left, right) x (start, end) contact phases of the gait: stored in the model file
+    #: (`fourierjax fit`), learned from a fitted BVH's contacts, else None.
+    contact_intervals: object | None = None
 
 
 def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,10 +46,11 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--representation",
-        default="euler",
+        default="tangent",
         metavar="REP",
-        help="channel representation when fitting a BVH argument: euler (default; Unuma's "
-        "per-channel joint-angle series), expmap or tangent (rig-invariant)",
+        help="channel representation when fitting a BVH argument: tangent (default; "
+        "rig-invariant), euler (Unuma's per-channel joint-angle series; depends on the rig's "
+        "joint frames) or expmap",
     )
 
 
@@ -67,6 +71,7 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
     """Fit BVH clips as `fourierjax fit` does, in one batched call: drop leading rest frames,
     then `fourierjax.motion.fit_motions` (steady straight stretch, fit, phase aligned to the
     left heel strike, falling back to the left hip flexion peak)."""
+    from fourierjax import gait
     from fourierjax import motion as fmotion
 
     clips = [_read_clip(p) for p in paths]
@@ -75,7 +80,8 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
     for path, (motion, rest), fit in zip(paths, clips, fits):
         provenance = fit.summary()
         provenance.update(source=str(path), rest_frames_dropped=rest)
-        gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment))
+        gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment,
+                          gait.fit_contact_intervals(fit, motion)))
     return gaits
 
 
@@ -97,7 +103,8 @@ def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
             hint = " (a characteristic file: apply it with `fourierjax synth --add`)"
         raise UserError(f"{argument}: {err}{hint}") from None
     return Gait(
-        mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none"
+        mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none",
+        getattr(mf, "contact_intervals", None),
     )
 
 

@@ -22,12 +22,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--harmonics", default=DEFAULT_HARMONICS, type=int, metavar="N",
                         help=f"number of harmonics N (default {DEFAULT_HARMONICS}, as when `transition` "
                         "or `interpolate` fit a BVH argument; Tilmanne: 2; Unuma: 3 to 7)")
-    parser.add_argument("--representation", default="euler", choices=("euler", "expmap", "tangent"),
-                        help="rotation channels: euler (default; Unuma's per-channel joint-angle "
-                        "series: the file's Euler angles made continuous; they depend on the rig's "
-                        "joint frames), expmap (the continuous exponential map, Tilmanne) or "
-                        "tangent (rotations about each joint's clip mean: rig-invariant, the same "
-                        "fit whatever the rig's joint frames and Euler orders)")
+    parser.add_argument("--representation", default="tangent", choices=("euler", "expmap", "tangent"),
+                        help="rotation channels: tangent (default; rotations about each joint's "
+                        "clip mean: rig-invariant, the same fit whatever the rig's joint frames and "
+                        "Euler orders), euler (Unuma's per-channel joint-angle series: the file's "
+                        "Euler angles made continuous; they depend on the rig's joint frames) or "
+                        "expmap (the continuous exponential map, Tilmanne)")
     parser.add_argument("--start-frame", type=int, default=None, metavar="K",
                         help="first frame of the file to use (default: drop leading rest/T-pose "
                         "frames, with a notice)")

@@ -90,18 +90,47 @@ def template_of(a: Gait, b: Gait, command: str):
     )
 
 
-def grounded_interpolation(model, template, num_frames: int, frame_time_s: float, *, foot_lock: bool = True):
+def grounded_interpolation(model, template, num_frames: int, frame_time_s: float, *, foot_lock: bool = True,
+                           contact_intervals=None):
     """An interpolated (or any) model synthesized as `synth` does, as a writeable `Motion`: the
     hip-height rule, root motion from the stance feet and, with `foot_lock`, planted feet
-    (`gait.synthesize_gait` on the body map of the model's own poses; the contact intervals are
-    estimated from its cycle, since neither model's stored ones belong to the blend)."""
+    (`gait.synthesize_gait` on the body map of the model's own poses), in contact over
+    `contact_intervals` (`[2, 2]`; the sources' blended, `blended_contact_intervals`), else over
+    intervals estimated from the blend's own cycle."""
     from fourierjax import gait
     from fourierjax.io.gait_bvh import gait_motion
 
     bmap = gait.model_body_map(model, template.skeleton())
     r = gait.synthesize_gait(model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
-                             foot_lock=foot_lock)
+                             foot_lock=foot_lock, contact_intervals=contact_intervals)
     return gait_motion(template, r, model.channel_names, frame_time_s, body_map=bmap)
+
+
+def blended_contact_intervals(a: Gait, b: Gait, s: float):
+    """`[2, 2]` contact phases of the blend at `s` (`gait.blend_contact_intervals`) from its
+    sources': stored with a model file or learned from a fitted clip's contacts, else estimated
+    from that source model's cycle (`gait.intervals_from_model`). None when neither gait
+    carries a skeleton to estimate on.
+
+    The blend's stance is its sources': estimated from the blend's own cycle instead, the
+    stance of two walks with different duty factors, which polar interpolation makes slide
+    (Bandai walk_normal/walk_old: the stance foot at 0.3 of the root speed, each source
+    <= 0.21), was cut short, and the foot lock lifted the sliding foot."""
+    import numpy as np
+
+    from fourierjax import gait
+
+    template = a.template if a.template is not None else b.template
+    ivs = []
+    for g in (a, b):
+        iv = g.contact_intervals
+        if iv is None:
+            if template is None:
+                return None
+            skeleton = template.skeleton()
+            iv = gait.intervals_from_model(g.model, skeleton, body_map=gait.model_body_map(g.model, skeleton))
+        ivs.append(np.asarray(iv, np.float64))
+    return np.asarray(gait.blend_contact_intervals(ivs[0], ivs[1], s), np.float64)
 
 
 # ------------------------------------------------------------------------------------ command
@@ -157,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
     model = style.interpolate(a.model, b.model, s, method=args.method)
     if not all(bool(jnp.isfinite(x).all()) for x in jax.tree.leaves(model)):
         raise UserError(f"--s: {s:g} extrapolates so far that the model overflows; use a smaller --s")
+    intervals = blended_contact_intervals(a, b, s)
     if out.suffix.lower() == ".npz":
         template = a.template if a.template is not None else b.template
         model_io.save_model(
@@ -165,14 +195,15 @@ def run(args: argparse.Namespace) -> int:
             motion=template,
             provenance={"command": "interpolate", "a": a.source, "b": b.source, "s": s, "method": args.method},
             alignment=a.alignment,
+            contact_intervals=intervals,
         )
     else:
         template, frame_time_s = template_of(a, b, "interpolate")
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
         num = frame_count(seconds, dt)
         if getattr(args, "root_motion", True):
-            write_bvh(grounded_interpolation(model, template, num, dt, foot_lock=getattr(args, "foot_lock", True)),
-                      out)
+            write_bvh(grounded_interpolation(model, template, num, dt, foot_lock=getattr(args, "foot_lock", True),
+                                             contact_intervals=intervals), out)
         else:
             t = jnp.arange(num) * dt
             write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model)
