@@ -83,6 +83,33 @@ def test_interpolate_command_blends_and_stores_the_sources_intervals(tmp_path, m
     np.testing.assert_allclose(np.asarray(seen[0]), want, atol=1e-6)
 
 
+def test_transition_command_locks_over_the_stored_intervals(tmp_path, monkeypatch):
+    """`fourierjax transition` of two model files hands their stored contact phases to the
+    grounded transition (as `synth` uses them), not phases re-estimated from the cycles."""
+    from fourierjax import style
+    from fourierjax.cli import main
+
+    template = data.load("02_01")[:2]
+    names = fmotion.channel_names_for(template.topology, "euler")
+    for k, (m, iv) in {"a": (_model(0, names, 6.0, 20.0), A), "b": (_model(1, names, 8.0, 40.0), B)}.items():
+        model_io.save_model(tmp_path / f"{k}.npz", m, motion=template, alignment="left_heel_strike",
+                            contact_intervals=iv)
+    monkeypatch.chdir(tmp_path)
+    seen = []
+    real = style.grounded_transition
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("contact_intervals"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(style, "grounded_transition", spy)
+    assert main(["transition", "a.npz", "b.npz", "--seconds", "0.5", "--start", "0.1", "--duration", "0.2",
+                 "--out", "t.bvh"]) == 0
+    assert len(seen) == 1 and seen[0] is not None
+    np.testing.assert_allclose(np.asarray(seen[0][0]), A, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(seen[0][1]), B, atol=1e-6)
+
+
 def test_tangent_polar_turns_the_whole_body():
     """Tangent polar eq. 3 turns every joint of a harmonic by one `s D`, `D = arg sum_j <z_A,j, z_B,j>`
     (closed form), and commutes with a change of each joint's frame."""

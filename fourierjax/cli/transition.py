@@ -55,10 +55,18 @@ def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: 
     from fourierjax import gait, style
     from fourierjax.io.gait_bvh import grounded_motion
 
-    bmap = gait.model_body_map(a.model, template.skeleton())
-    r = style.grounded_transition(a.model, b.model, template.skeleton(), num_frames, dt, start, duration,
+    skeleton = template.skeleton()
+    bmap = gait.model_body_map(a.model, skeleton)
+    foot_lock = getattr(args, "foot_lock", True)
+    # The contact phases each model learned from its clip (model file or BVH fit), as `synth`
+    # uses them; estimated from the model's own cycle where a source has none.
+    intervals = None
+    if foot_lock:
+        intervals = tuple(g.contact_intervals if getattr(g, "contact_intervals", None) is not None
+                          else gait.contact_intervals(g.model, skeleton, body_map=bmap) for g in (a, b))
+    r = style.grounded_transition(a.model, b.model, skeleton, num_frames, dt, start, duration,
                                   body_map=bmap, ease=args.ease, method=args.method,
-                                  foot_lock=getattr(args, "foot_lock", True))
+                                  foot_lock=foot_lock, contact_intervals=intervals)
     return grounded_motion(template, r.features, r.root_position, a.model.channel_names, dt, body_map=bmap)
 
 
