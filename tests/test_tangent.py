@@ -11,7 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import fourierjax.data
-from fourierjax import fourier, style
+from fourierjax import fourier, gait, style
+from fourierjax import motion as fmotion
 from fourierjax._fourier import _tangent
 from fourierjax.body import infer_body_map
 from fourierjax.errors import UserError
@@ -457,3 +458,39 @@ def test_cadence_gain_on_tangent(pair, fits):
     with pytest.raises(RuntimeError, match=r"transfer\(gains=\): tangent models take the log-omega gain only"):
         jax.block_until_ready(jax.jit(lambda gg: style.transfer(source, refs_s, refs_t, method="content_mean",
                                                                 weight=w, gains=gg).omega)(bad))
+
+
+# ------------------------------------------------ grounded synthesis of tangent fits on every rig
+
+
+@pytest.fixture(scope="module")
+def gait_fits(fits):
+    """`fit_motions` (body map, steady segment, heel-strike alignment, root channels) of 07_01
+    and three rewrites, tangent, in one batch."""
+    m, rew, _, _ = fits
+    keys = ("cmu", *RIGS3)
+    res = fmotion.fit_motions([m] + [rew[k][0] for k in RIGS3], 3, "tangent", throw=True)
+    return m, rew, dict(zip(keys, res))
+
+
+@pytest.mark.parametrize("key", RIGS3)
+def test_grounded_synthesis_is_rig_invariant(gait_fits, key):
+    """#20 Done-when on the rewrites (Bandai names, ZXY, bones along X; Z-up; rotated rest
+    frames), through the whole path a user takes: heel strikes and aligned phases equal, and
+    `synthesize_gait` (hip rule, root motion from the stance feet, foot lock) gives the CMU clip's
+    root path, root advance and foot skating within 1%."""
+    m, rew, f = gait_fits
+    ref, fit = f["cmu"], f[key]
+    assert fit.alignment == ref.alignment == "left_heel_strike"
+    assert (fit.left_heel_strikes, fit.right_heel_strikes) == (ref.left_heel_strikes, ref.right_heel_strikes)
+    assert abs(np.angle(np.exp(1j * (fit.phase_shift - ref.phase_shift)))) < 0.01 * 2 * np.pi
+    dt, T = m.frame_time_s, 240
+    a = gait.synthesize_gait(ref.model, m.skeleton(), T, dt)
+    b = gait.synthesize_gait(fit.model, rew[key][0].skeleton(), T, dt)
+    leg = sum(np.linalg.norm(m.offsets[m.topology.names.index(n)]) for n in ("LeftLeg", "LeftFoot"))
+    pa, pb = np.asarray(a.root_position, np.float64), np.asarray(b.root_position, np.float64)
+    assert np.abs(pb - pa).max() < 0.01 * leg, np.abs(pb - pa).max() / leg
+    advance_a, advance_b = (np.linalg.norm((p[-1] - p[0])[[0, 2]]) for p in (pa, pb))
+    assert advance_b == pytest.approx(advance_a, rel=0.01)
+    skate = [float(gait.foot_skating(r.foot_positions, dt, r.clearance[None]).mean_speed) for r in (a, b)]
+    assert skate[1] == pytest.approx(skate[0], rel=0.01), skate
