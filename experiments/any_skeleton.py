@@ -6,6 +6,8 @@ root, a Blender armature with bones along Y, no toe joints, large rest rotations
 fitted and synthesized like its CMU original, and the results are compared after the conversion
 is undone: heel strikes (frames), omega from steps, aligned phases (cycles), synthesized root
 and ankle positions (fraction of the leg length), foot skating and root advance (relative).
+The fits use the config's representation: `tangent` by default, as on the command line
+(`euler` is Unuma's per-channel series, which depends on the rig's joint frames).
 On ``../shared/data/mocap/bandai1`` (when present), per content: strikes, alignment, omega from
 steps against the fit, the steady segment, root speed against the captured and its direction,
 ``fourierjax synth`` and the s = 0.5 interpolation. Usage:
@@ -73,13 +75,14 @@ def convention_rows(cfg, log=print) -> list[dict]:
         m = data.load(c)
         motions.append(m[detect_rest_frames(m):][: cfg["max_frames"]])
     frames = cfg["synth_frames"]
-    ref_fits = fit_motions(motions, cfg["harmonics"])
+    rep = cfg.get("representation", "tangent")
+    ref_fits = fit_motions(motions, cfg["harmonics"], rep)
     ref_synth = [_synth(f, m, frames) for f, m in zip(ref_fits, motions)]
     rows = []
     for conv in cfg["conventions"]:
         log(f"  {conv}", flush=True)
         rigs = [_rewrite(m, conv) for m in motions]
-        fits = fit_motions(rigs, cfg["harmonics"], throw=False)
+        fits = fit_motions(rigs, cfg["harmonics"], rep, throw=False)
         s = _undo_scale(conv)
         for clip, m, rig, ref, f, rs in zip(clips, motions, rigs, ref_fits, fits, ref_synth):
             row = {"convention": conv, "clip": clip, "alignment": f.alignment}
@@ -140,7 +143,7 @@ def bandai_rows(cfg, out, log=print) -> list[dict]:
         files = [p for p in files if p.stem.split("_")[1] == content]
         log(f"  bandai {content}: {len(files)} clips", flush=True)
         motions = [read_bvh(p) for p in files]
-        fits = fit_motions(motions, cfg["harmonics"], throw=False)
+        fits = fit_motions(motions, cfg["harmonics"], cfg.get("representation", "tangent"), throw=False)
         ok = [f.successful for f in fits]
         strikes = sum(bool(f.successful and len(f.left_heel_strikes) and len(f.right_heel_strikes)) for f in fits)
         aligned = sum(f.alignment == "left_heel_strike" for f in fits)
@@ -178,7 +181,8 @@ def bandai_rows(cfg, out, log=print) -> list[dict]:
         normal = next(i for i, p in enumerate(files) if "_normal_" in p.name)
         folder = out / "bandai_models"
         folder.mkdir(exist_ok=True)
-        rc_fit = cli(["fit", str(files[normal]), "--harmonics", str(cfg["harmonics"]), "--out", str(folder) + "/"])
+        rc_fit = cli(["fit", str(files[normal]), "--harmonics", str(cfg["harmonics"]), "--representation",
+                      cfg.get("representation", "tangent"), "--out", str(folder) + "/"])
         rc_synth = cli(["synth", str(folder / f"{files[normal].stem}.npz"), "--seconds", "3",
                         "--out", str(folder / f"{content}_synth.bvh")]) if rc_fit == 0 else rc_fit
         # s = 0.5 between normal and each other style: distance to each against their distance.
