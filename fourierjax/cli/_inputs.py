@@ -31,6 +31,9 @@ class Gait:
     #: `[2, 2]` (left, right) x (start, end) contact phases of the gait: stored in the model file
     #: (`fourierjax fit`), learned from a fitted BVH's contacts, else None.
     contact_intervals: object | None = None
+    #: The source file's up axis ("y", "z", "-z", ...): the model and `template` are Y-up, and
+    #: BVH written from them is turned back to it (`write_output`).
+    up: str = "y"
 
 
 def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,17 +57,50 @@ def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _read_clip(path: pathlib.Path):
+def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: int | None = None,
+              up: str | None = None, body_map: str | None = None):
+    """A BVH clip as every command reads it: `(motion, skip, body_map, up)`.
+
+    ``motion`` is Y-up (a file whose body map finds another up axis, or with ``up`` given, is
+    turned on reading, with a one-line notice), cut to ``[start_frame, stop_frame)`` or, without
+    ``start_frame``, with its leading rest frames dropped (a notice); ``skip`` is the number of
+    leading file frames dropped; ``up`` is the file's own up axis ("y", "z", "-z", ...).
+    """
+    from fourierjax.body import infer_body_map
     from fourierjax.data import detect_rest_frames
     from fourierjax.errors import UserError
+    from fourierjax.io.axes import to_y_up
     from fourierjax.io.bvh import read_bvh
 
     motion = read_bvh(path)
-    rest = detect_rest_frames(motion)
-    motion = motion[rest:]
+    if stop_frame is not None:
+        if not 1 < stop_frame <= motion.num_frames:
+            raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
+        motion = motion[:stop_frame]
+    bm = infer_body_map(motion, up=up, overrides=body_map)
+    axis = "y"
+    if (bm.up_axis, bm.up_sign) != (1, 1):
+        axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
+        print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
+        motion = to_y_up(motion, axis)
+        bm = infer_body_map(motion, overrides=body_map)
+    if start_frame is not None:
+        if not 0 <= start_frame < motion.num_frames - 1:
+            raise UserError(
+                f"--start-frame: {start_frame} is outside {path} (frames 0..{motion.num_frames - 1})"
+            )
+        skip = start_frame
+    else:
+        skip = detect_rest_frames(motion)
+        if skip:
+            print(f"fourierjax: notice: {path}: dropped {skip} leading rest frame(s) "
+                  f"(use --start-frame to choose)", file=sys.stderr)
+    motion = motion[skip:]
     if motion.num_frames < 16:
-        raise UserError(f"{path}: only {motion.num_frames} motion frames, too short to fit")
-    return motion, rest
+        raise UserError(f"{path}: only {motion.num_frames} frames to fit; need at least 16")
+    if start_frame is not None and start_frame >= (stop_frame or motion.num_frames + skip):
+        raise UserError(f"--start-frame {start_frame} is not before --stop-frame {stop_frame}")
+    return motion, skip, bm, axis
 
 
 def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
@@ -74,14 +110,15 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
     from fourierjax import gait
     from fourierjax import motion as fmotion
 
-    clips = [_read_clip(p) for p in paths]
-    fits = fmotion.fit_motions([m for m, _ in clips], harmonics, representation, throw=True)
+    clips = [read_clip(p) for p in paths]
+    fits = fmotion.fit_motions([c[0] for c in clips], harmonics, representation, throw=True,
+                               body_map=[c[2] for c in clips])
     gaits = []
-    for path, (motion, rest), fit in zip(paths, clips, fits):
+    for path, (motion, rest, _, up), fit in zip(paths, clips, fits):
         provenance = fit.summary()
-        provenance.update(source=str(path), rest_frames_dropped=rest)
+        provenance.update(source=str(path), rest_frames_dropped=rest, up=up)
         gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment,
-                          gait.fit_contact_intervals(fit, motion)))
+                          gait.fit_contact_intervals(fit, motion), up))
     return gaits
 
 
@@ -102,9 +139,10 @@ def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
         if "fourier_characteristic" in str(err):
             hint = " (a characteristic file: apply it with `fourierjax synth --add`)"
         raise UserError(f"{argument}: {err}{hint}") from None
+    provenance = dict(mf.provenance or {})
     return Gait(
-        mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none",
-        getattr(mf, "contact_intervals", None),
+        mf.model, mf.template_motion(), mf.frame_time_s, str(path), provenance, mf.alignment or "none",
+        getattr(mf, "contact_intervals", None), source_up(provenance),
     )
 
 
@@ -141,3 +179,10 @@ def load_gait_pair(args: argparse.Namespace):
             file=sys.stderr,
         )
     return a, b
+
+
+def source_up(provenance: dict) -> str:
+    """The up axis of the file a model was fitted from, as `fourierjax fit` records it in the
+    model file's provenance ("y" for files written before it did, and for Y-up files)."""
+    up = str((provenance or {}).get("up", "y")).strip().lower().lstrip("+")
+    return up if up in ("x", "y", "z", "-x", "-y", "-z") else "y"

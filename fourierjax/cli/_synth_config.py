@@ -99,8 +99,8 @@ _REPLACED = {"model": None, "seconds": None, "fps": None, "add": [], "noise": 0.
 def run_config(args) -> int:
     """`synth --config FILE --out OUT.bvh`: the explorer's export, frame for frame."""
     from fourierjax import explore
+    from fourierjax.cli._outputs import write_bvh_as_source
     from fourierjax.errors import UserError
-    from fourierjax.io.bvh import write_bvh
 
     given = [k for k, v in _REPLACED.items() if hasattr(args, k) and getattr(args, k) != v]
     if given:
@@ -119,6 +119,6 @@ def run_config(args) -> int:
     _memory.check_synthesis(f"--config {args.config}: {params.seconds:g} s at {params.fps:g} fps", params.num_frames,
                             model.num_channels, model.num_harmonics)
     motion, _ = explore.render(library, params)
-    write_bvh(motion, out)
+    write_bvh_as_source(motion, out, "y", getattr(args, "out_up", None))  # the explorer's models: Y-up
     print(f"wrote {out}: {params.num_frames} frames at {params.fps:g} fps (config {args.config})")
     return 0

@@ -10,7 +10,7 @@ import os
 import pathlib
 import sys
 
-from fourierjax.cli._inputs import DEFAULT_HARMONICS
+from fourierjax.cli._inputs import DEFAULT_HARMONICS, read_clip
 
 HELP = "Fit Fourier gait models (Unuma eq. 1) to BVH clips: fundamental three ways, fit quality."
 
@@ -46,45 +46,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "a directory that receives one <name>.npz per clip")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON list (one object per clip) instead of a table")
-
-
-def _load(path: pathlib.Path, start_frame: int | None, stop_frame: int | None = None,
-          up: str | None = None, body_map: str | None = None):
-    """The motion to fit (Y up), the number of leading file frames dropped, and its body map."""
-    from fourierjax.body import infer_body_map
-    from fourierjax.data import detect_rest_frames
-    from fourierjax.errors import UserError
-    from fourierjax.io.axes import to_y_up
-    from fourierjax.io.bvh import read_bvh
-
-    motion = read_bvh(path)
-    if stop_frame is not None:
-        if not 1 < stop_frame <= motion.num_frames:
-            raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
-        motion = motion[:stop_frame]
-    bm = infer_body_map(motion, up=up, overrides=body_map)
-    if (bm.up_axis, bm.up_sign) != (1, 1):
-        axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
-        print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
-        motion = to_y_up(motion, axis)
-        bm = infer_body_map(motion, overrides=body_map)
-    if start_frame is not None:
-        if not 0 <= start_frame < motion.num_frames - 1:
-            raise UserError(
-                f"--start-frame: {start_frame} is outside {path} (frames 0..{motion.num_frames - 1})"
-            )
-        skip = start_frame
-    else:
-        skip = detect_rest_frames(motion)
-        if skip:
-            print(f"fourierjax: notice: {path}: dropped {skip} leading rest frame(s) "
-                  f"(use --start-frame to choose)", file=sys.stderr)
-    motion = motion[skip:]
-    if motion.num_frames < 16:
-        raise UserError(f"{path}: only {motion.num_frames} frames to fit; need at least 16")
-    if start_frame is not None and start_frame >= (stop_frame or motion.num_frames + skip):
-        raise UserError(f"--start-frame {start_frame} is not before --stop-frame {stop_frame}")
-    return motion, skip, bm
 
 
 #: A fit explaining less than this fraction of the angle variance is flagged on stderr (the
@@ -153,14 +114,14 @@ def run(args: argparse.Namespace) -> int:
     def clips():
         for text, p in zip(files, paths, strict=True):
             try:
-                motion, skip, bm = _load(p, args.start_frame, args.stop_frame, args.up,
-                                         args.body_map)
+                motion, skip, bm, up = read_clip(p, args.start_frame, args.stop_frame, args.up,
+                                                 args.body_map)
             except UserError as err:
                 if len(files) == 1:
                     raise
                 failed.append(f"{text}: {err}")
                 continue
-            loaded.append((text, p, motion, skip))
+            loaded.append((text, p, motion, skip, up))
             yield motion, bm
 
     pairs_m, pairs_b = itertools.tee(clips())
@@ -170,11 +131,11 @@ def run(args: argparse.Namespace) -> int:
     rows = []
     try:
         for fit in fits:
-            text, path, motion, skip = loaded.popleft()
+            text, path, motion, skip, up = loaded.popleft()
             if not fit.successful:
                 failed.append(f"{text}: {fit.message}")
                 continue
-            rows.append(_row(args, text, path, motion, skip, fit, out, to_folder, __version__,
+            rows.append(_row(args, text, path, motion, skip, up, fit, out, to_folder, __version__,
                              model_io))
     except UserError as err:
         if "fit_motions: no motions given" not in str(err) or not failed:
@@ -197,9 +158,10 @@ def run(args: argparse.Namespace) -> int:
     return _report_failures(failed, len(files))
 
 
-def _row(args, text, path, motion, skip, fit, out, to_folder, version, model_io) -> dict:
-    """The report row of one fitted clip; its model file written when ``--out`` is given."""
-    row = {"file": text, "path": str(path)}
+def _row(args, text, path, motion, skip, up, fit, out, to_folder, version, model_io) -> dict:
+    """The report row of one fitted clip; its model file written when ``--out`` is given (its
+    provenance keeps the file's up axis, ``up``, so that BVH written from it can keep it too)."""
+    row = {"file": text, "path": str(path), "up": up}
     row.update(fit.summary())
     row.pop("source", None)
     row["frame_start"] = skip + fit.frame_start  # file frame numbers

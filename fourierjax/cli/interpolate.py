@@ -27,8 +27,10 @@ HELP = "Inter/extrapolate two gaits (Unuma eq. 3): write the model (.npz) or a m
 # ----------------------------------------------------------------------------- shared helpers
 
 
-def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None, body_map=None) -> None:
-    """Write synthesized features as a BVH on `template`'s skeleton.
+def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, template, model=None, body_map=None,
+                 up: str = "y", out_up: str | None = None) -> None:
+    """Write synthesized features as a BVH on `template`'s skeleton (with `out_up`, else the
+    source's `up`, as its up axis: `fourierjax.cli._outputs.write_bvh_as_source`).
 
     Features whose root channels do not move (a rig whose trajectory is not on joint 0, e.g.
     Bandai's `Hips` under a still `joint_Root`) would walk in place with the feet off the floor:
@@ -40,7 +42,7 @@ def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, templ
     import numpy as np
 
     from fourierjax import motion as fmotion
-    from fourierjax.io.bvh import write_bvh
+    from fourierjax.cli._outputs import write_bvh_as_source
 
     x = np.asarray(features, np.float64)
     if body_map is None and model is not None:
@@ -62,7 +64,7 @@ def write_motion(out: pathlib.Path, features, channel_names, frame_time_s, templ
         motion = grounded_motion(template, feats, root, channel_names, frame_time_s, body_map=bmap)
     else:
         motion = fmotion.motion_from_features(template, x, channel_names, frame_time_s, body_map=body_map)
-    write_bvh(motion, out)
+    write_bvh_as_source(motion, out, up, out_up)
 
 
 def check_out(text: str, suffixes: tuple[str, ...]) -> pathlib.Path:
@@ -165,8 +167,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                    "on); --no-root-motion keeps the interpolated model's own root channels (and no "
                    "foot lock)")
     from fourierjax.cli._gait_args import add_foot_lock_arguments
+    from fourierjax.cli._outputs import add_out_up_argument
 
     add_foot_lock_arguments(g)
+    add_out_up_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -174,9 +178,9 @@ def run(args: argparse.Namespace) -> int:
     import jax.numpy as jnp
 
     from fourierjax import fourier, style
+    from fourierjax.cli._outputs import write_bvh_as_source
     from fourierjax.errors import UserError
     from fourierjax.io import model_io
-    from fourierjax.io.bvh import write_bvh
 
     s = parse_number(args.s, "--s")
     out = check_out(args.out, (".npz", ".bvh"))
@@ -187,13 +191,15 @@ def run(args: argparse.Namespace) -> int:
     if not all(bool(jnp.isfinite(x).all()) for x in jax.tree.leaves(model)):
         raise UserError(f"--s: {s:g} extrapolates so far that the model overflows; use a smaller --s")
     intervals = blended_contact_intervals(a, b, s)
+    src = a if a.template is not None else b  # the gait whose skeleton (and up axis) is written
     if out.suffix.lower() == ".npz":
         template = a.template if a.template is not None else b.template
         model_io.save_model(
             out,
             model,
             motion=template,
-            provenance={"command": "interpolate", "a": a.source, "b": b.source, "s": s, "method": args.method},
+            provenance={"command": "interpolate", "a": a.source, "b": b.source, "s": s, "method": args.method,
+                        "up": src.up},
             alignment=a.alignment,
             contact_intervals=intervals,
         )
@@ -202,10 +208,12 @@ def run(args: argparse.Namespace) -> int:
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
         num = frame_count(seconds, dt)
         if getattr(args, "root_motion", True):
-            write_bvh(grounded_interpolation(model, template, num, dt, foot_lock=getattr(args, "foot_lock", True),
-                                             contact_intervals=intervals), out)
+            write_bvh_as_source(grounded_interpolation(model, template, num, dt,
+                                                       foot_lock=getattr(args, "foot_lock", True),
+                                                       contact_intervals=intervals), out, src.up, args.out_up)
         else:
             t = jnp.arange(num) * dt
-            write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model)
+            write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model,
+                         up=src.up, out_up=args.out_up)
     print(f"wrote {out}")
     return 0

@@ -29,6 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from fourierjax.cli._gait_args import add_gait_arguments  # step constraints (gait.py)
 
     add_gait_arguments(parser)
+    from fourierjax.cli._outputs import add_out_up_argument
+
+    add_out_up_argument(parser)
 
 
 def _parse_add(text: str):
@@ -52,8 +55,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fourierjax import fourier, model_io
+    from fourierjax.cli._inputs import source_up
+    from fourierjax.cli._outputs import write_bvh_as_source
     from fourierjax.errors import UserError
-    from fourierjax.io.bvh import write_bvh
 
     if args.config:  # the explorer's parameter set (issue 23)
         from fourierjax.cli._synth_config import run_config
@@ -113,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     intervals, source = _foot_lock_inputs(mf)
     motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None),
                                       contact_intervals=intervals, source=source)
-    write_bvh(motion, out)
+    write_bvh_as_source(motion, out, source_up(getattr(mf, "provenance", None) or {}), args.out_up)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
     print(gait_summary)

@@ -35,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="interpolation of the harmonics (default polar, Unuma eq. 3)",
     )
     add_grounding_arguments(parser)
+    from fourierjax.cli._outputs import add_out_up_argument
+
+    add_out_up_argument(parser)
 
 
 def add_grounding_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,12 +96,14 @@ def run(args: argparse.Namespace) -> int:
     template, frame_time_s = template_of(a, b, "transition")
     dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
     t = jnp.arange(frame_count(seconds, dt)) * dt
+    src = a if a.template is not None else b  # the gait whose skeleton (and up axis) is written
     if getattr(args, "root_motion", False):
-        from fourierjax.io.bvh import write_bvh
+        from fourierjax.cli._outputs import write_bvh_as_source
 
-        write_bvh(grounded_motion_of(args, a, b, template, t.shape[0], dt, start, duration), out)
+        write_bvh_as_source(grounded_motion_of(args, a, b, template, t.shape[0], dt, start, duration), out,
+                            src.up, args.out_up)
     else:
         values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
-        write_motion(out, values, a.model.channel_names, dt, template, a.model)
+        write_motion(out, values, a.model.channel_names, dt, template, a.model, up=src.up, out_up=args.out_up)
     print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
     return 0
