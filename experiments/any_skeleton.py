@@ -75,7 +75,7 @@ def convention_rows(cfg, log=print) -> list[dict]:
         m = data.load(c)
         motions.append(m[detect_rest_frames(m):][: cfg["max_frames"]])
     frames = cfg["synth_frames"]
-    rep = cfg.get("representation", "tangent")
+    rep = cfg["representation"]
     ref_fits = fit_motions(motions, cfg["harmonics"], rep)
     ref_synth = [_synth(f, m, frames) for f, m in zip(ref_fits, motions)]
     rows = []
@@ -143,7 +143,7 @@ def bandai_rows(cfg, out, log=print) -> list[dict]:
         files = [p for p in files if p.stem.split("_")[1] == content]
         log(f"  bandai {content}: {len(files)} clips", flush=True)
         motions = [read_bvh(p) for p in files]
-        fits = fit_motions(motions, cfg["harmonics"], cfg.get("representation", "tangent"), throw=False)
+        fits = fit_motions(motions, cfg["harmonics"], cfg["representation"], throw=False)
         ok = [f.successful for f in fits]
         strikes = sum(bool(f.successful and len(f.left_heel_strikes) and len(f.right_heel_strikes)) for f in fits)
         aligned = sum(f.alignment == "left_heel_strike" for f in fits)
@@ -182,7 +182,7 @@ def bandai_rows(cfg, out, log=print) -> list[dict]:
         folder = out / "bandai_models"
         folder.mkdir(exist_ok=True)
         rc_fit = cli(["fit", str(files[normal]), "--harmonics", str(cfg["harmonics"]), "--representation",
-                      cfg.get("representation", "tangent"), "--out", str(folder) + "/"])
+                      cfg["representation"], "--out", str(folder) + "/"])
         rc_synth = cli(["synth", str(folder / f"{files[normal].stem}.npz"), "--seconds", "3",
                         "--out", str(folder / f"{content}_synth.bvh")]) if rc_fit == 0 else rc_fit
         # s = 0.5 between normal and each other style: distance to each against their distance.

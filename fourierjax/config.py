@@ -213,6 +213,8 @@ SCHEMAS["any_skeleton"] = {
     "conventions": Field(list_of(_is_str, "convention names", min_len=0),
                          doc="tests.conventions / tests.rigs rewrites to compare with the CMU clips"),
     "harmonics": Field(integer(1, 16), 3),
+    "representation": Field(choice("euler", "expmap", "tangent"), "tangent",
+                            "rotation channels of the fits (the command line's default: tangent)"),
     "max_frames": Field(integer(16, 100000), 400, "frames of each clip (after its rest frames)"),
     "synth_frames": Field(integer(16, 10000), 240, "frames of each synthesized gait"),
     "bandai_contents": Field(list_of(_is_str, "contents", min_len=0), ["walk", "run", "dash", "walk-back"],
