@@ -223,6 +223,8 @@ def _rows(a, start: int, stop: int):
     """`a[start:stop]` (rows of the leading axis) as one `slice`, without jnp's indexing."""
     if start == 0 and stop == a.shape[0]:
         return a
+    if isinstance(a, np.ndarray):  # a constant stays NumPy (folded into the program)
+        return a[start:stop]
     return lax.slice(a, (start, *(0,) * (a.ndim - 1)), (stop, *a.shape[1:]))
 
 
@@ -254,6 +256,30 @@ def qapply(q, v):
     ]
 
 
+def _broadcast(x, shape):
+    """`jnp.broadcast_to(x, shape)` for `x` of the same rank, as one lax op."""
+    if x.shape == shape:
+        return x
+    if isinstance(x, np.ndarray) or x.ndim != len(shape):
+        return jnp.broadcast_to(x, shape)
+    return lax.broadcast_in_dim(x, shape, tuple(range(x.ndim)))
+
+
+def _concat(parts):
+    """`jnp.concatenate(parts, axis=0)`, as one lax op for jax arrays of one dtype."""
+    if any(isinstance(p, np.ndarray) or p.dtype != parts[0].dtype for p in parts):
+        return jnp.concatenate(parts, axis=0)
+    return lax.concatenate(parts, 0)
+
+
+def _column(a, start: int, stop: int, axis: int, dtype, ones):
+    """`a[start:stop, axis].astype(dtype).reshape(-1, *ones)` in lax ops (the same program)."""
+    if isinstance(a, np.ndarray):
+        return a[start:stop, axis].astype(dtype).reshape(-1, *ones)
+    column = lax.squeeze(lax.slice(a, (start, axis), (stop, axis + 1)), (1,))
+    return lax.reshape(column.astype(dtype), (stop - start, *ones))
+
+
 def _take(a, runs):
     """Rows of `a` `[n, *S]` by static runs (slices and broadcasts, no gather)."""
     if isinstance(a, int):
@@ -263,8 +289,8 @@ def _take(a, runs):
         if step == 1:
             parts.append(_rows(a, start, start + count))
         else:
-            parts.append(jnp.broadcast_to(_rows(a, start, start + 1), (count, *a.shape[1:])))
-    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
+            parts.append(_broadcast(_rows(a, start, start + 1), (count, *a.shape[1:])))
+    return parts[0] if len(parts) == 1 else _concat(parts)
 
 
 def _cat(parts, shape, dtype):
@@ -312,13 +338,13 @@ def local_translations(level: _Level, pos, bone_offsets, shape, dtype):
         parts = []
         for s in segs:
             if s.row < 0:
-                parts.append(bone_offsets[s.start:s.stop, axis].astype(dtype).reshape(-1, *ones))
+                parts.append(_column(bone_offsets, s.start, s.stop, axis, dtype, ones))
             else:
                 parts.append(_rows(pos, s.row, s.row + s.stop - s.start))
         if len(parts) == 1:
             out.append(parts[0])
         else:
-            out.append(jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], *shape)) for p in parts], axis=0))
+            out.append(_concat([_broadcast(p, (p.shape[0], *shape)) for p in parts]))
     return out
 
 
@@ -377,7 +403,7 @@ def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None):
         sincos = sincos_degrees(0.5 * _rows(x, 0, the_plan.num_rot))
     sin, cos = sincos
     if keep is not None:  # one stored block: both come from one range reduction
-        both = keep(jnp.concatenate([sin, cos], axis=0))
+        both = keep(_concat([sin, cos]))
         sin, cos = _rows(both, 0, the_plan.num_rot), _rows(both, the_plan.num_rot, both.shape[0])
     pos = _rows(x, the_plan.num_rot, x.shape[0])
     lq = [local_quats(lv, sin, cos, shape, dtype) for lv in the_plan.levels]
