@@ -170,8 +170,8 @@ def _is(x, value: int) -> bool:
 def _binary(name: str, u, v):
     lax_op, jnp_op, py_op = _OPS[name]
     u_num, v_num = isinstance(u, (int, float)), isinstance(v, (int, float))
-    if u_num and v_num:
-        return py_op(u, v)
+    if (u_num or isinstance(u, np.ndarray)) and (v_num or isinstance(v, np.ndarray)):
+        return py_op(u, v)  # constants stay Python or NumPy (folded into the program)
     if u_num or v_num:
         array = v if u_num else u
         if not jnp.issubdtype(array.dtype, jnp.floating):
@@ -213,7 +213,7 @@ def _sum(*signed):
         if _is(t, 0):
             continue
         if _is(out, 0):
-            out = t if sign > 0 else (-t if isinstance(t, int) else lax.neg(t))
+            out = t if sign > 0 else (-t if isinstance(t, (int, np.ndarray)) else lax.neg(t))
         else:
             out = _add(out, t) if sign > 0 else _sub(out, t)
     return out
