@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import functools
+import operator
 from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
+from jax import lax
 
 from fourierjax._sincos import sincos_degrees
 from fourierjax.skeleton import Topology
@@ -155,17 +157,54 @@ def store(x):
     A division is too expensive for XLA to duplicate into each consumer, and `1 + 0 x` is not
     folded for floats (`0 x` is nan for infinite `x`). Speed only: finite values are unchanged.
     """
-    return x / (1.0 + 0.0 * x)
+    return lax.div(x, lax.add(1.0, lax.mul(0.0, x)))  # lax: see `_same`
 
 
 def _is(x, value: int) -> bool:
     return isinstance(x, int) and x == value
 
 
+# The products and sums below bind lax primitives (the program is the one `*`, `+` and `-` would
+# make, operands broadcast as jnp does): each jnp ufunc traces through a `jit` of its own, which
+# cost 2-3x the op itself (a 1,200-op FK traced in 78 against 48 ms on 2 cores).
+def _binary(name: str, u, v):
+    lax_op, jnp_op, py_op = _OPS[name]
+    u_num, v_num = isinstance(u, (int, float)), isinstance(v, (int, float))
+    if (u_num or isinstance(u, np.ndarray)) and (v_num or isinstance(v, np.ndarray)):
+        return py_op(u, v)  # constants stay Python or NumPy (folded into the program)
+    if u_num or v_num:
+        array = v if u_num else u
+        if not jnp.issubdtype(array.dtype, jnp.floating):
+            return jnp_op(u, v)
+        return lax_op(float(u), v) if u_num else lax_op(u, float(v))
+    if u.ndim != v.ndim or u.dtype != v.dtype:  # anything else as jnp does it
+        return jnp_op(u, v)
+    return lax_op(u, v)  # lax broadcasts axes of size 1 between operands of one rank, as jnp
+
+
+_OPS = {
+    "add": (lax.add, jnp.add, operator.add),
+    "sub": (lax.sub, jnp.subtract, operator.sub),
+    "mul": (lax.mul, jnp.multiply, operator.mul),
+}
+
+
+def _add(u, v):
+    return _binary("add", u, v)
+
+
+def _sub(u, v):
+    return _binary("sub", u, v)
+
+
 def _mul(u, v):
     if _is(u, 0) or _is(v, 0):
         return 0
-    return v if _is(u, 1) else u if _is(v, 1) else u * v
+    if _is(u, 1):
+        return v
+    if _is(v, 1):
+        return u
+    return _binary("mul", u, v)
 
 
 def _sum(*signed):
@@ -174,10 +213,19 @@ def _sum(*signed):
         if _is(t, 0):
             continue
         if _is(out, 0):
-            out = t if sign > 0 else -t
+            out = t if sign > 0 else (-t if isinstance(t, (int, np.ndarray)) else lax.neg(t))
         else:
-            out = out + t if sign > 0 else out - t
+            out = _add(out, t) if sign > 0 else _sub(out, t)
     return out
+
+
+def _rows(a, start: int, stop: int):
+    """`a[start:stop]` (rows of the leading axis) as one `slice`, without jnp's indexing."""
+    if start == 0 and stop == a.shape[0]:
+        return a
+    if isinstance(a, np.ndarray):  # a constant stays NumPy (folded into the program)
+        return a[start:stop]
+    return lax.slice(a, (start, *(0,) * (a.ndim - 1)), (stop, *a.shape[1:]))
 
 
 def qmul(a, b):
@@ -208,6 +256,30 @@ def qapply(q, v):
     ]
 
 
+def _broadcast(x, shape):
+    """`jnp.broadcast_to(x, shape)` for `x` of the same rank, as one lax op."""
+    if x.shape == shape:
+        return x
+    if isinstance(x, np.ndarray) or x.ndim != len(shape):
+        return jnp.broadcast_to(x, shape)
+    return lax.broadcast_in_dim(x, shape, tuple(range(x.ndim)))
+
+
+def _concat(parts):
+    """`jnp.concatenate(parts, axis=0)`, as one lax op for jax arrays of one dtype."""
+    if any(isinstance(p, np.ndarray) or p.dtype != parts[0].dtype for p in parts):
+        return jnp.concatenate(parts, axis=0)
+    return lax.concatenate(parts, 0)
+
+
+def _column(a, start: int, stop: int, axis: int, dtype, ones):
+    """`a[start:stop, axis].astype(dtype).reshape(-1, *ones)` in lax ops (the same program)."""
+    if isinstance(a, np.ndarray):
+        return a[start:stop, axis].astype(dtype).reshape(-1, *ones)
+    column = lax.squeeze(lax.slice(a, (start, axis), (stop, axis + 1)), (1,))
+    return lax.reshape(column.astype(dtype), (stop - start, *ones))
+
+
 def _take(a, runs):
     """Rows of `a` `[n, *S]` by static runs (slices and broadcasts, no gather)."""
     if isinstance(a, int):
@@ -215,10 +287,10 @@ def _take(a, runs):
     parts = []
     for start, count, step in runs:
         if step == 1:
-            parts.append(a[start:start + count])
+            parts.append(_rows(a, start, start + count))
         else:
-            parts.append(jnp.broadcast_to(a[start:start + 1], (count, *a.shape[1:])))
-    return parts[0] if len(parts) == 1 else jnp.concatenate(parts, axis=0)
+            parts.append(_broadcast(_rows(a, start, start + 1), (count, *a.shape[1:])))
+    return parts[0] if len(parts) == 1 else _concat(parts)
 
 
 def _cat(parts, shape, dtype):
@@ -246,8 +318,8 @@ def local_quats(level: _Level, sin, cos, shape, dtype):
         q = [1, 0, 0, 0]
         for slot, axis in enumerate(r.order):
             row = r.row + slot * m
-            e = [cos[row:row + m], 0, 0, 0]
-            e[1 + "XYZ".index(axis)] = sin[row:row + m]
+            e = [_rows(cos, row, row + m), 0, 0, 0]
+            e[1 + "XYZ".index(axis)] = _rows(sin, row, row + m)
             q = qmul(q, e)
         pieces.append((m, q))
         at = r.stop
@@ -266,13 +338,13 @@ def local_translations(level: _Level, pos, bone_offsets, shape, dtype):
         parts = []
         for s in segs:
             if s.row < 0:
-                parts.append(bone_offsets[s.start:s.stop, axis].astype(dtype).reshape(-1, *ones))
+                parts.append(_column(bone_offsets, s.start, s.stop, axis, dtype, ones))
             else:
-                parts.append(pos[s.row:s.row + s.stop - s.start])
+                parts.append(_rows(pos, s.row, s.row + s.stop - s.start))
         if len(parts) == 1:
             out.append(parts[0])
         else:
-            out.append(jnp.concatenate([jnp.broadcast_to(p, (p.shape[0], *shape)) for p in parts], axis=0))
+            out.append(_concat([_broadcast(p, (p.shape[0], *shape)) for p in parts]))
     return out
 
 
@@ -301,9 +373,9 @@ def world(the_plan: Plan, local_q, local_t, *, keep=None):
         else:
             pq = [_take(c, level.parents) for c in prev_q]
             pp = [_take(c, level.parents) for c in prev_p]
-            pq_rot = [c if isinstance(c, int) else c[:level.num_rotated] for c in pq]
+            pq_rot = [c if isinstance(c, int) else _rows(c, 0, level.num_rotated) for c in pq]
             q = qmul(pq_rot, lq) if level.num_rotated else [1, 0, 0, 0]
-            p = [a + b for a, b in zip(pp, qapply(pq, lt))]
+            p = [_add(a, b) for a, b in zip(pp, qapply(pq, lt))]
         if keep is not None:
             q = [c if isinstance(c, int) else keep(c) for c in q]
             p = [keep(c) for c in p]
@@ -328,12 +400,12 @@ def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None):
     """
     shape, dtype = x.shape[1:], x.dtype
     if sincos is None:
-        sincos = sincos_degrees(0.5 * x[:the_plan.num_rot])
+        sincos = sincos_degrees(0.5 * _rows(x, 0, the_plan.num_rot))
     sin, cos = sincos
     if keep is not None:  # one stored block: both come from one range reduction
-        both = keep(jnp.concatenate([sin, cos], axis=0))
-        sin, cos = both[:the_plan.num_rot], both[the_plan.num_rot:]
-    pos = x[the_plan.num_rot:]
+        both = keep(_concat([sin, cos]))
+        sin, cos = _rows(both, 0, the_plan.num_rot), _rows(both, the_plan.num_rot, both.shape[0])
+    pos = _rows(x, the_plan.num_rot, x.shape[0])
     lq = [local_quats(lv, sin, cos, shape, dtype) for lv in the_plan.levels]
     offsets = bone_offsets[np.asarray(the_plan.order)]  # [J, 3] in level order: one gather
     lt, at = [], 0

@@ -24,13 +24,15 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 CLIP = "07_01"
 
 #: Parse a bundled clip and run FK, in a fresh process with the compile cache on; prints the
-#: phases (seconds) as JSON.
+#: phases (seconds) as JSON: JAX's own for the FK call too (`ProgramCount`: trace, lowering,
+#: compile or cache load, of which the cache read).
 FK_SCRIPT = """
 import json, sys, time
 t0 = time.perf_counter()
 import fourierjax as fj
 fj.enable_compile_cache()
 from fourierjax import data
+from fourierjax._programs import ProgramCount
 from fourierjax.io.bvh import read_bvh
 from fourierjax.kinematics import joint_positions
 t1 = time.perf_counter()
@@ -38,10 +40,18 @@ m = read_bvh(data.path(sys.argv[1]))
 t2 = time.perf_counter()
 sk = m.skeleton()
 t3 = time.perf_counter()
-p = joint_positions(sk, m.channels).block_until_ready()
+with ProgramCount() as count:
+    p = joint_positions(sk, m.channels).block_until_ready()
 t4 = time.perf_counter()
-print(json.dumps({"import_s": t1 - t0, "parse_s": t2 - t1, "skeleton_s": t3 - t2, "fk_s": t4 - t3}))
+out = {"import_s": t1 - t0, "parse_s": t2 - t1, "skeleton_s": t3 - t2, "fk_s": t4 - t3}
+out.update({f"fk_{k}_s": v for k, v in count.seconds.items()})
+print(json.dumps(out))
 """
+
+#: `FK_SCRIPT` leaving by `os._exit` (no interpreter finalization): against `FK_SCRIPT`, what
+#: the exit costs (`EXIT_SCRIPT` the same for `import jax.numpy` alone).
+FK_EXIT_SCRIPT = FK_SCRIPT + "import os; sys.stdout.flush(); os._exit(0)\n"
+EXIT_SCRIPT = "import os, jax.numpy; os._exit(0)"
 
 #: The least a process that runs JAX pays: one op on the CPU backend.
 ONE_OP_SCRIPT = "import jax.numpy as jnp; jnp.ones(3).block_until_ready()"
@@ -202,14 +212,21 @@ def run(size: str) -> list[Record]:
         fk_cmd = [py, "-c", FK_SCRIPT, CLIP]
         _wall(fk_cmd, env, tmp)  # fills the cache
         phases = []
-        fk_t, jnp_t, op_t = [], [], []
+        fk_t, jnp_t, op_t, fk_exit_t, jnp_exit_t = [], [], [], [], []
         for _ in range(repeats):
             dt, out = _wall(fk_cmd, env, tmp)
             fk_t.append(dt)
             phases.append(json.loads(out))
             jnp_t.append(_wall([py, "-c", "import jax.numpy"], env, tmp)[0])
             op_t.append(_wall([py, "-c", ONE_OP_SCRIPT], env, tmp)[0])
-        details = {f"median_{k}": round(statistics.median(p[k] for p in phases), 4) for k in phases[0]}
+            fk_exit_t.append(_wall([py, "-c", FK_EXIT_SCRIPT, CLIP], env, tmp)[0])
+            jnp_exit_t.append(_wall([py, "-c", EXIT_SCRIPT], env, tmp)[0])
+        details = {f"median_{k}": round(statistics.median(p.get(k, 0.0) for p in phases), 4)
+                   for k in sorted({k for p in phases for k in p})}
+        # The interpreter's exit (finalizing modules and a few full garbage collections over
+        # every object JAX and fourierjax made): in the script and in the baseline.
+        details["exit_s"] = round(statistics.median(fk_t) - statistics.median(fk_exit_t), 4)
+        details["baseline_exit_s"] = round(statistics.median(jnp_t) - statistics.median(jnp_exit_t), 4)
         # What any process pays once JAX runs one op: the CPU backend's start (the exit's
         # finalization of JAX, 0.25-0.35 s on 2 cores, is in both baselines).
         details["one_jax_op_extra_s"] = round(statistics.median(op_t) - statistics.median(jnp_t), 4)
