@@ -349,3 +349,35 @@ def test_synth_body_map_file(cmu, tmp_path, capsys):
                  "--out", str(tmp_path / "c.bvh")]) == 2
     err = capsys.readouterr().err
     assert "Tail" in err and "Traceback" not in err
+
+
+def test_blender_root_carries_the_travel_in_interpolate_and_transition(tmp_path):
+    """A Blender rig (`Armature -> Root -> mixamorig:Hips`, the travel on `Root`, 6 channels on
+    every joint): `interpolate` and `transition` write the travel on `Root`, on the floor, as
+    `synth` does. They used the map of the model's own cycle, whose trajectory is the hips
+    (a cycle does not show which joint travelled): `Root` stood still 31.9 units (1.8 m) up in
+    the air while the hips walked away."""
+    from fourierjax import body, data
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+    from tests.rigs import blender
+
+    src = tmp_path / "walk.bvh"
+    write_bvh(blender(data.load("02_01")), src)
+    assert main(["fit", str(src), "--harmonics", "3", "--out", f"{tmp_path}/"]) == 0
+    m = str(tmp_path / "walk.npz")
+    assert main(["interpolate", m, m, "--s", "0.5", "--seconds", "2", "--out", f"{tmp_path}/i.bvh"]) == 0
+    assert main(["interpolate", m, m, "--s", "0.5", "--out", f"{tmp_path}/i.npz"]) == 0
+    assert main(["synth", f"{tmp_path}/i.npz", "--seconds", "2", "--out", f"{tmp_path}/si.bvh"]) == 0
+    assert main(["transition", m, m, "--seconds", "2", "--start", "0.5", "--duration", "1",
+                 "--out", f"{tmp_path}/t.bvh"]) == 0
+    bmap = body.infer_body_map(read_bvh(src))
+    assert bmap.name(bmap.trajectory) == "Root"
+    for name in ("i", "si", "t"):
+        P = motion_joint_positions(read_bvh(tmp_path / f"{name}.bvh"))
+        root, hips = P[:, bmap.trajectory], P[:, bmap.pelvis]
+        travel = np.linalg.norm(np.delete(root[-1] - root[0], 1))
+        hips_travel = np.linalg.norm(np.delete(hips[-1] - hips[0], 1))
+        assert hips_travel > 20.0, (name, hips_travel)  # 1.1 m in 2 s
+        assert abs(travel / hips_travel - 1) < 0.05, (name, travel, hips_travel)
+        assert np.abs(root[:, 1]).max() < 1.0, (name, root[:, 1].min(), root[:, 1].max())  # on the floor

@@ -31,6 +31,10 @@ class Gait:
     #: `[2, 2]` (left, right) x (start, end) contact phases of the gait: stored in the model file
     #: (`fourierjax fit`), learned from a fitted BVH's contacts, else None.
     contact_intervals: object | None = None
+    #: The skeleton's `body.BodyMap` from the capture (stored in the model file, or the fit's):
+    #: it knows which joint carried the travel, which a model's own cycle does not show (a
+    #: Blender rig's `Root` under the hips, both with position channels). None when unknown.
+    body_map: object | None = None
 
 
 def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
@@ -81,7 +85,7 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
         provenance = fit.summary()
         provenance.update(source=str(path), rest_frames_dropped=rest)
         gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment,
-                          gait.fit_contact_intervals(fit, motion)))
+                          gait.fit_contact_intervals(fit, motion), fit.body_map))
     return gaits
 
 
@@ -104,7 +108,7 @@ def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
         raise UserError(f"{argument}: {err}{hint}") from None
     return Gait(
         mf.model, mf.template_motion(), mf.frame_time_s, str(path), dict(mf.provenance or {}), mf.alignment or "none",
-        getattr(mf, "contact_intervals", None),
+        getattr(mf, "contact_intervals", None), mf.body_map,
     )
 
 
