@@ -64,11 +64,29 @@ def _read_clip(path: pathlib.Path):
     from fourierjax.io.bvh import read_bvh
 
     motion = read_bvh(path)
+    motion = _y_up(motion, path)
     rest = detect_rest_frames(motion)
     motion = motion[rest:]
     if motion.num_frames < 16:
         raise UserError(f"{path}: only {motion.num_frames} motion frames, too short to fit")
     return motion, rest
+
+
+def _y_up(motion, path):
+    """`motion` turned Y-up when its up axis is another, with the notice `fourierjax fit` gives
+    (a Blender file is Z up); the fit refused it before."""
+    from fourierjax.body import BodyMapError, infer_body_map
+    from fourierjax.io.axes import to_y_up
+
+    try:
+        bm = infer_body_map(motion)
+    except BodyMapError:
+        return motion  # the fit says what is missing
+    if (bm.up_axis, bm.up_sign) == (1, 1):
+        return motion
+    axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
+    print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
+    return to_y_up(motion, axis)
 
 
 def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
@@ -137,6 +155,7 @@ def load_gait_pair(args: argparse.Namespace):
         style.check_compatible(a.model, b.model, names=(f"A ({args.a})", f"B ({args.b})"))
     except ValueError as err:
         raise UserError(f"incompatible models: {err}") from None
+    _check_units(a, b, args)
     if a.alignment != b.alignment:
         # Phases are only comparable when θ = 0 is the same gait event in both models.
         print(
@@ -145,3 +164,19 @@ def load_gait_pair(args: argparse.Namespace):
             file=sys.stderr,
         )
     return a, b
+
+
+def _check_units(a: Gait, b: Gait, args) -> None:
+    """One-line UserError when the two gaits' lengths are in different units: their root
+    channels (velocity, height) would be blended as numbers (a CMU walk and the same rig's run
+    in metres, interpolated at s = 0.5, went 0.37 of the way of the two in CMU units)."""
+    from fourierjax.errors import UserError
+
+    ma, mb = (getattr(g.body_map, "metres_per_unit", None) for g in (a, b))
+    la, lb = (getattr(g.body_map, "leg_length", None) for g in (a, b))
+    # Units are a guess from the body's size: refused only when the legs' lengths in file units
+    # differ too (the same rig in other units), not when one clip's guess flipped.
+    if ma and mb and la and lb and abs(ma / mb - 1) > 1e-3 and max(la / lb, lb / la) > 1.5:
+        units = [f"{g.body_map.units} ({m:g} m per unit)" for g, m in ((a, ma), (b, mb))]
+        raise UserError(f"incompatible models: A ({args.a}) is in {units[0]}, B ({args.b}) in {units[1]}; "
+                        "fit both on clips in the same units")
