@@ -72,6 +72,23 @@ def _read_clip(path: pathlib.Path):
     return motion, rest
 
 
+def check_legs_are_not_arms(bm, path) -> None:
+    """One-line UserError when the legs were found by geometry (the two chains that reach lowest)
+    but the names call those joints arms: a rig without legs (an upper body) was fitted as a walk
+    on its hands, aligned to a "left heel strike", exit 0."""
+    from fourierjax.errors import UserError
+
+    if dict(bm.sources).get("legs") != "geometry":
+        return
+    arms = {j for a in (bm.left_arm, bm.right_arm) if a is not None
+            for j in (a.collar, a.shoulder, a.elbow, a.wrist) if j >= 0}
+    legs = {j for leg in (bm.left, bm.right) for j in (leg.hip, leg.knee, leg.ankle, leg.toe) if j >= 0}
+    if arms & legs:
+        raise UserError(f"{path}: no legs found: the chains that reach lowest are the arms "
+                        f"({bm.left.names[0]}, {bm.right.names[0]}); give a clip with legs, or name "
+                        "them in a body map file (--body-map; `fourierjax info` prints the map)")
+
+
 def _y_up(motion, path):
     """`motion` turned Y-up when its up axis is another, with the notice `fourierjax fit` gives
     (a Blender file is Z up); the fit refused it before."""
@@ -82,6 +99,7 @@ def _y_up(motion, path):
         bm = infer_body_map(motion)
     except BodyMapError:
         return motion  # the fit says what is missing
+    check_legs_are_not_arms(bm, path)
     if (bm.up_axis, bm.up_sign) == (1, 1):
         return motion
     axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]

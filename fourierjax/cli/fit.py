@@ -52,6 +52,7 @@ def _load(path: pathlib.Path, start_frame: int | None, stop_frame: int | None = 
           up: str | None = None, body_map: str | None = None):
     """The motion to fit (Y up), the number of leading file frames dropped, and its body map."""
     from fourierjax.body import infer_body_map
+    from fourierjax.cli._inputs import check_legs_are_not_arms
     from fourierjax.data import detect_rest_frames
     from fourierjax.errors import UserError
     from fourierjax.io.axes import to_y_up
@@ -63,6 +64,7 @@ def _load(path: pathlib.Path, start_frame: int | None, stop_frame: int | None = 
             raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
         motion = motion[:stop_frame]
     bm = infer_body_map(motion, up=up, overrides=body_map)
+    check_legs_are_not_arms(bm, path)
     if (bm.up_axis, bm.up_sign) != (1, 1):
         axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
         print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
