@@ -198,3 +198,16 @@ def test_a_rig_without_legs_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no legs found" in err and "--body-map" in err, err
     assert not (tmp_path / "upper.npz").exists()
+
+
+def test_one_clip_that_cannot_be_fitted_is_one_line(tmp_path, capsys):
+    """A single clip shorter than a gait cycle (0.5 s of 02_01, whose cycle is 1.1 s): one error
+    line and exit 2, as for a clip that cannot be read (it was that line, a "fitted 0 of 1 clips"
+    summary and exit 1)."""
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+
+    write_bvh(data.load("02_01")[:60], tmp_path / "short.bvh")
+    assert main(["fit", str(tmp_path / "short.bvh"), "--out", f"{tmp_path}/"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fourierjax: error: ") and "cycle" in err[0], err
