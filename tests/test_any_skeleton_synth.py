@@ -349,3 +349,93 @@ def test_synth_body_map_file(cmu, tmp_path, capsys):
                  "--out", str(tmp_path / "c.bvh")]) == 2
     err = capsys.readouterr().err
     assert "Tail" in err and "Traceback" not in err
+
+
+def test_blender_root_carries_the_travel_in_interpolate_and_transition(tmp_path):
+    """A Blender rig (`Armature -> Root -> mixamorig:Hips`, the travel on `Root`, 6 channels on
+    every joint): `interpolate` and `transition` write the travel on `Root`, on the floor, as
+    `synth` does. They used the map of the model's own cycle, whose trajectory is the hips
+    (a cycle does not show which joint travelled): `Root` stood still 31.9 units (1.8 m) up in
+    the air while the hips walked away."""
+    from fourierjax import body, data
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+    from tests.rigs import blender
+
+    src = tmp_path / "walk.bvh"
+    write_bvh(blender(data.load("02_01")), src)
+    assert main(["fit", str(src), "--harmonics", "3", "--out", f"{tmp_path}/"]) == 0
+    m = str(tmp_path / "walk.npz")
+    assert main(["interpolate", m, m, "--s", "0.5", "--seconds", "2", "--out", f"{tmp_path}/i.bvh"]) == 0
+    assert main(["interpolate", m, m, "--s", "0.5", "--out", f"{tmp_path}/i.npz"]) == 0
+    assert main(["synth", f"{tmp_path}/i.npz", "--seconds", "2", "--out", f"{tmp_path}/si.bvh"]) == 0
+    assert main(["transition", m, m, "--seconds", "2", "--start", "0.5", "--duration", "1",
+                 "--out", f"{tmp_path}/t.bvh"]) == 0
+    bmap = body.infer_body_map(read_bvh(src))
+    assert bmap.name(bmap.trajectory) == "Root"
+    for name in ("i", "si", "t"):
+        P = motion_joint_positions(read_bvh(tmp_path / f"{name}.bvh"))
+        root, hips = P[:, bmap.trajectory], P[:, bmap.pelvis]
+        travel = np.linalg.norm(np.delete(root[-1] - root[0], 1))
+        hips_travel = np.linalg.norm(np.delete(hips[-1] - hips[0], 1))
+        assert hips_travel > 20.0, (name, hips_travel)  # 1.1 m in 2 s
+        assert abs(travel / hips_travel - 1) < 0.05, (name, travel, hips_travel)
+        assert np.abs(root[:, 1]).max() < 1.0, (name, root[:, 1].min(), root[:, 1].max())  # on the floor
+
+
+
+@pytest.fixture(scope="module")
+def run_rigs(tmp_path_factory):
+    """02_03 written Y up (CMU), Z up (a Blender file) and in metres, fitted in one `fit` call."""
+    from fourierjax import data
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+
+    tmp = tmp_path_factory.mktemp("run_rigs")
+    run = data.load("02_03")
+    for name, motion in (("y", run), ("z", convert(run, "zup")), ("metres", convert(run, "metres"))):
+        write_bvh(motion, tmp / f"{name}.bvh")
+    assert main(["fit", *(str(tmp / f"{n}.bvh") for n in ("y", "z", "metres")), "--harmonics", "3",
+                 "--out", f"{tmp}/"]) == 0
+    return tmp
+
+
+def test_synth_source_skating_of_a_z_up_clip(run_rigs, capsys):
+    """`synth`'s summary measures the source clip's skating as `fit` read it: turned Y-up. Read
+    again as stored (Z up), a horizontal axis was taken for up: 02_03 as a Z-up file gave 10.41
+    units/s against the Y-up file's 7.17."""
+    import re
+
+    from fourierjax.cli import main
+
+    figures = []
+    for name in ("y", "z"):
+        capsys.readouterr()
+        assert main(["synth", str(run_rigs / f"{name}.npz"), "--seconds", "1", "--out", str(run_rigs / "s.bvh")]) == 0
+        figures.append(float(re.search(r"against ([\d.]+) units/s", capsys.readouterr().out).group(1)))
+    assert figures[0] > 1.0 and abs(figures[1] / figures[0] - 1) < 0.01, figures
+
+
+def test_style_commands_take_a_z_up_bvh(run_rigs, capsys):
+    """A Z-up BVH given to `characteristic`, `interpolate` or `transition` is turned Y-up and fitted,
+    as `fit` does; it was refused with a Python hint ("convert it first with
+    fourierjax.io.axes.to_y_up(motion, up)")."""
+    from fourierjax.cli import main
+
+    z = str(run_rigs / "z.bvh")
+    assert main(["characteristic", z, z, "--harmonics", "2", "--out", str(run_rigs / "c.npz")]) == 0
+    assert "turned Y-up" in capsys.readouterr().err
+
+
+def test_style_commands_refuse_models_in_other_units(run_rigs, capsys):
+    """The same run in CMU units and in metres: their root channels would be blended as numbers
+    (a CMU walk with its run in metres, s = 0.5: 0.37 of the CMU pair's advance). One line, exit 2."""
+    from fourierjax.cli import main
+
+    y, m = str(run_rigs / "y.npz"), str(run_rigs / "metres.npz")
+    for cmd in (["interpolate", y, m, "--s", "0.5", "--out", str(run_rigs / "i.npz")],
+                ["characteristic", m, y, "--out", str(run_rigs / "c.npz")]):
+        capsys.readouterr()
+        assert main(cmd) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "units" in err and "m per unit" in err, err

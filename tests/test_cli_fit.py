@@ -178,3 +178,36 @@ def test_winding_joints_get_one_notice_naming_them(capsys):
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "Spine, UpperArm_L, a, b and 1 more" in err[0]
     assert "--representation tangent" in err[0] and err[0].startswith("fourierjax: notice: a.bvh")
+
+
+def test_a_rig_without_legs_is_one_line(tmp_path, capsys):
+    """An upper body (CMU 02_01 without its legs): the geometry takes the hanging arms for legs,
+    which the names call arms. It was fitted as a walk on its hands ("left_heel_strike", exit 0);
+    now one line naming the arms and the body map option, exit 2."""
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+    from tests.rigs import _Rig
+
+    rig = _Rig.of(data.load("02_01")[:120])
+    for side in ("Left", "Right"):
+        for part in ("ToeBase", "Foot", "Leg", "UpLeg"):
+            rig.drop_leaf(f"{side}{part}", end_site=False)
+        rig.drop_leaf(f"{side[0]}HipJoint", end_site=False)
+    write_bvh(rig.motion(), tmp_path / "upper.bvh")
+    assert main(["fit", str(tmp_path / "upper.bvh"), "--out", f"{tmp_path}/"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no legs found" in err and "--body-map" in err, err
+    assert not (tmp_path / "upper.npz").exists()
+
+
+def test_one_clip_that_cannot_be_fitted_is_one_line(tmp_path, capsys):
+    """A single clip shorter than a gait cycle (0.5 s of 02_01, whose cycle is 1.1 s): one error
+    line and exit 2, as for a clip that cannot be read (it was that line, a "fitted 0 of 1 clips"
+    summary and exit 1)."""
+    from fourierjax.cli import main
+    from fourierjax.io.bvh import write_bvh
+
+    write_bvh(data.load("02_01")[:60], tmp_path / "short.bvh")
+    assert main(["fit", str(tmp_path / "short.bvh"), "--out", f"{tmp_path}/"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fourierjax: error: ") and "cycle" in err[0], err

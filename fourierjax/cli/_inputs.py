@@ -31,8 +31,12 @@ class Gait:
     #: `[2, 2]` (left, right) x (start, end) contact phases of the gait: stored in the model file
     #: (`fourierjax fit`), learned from a fitted BVH's contacts, else None.
     contact_intervals: object | None = None
+    #: The skeleton's `body.BodyMap` from the capture (stored in the model file, or the fit's):
+    #: it knows which joint carried the travel, which a model's own cycle does not show (a
+    #: Blender rig's `Root` under the hips, both with position channels). None when unknown.
+    body_map: object | None = None
     #: The source file's up axis ("y", "z", "-z", ...): the model and `template` are Y-up, and
-    #: BVH written from them is turned back to it (`write_output`).
+    #: BVH written from them is turned back to it (`cli._outputs.write_bvh_as_source`).
     up: str = "y"
 
 
@@ -78,6 +82,7 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
             raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
         motion = motion[:stop_frame]
     bm = infer_body_map(motion, up=up, overrides=body_map)
+    check_legs_are_not_arms(bm, path)
     axis = "y"
     if (bm.up_axis, bm.up_sign) != (1, 1):
         axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
@@ -103,6 +108,23 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
     return motion, skip, bm, axis
 
 
+def check_legs_are_not_arms(bm, path) -> None:
+    """One-line UserError when the legs were found by geometry (the two chains that reach lowest)
+    but the names call those joints arms: a rig without legs (an upper body) was fitted as a walk
+    on its hands, aligned to a "left heel strike", exit 0."""
+    from fourierjax.errors import UserError
+
+    if dict(bm.sources).get("legs") != "geometry":
+        return
+    arms = {j for a in (bm.left_arm, bm.right_arm) if a is not None
+            for j in (a.collar, a.shoulder, a.elbow, a.wrist) if j >= 0}
+    legs = {j for leg in (bm.left, bm.right) for j in (leg.hip, leg.knee, leg.ankle, leg.toe) if j >= 0}
+    if arms & legs:
+        raise UserError(f"{path}: no legs found: the chains that reach lowest are the arms "
+                        f"({bm.left.names[0]}, {bm.right.names[0]}); give a clip with legs, or name "
+                        "them in a body map file (--body-map; `fourierjax info` prints the map)")
+
+
 def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
     """Fit BVH clips as `fourierjax fit` does, in one batched call: drop leading rest frames,
     then `fourierjax.motion.fit_motions` (steady straight stretch, fit, phase aligned to the
@@ -118,7 +140,7 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
         provenance = fit.summary()
         provenance.update(source=str(path), rest_frames_dropped=rest, up=up)
         gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment,
-                          gait.fit_contact_intervals(fit, motion), up))
+                          gait.fit_contact_intervals(fit, motion), body_map=fit.body_map, up=up))
     return gaits
 
 
@@ -142,7 +164,7 @@ def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
     provenance = dict(mf.provenance or {})
     return Gait(
         mf.model, mf.template_motion(), mf.frame_time_s, str(path), provenance, mf.alignment or "none",
-        getattr(mf, "contact_intervals", None), source_up(provenance),
+        getattr(mf, "contact_intervals", None), body_map=mf.body_map, up=source_up(provenance),
     )
 
 
@@ -171,6 +193,7 @@ def load_gait_pair(args: argparse.Namespace):
         style.check_compatible(a.model, b.model, names=(f"A ({args.a})", f"B ({args.b})"))
     except ValueError as err:
         raise UserError(f"incompatible models: {err}") from None
+    _check_units(a, b, args)
     if a.alignment != b.alignment:
         # Phases are only comparable when θ = 0 is the same gait event in both models.
         print(
@@ -186,3 +209,19 @@ def source_up(provenance: dict) -> str:
     model file's provenance ("y" for files written before it did, and for Y-up files)."""
     up = str((provenance or {}).get("up", "y")).strip().lower().lstrip("+")
     return up if up in ("x", "y", "z", "-x", "-y", "-z") else "y"
+
+
+def _check_units(a: Gait, b: Gait, args) -> None:
+    """One-line UserError when the two gaits' lengths are in different units: their root
+    channels (velocity, height) would be blended as numbers (a CMU walk and the same rig's run
+    in metres, interpolated at s = 0.5, went 0.37 of the way of the two in CMU units)."""
+    from fourierjax.errors import UserError
+
+    ma, mb = (getattr(g.body_map, "metres_per_unit", None) for g in (a, b))
+    la, lb = (getattr(g.body_map, "leg_length", None) for g in (a, b))
+    # Units are a guess from the body's size: refused only when the legs' lengths in file units
+    # differ too (the same rig in other units), not when one clip's guess flipped.
+    if ma and mb and la and lb and abs(ma / mb - 1) > 1e-3 and max(la / lb, lb / la) > 1.5:
+        units = [f"{g.body_map.units} ({m:g} m per unit)" for g, m in ((a, ma), (b, mb))]
+        raise UserError(f"incompatible models: A ({args.a}) is in {units[0]}, B ({args.b}) in {units[1]}; "
+                        "fit both on clips in the same units")

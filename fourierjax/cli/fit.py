@@ -193,9 +193,13 @@ def _expand_folders(files: list[str]) -> list[str]:
 
 
 def _report_failures(failed: list[str], total: int) -> int:
-    """One stderr line per clip that failed and a summary; the exit status (1 if any failed)."""
+    """One stderr line per clip that failed and a summary; the exit status (1 if any failed).
+    One clip given, one that failed: its line alone and exit 2, as when it cannot be read."""
     if not failed:
         return 0
+    if total == 1:
+        print(f"fourierjax: error: {failed[0]}", file=sys.stderr)
+        return 2
     for line in failed:
         print(f"fourierjax: error: {line}", file=sys.stderr)
     print(f"fourierjax: fitted {total - len(failed)} of {total} clips; {len(failed)} failed",

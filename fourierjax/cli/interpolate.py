@@ -92,17 +92,32 @@ def template_of(a: Gait, b: Gait, command: str):
     )
 
 
+def body_map_of(a: Gait, b: Gait, model, template):
+    """The body map to synthesize on `template` (`template_of`'s): the captured map of the gait
+    whose skeleton it is (stored in its model file, or its fit's), else the map of `model`'s own
+    poses. A model's cycle does not show which joint carried the travel: on a Blender rig
+    (`Root` under the hips, both with position channels) the travel went to the hips and `Root`
+    stood still, up in the air."""
+    from fourierjax import gait
+
+    for g in (a, b):
+        if g.template is template and g.body_map is not None:
+            return g.body_map
+    return gait.model_body_map(model, template.skeleton())
+
+
 def grounded_interpolation(model, template, num_frames: int, frame_time_s: float, *, foot_lock: bool = True,
-                           contact_intervals=None):
+                           contact_intervals=None, body_map=None):
     """An interpolated (or any) model synthesized as `synth` does, as a writeable `Motion`: the
     hip-height rule, root motion from the stance feet and, with `foot_lock`, planted feet
     (`gait.synthesize_gait` on the body map of the model's own poses), in contact over
     `contact_intervals` (`[2, 2]`; the sources' blended, `blended_contact_intervals`), else over
-    intervals estimated from the blend's own cycle."""
+    intervals estimated from the blend's own cycle; on `body_map` (`body_map_of`), else the map
+    of the model's own poses."""
     from fourierjax import gait
     from fourierjax.io.gait_bvh import gait_motion
 
-    bmap = gait.model_body_map(model, template.skeleton())
+    bmap = body_map if body_map is not None else gait.model_body_map(model, template.skeleton())
     r = gait.synthesize_gait(model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
                              foot_lock=foot_lock, contact_intervals=contact_intervals)
     return gait_motion(template, r, model.channel_names, frame_time_s, body_map=bmap)
@@ -198,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
             out,
             model,
             motion=template,
+            body_map=None if template is None else body_map_of(a, b, model, template),
             provenance={"command": "interpolate", "a": a.source, "b": b.source, "s": s, "method": args.method,
                         "up": src.up},
             alignment=a.alignment,
@@ -207,13 +223,15 @@ def run(args: argparse.Namespace) -> int:
         template, frame_time_s = template_of(a, b, "interpolate")
         dt = 1.0 / fps if fps is not None else (frame_time_s or 1 / 120)
         num = frame_count(seconds, dt)
+        bmap = body_map_of(a, b, model, template)
         if getattr(args, "root_motion", True):
             write_bvh_as_source(grounded_interpolation(model, template, num, dt,
                                                        foot_lock=getattr(args, "foot_lock", True),
-                                                       contact_intervals=intervals), out, src.up, args.out_up)
+                                                       contact_intervals=intervals, body_map=bmap),
+                                out, src.up, args.out_up)
         else:
             t = jnp.arange(num) * dt
-            write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model,
+            write_motion(out, fourier.synthesize(model, t), model.channel_names, dt, template, model, bmap,
                          up=src.up, out_up=args.out_up)
     print(f"wrote {out}")
     return 0

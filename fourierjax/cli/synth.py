@@ -144,4 +144,16 @@ def _foot_lock_inputs(mf):
         clip = clip[lo:hi]
     if tuple(clip.topology.names) != tuple(mf.topology.names):
         return intervals, None
+    # `fit` turned a clip that is not Y up Y-up on reading (a Blender file is Z up); measured
+    # as read, the source's skating took a horizontal axis for up (02_03 as Z up: 10.41 units/s
+    # against 7.17).
+    from fourierjax.body import BodyMapError, infer_body_map
+    from fourierjax.io.axes import to_y_up
+
+    try:
+        bm = infer_body_map(clip)
+    except BodyMapError:
+        return intervals, None
+    if (bm.up_axis, bm.up_sign) != (1, 1):
+        clip = to_y_up(clip, ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis])
     return intervals, clip

@@ -56,10 +56,11 @@ def add_grounding_arguments(parser: argparse.ArgumentParser) -> None:
 def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: float, duration: float):
     """The grounded transition as a writeable `Motion` (`style.grounded_transition`)."""
     from fourierjax import gait, style
+    from fourierjax.cli.interpolate import body_map_of
     from fourierjax.io.gait_bvh import grounded_motion
 
     skeleton = template.skeleton()
-    bmap = gait.model_body_map(a.model, skeleton)
+    bmap = body_map_of(a, b, a.model, template)
     foot_lock = getattr(args, "foot_lock", True)
     # The contact phases each model learned from its clip (model file or BVH fit), as `synth`
     # uses them; estimated from the model's own cycle where a source has none.
@@ -78,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fourierjax import style
     from fourierjax.cli._inputs import load_gait_pair
-    from fourierjax.cli.interpolate import check_out, frame_count, parse_number, template_of, write_motion
+    from fourierjax.cli.interpolate import body_map_of, check_out, frame_count, parse_number, template_of, write_motion
     from fourierjax.errors import UserError
 
     seconds = parse_number(args.seconds, "--seconds", positive=True)
@@ -104,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
                             src.up, args.out_up)
     else:
         values = style.transition(a.model, b.model, t, start, duration, ease=args.ease, method=args.method)
-        write_motion(out, values, a.model.channel_names, dt, template, a.model, up=src.up, out_up=args.out_up)
+        write_motion(out, values, a.model.channel_names, dt, template, a.model, body_map_of(a, b, a.model, template),
+                     up=src.up, out_up=args.out_up)
     print(f"wrote {out}: {t.shape[0]} frames at {1 / dt:g} fps, transition {start:g}s to {start + duration:g}s")
     return 0
