@@ -183,7 +183,7 @@ def test_winding_joints_get_one_notice_naming_them(capsys):
 def test_a_rig_without_legs_is_one_line(tmp_path, capsys):
     """An upper body (CMU 02_01 without its legs): the geometry takes the hanging arms for legs,
     which the names call arms. It was fitted as a walk on its hands ("left_heel_strike", exit 0);
-    now one line naming the arms and the body map option, exit 2."""
+    now the body map's one error (naming the arms, then the TOML file to write), exit 2."""
     from fourierjax.cli import main
     from fourierjax.io.bvh import write_bvh
     from tests.rigs import _Rig
@@ -196,7 +196,9 @@ def test_a_rig_without_legs_is_one_line(tmp_path, capsys):
     write_bvh(rig.motion(), tmp_path / "upper.bvh")
     assert main(["fit", str(tmp_path / "upper.bvh"), "--out", f"{tmp_path}/"]) == 2
     err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and "no legs found" in err and "--body-map" in err, err
+    first = err.splitlines()[0]
+    assert first.startswith("fourierjax: error: cannot find the legs") and "arms by name" in first, err
+    assert "--body-map" in err and "[legs.left]" in err, err
     assert not (tmp_path / "upper.npz").exists()
 
 

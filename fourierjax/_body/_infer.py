@@ -93,6 +93,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     if not legs:
         legs = _legs_from_geometry(local, u_local, point_parents, pelvis, J, names)
         sources["legs"] = "geometry"
+        _check_not_arms(legs, names, parents)
     trunk = trunk_pelvis(parents, pelvis, (legs["left"]["hip"], legs["right"]["hip"]))
     if trunk != pelvis:
         pelvis = trunk
@@ -317,6 +318,20 @@ def _legs_from_geometry(local, u, point_parents, pelvis: int, J: int, names) -> 
     facing = _facing_from_points(local, u, [a, b], [leaf for _, _, leaf in lows[:2]])
     left_dir = np.cross(u, facing)
     return {"left": a, "right": b} if lat @ left_dir > 0 else {"left": b, "right": a}
+
+
+def _check_not_arms(legs: dict, names, parents) -> None:
+    """BodyMapError when the chains geometry chose as legs hold joints the names call arms: a
+    rig without legs (an upper body) would otherwise walk on its hands. Names win over reach."""
+    arms = set()
+    for side in ("left", "right"):
+        chain = _match_chain(names, parents, side, "arm")
+        arms |= set(_present(chain)) if chain else set()
+    taken = sorted(arms & {legs[s][k] for s in ("left", "right") for k in ("hip", "knee", "ankle")})
+    if taken:
+        raise BodyMapError(missing_legs_message(
+            "the two chains that reach lowest are the arms by name (" + ", ".join(names[j] for j in taken) + ")",
+            names))
 
 
 def _chain_from_geometry(local, u, point_parents, pelvis, c, leaf, J):

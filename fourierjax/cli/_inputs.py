@@ -82,7 +82,6 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
             raise UserError(f"--stop-frame: {stop_frame} is outside {path} (frames 0..{motion.num_frames - 1})")
         motion = motion[:stop_frame]
     bm = infer_body_map(motion, up=up, overrides=body_map)
-    check_legs_are_not_arms(bm, path)
     axis = "y"
     if (bm.up_axis, bm.up_sign) != (1, 1):
         axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
@@ -106,23 +105,6 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
     if start_frame is not None and start_frame >= (stop_frame or motion.num_frames + skip):
         raise UserError(f"--start-frame {start_frame} is not before --stop-frame {stop_frame}")
     return motion, skip, bm, axis
-
-
-def check_legs_are_not_arms(bm, path) -> None:
-    """One-line UserError when the legs were found by geometry (the two chains that reach lowest)
-    but the names call those joints arms: a rig without legs (an upper body) was fitted as a walk
-    on its hands, aligned to a "left heel strike", exit 0."""
-    from fourierjax.errors import UserError
-
-    if dict(bm.sources).get("legs") != "geometry":
-        return
-    arms = {j for a in (bm.left_arm, bm.right_arm) if a is not None
-            for j in (a.collar, a.shoulder, a.elbow, a.wrist) if j >= 0}
-    legs = {j for leg in (bm.left, bm.right) for j in (leg.hip, leg.knee, leg.ankle, leg.toe) if j >= 0}
-    if arms & legs:
-        raise UserError(f"{path}: no legs found: the chains that reach lowest are the arms "
-                        f"({bm.left.names[0]}, {bm.right.names[0]}); give a clip with legs, or name "
-                        "them in a body map file (--body-map; `fourierjax info` prints the map)")
 
 
 def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
