@@ -73,7 +73,7 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
     from fourierjax.body import infer_body_map
     from fourierjax.data import detect_rest_frames
     from fourierjax.errors import UserError
-    from fourierjax.io.axes import to_y_up
+    from fourierjax.io.axes import to_y_up, up_name
     from fourierjax.io.bvh import read_bvh
 
     motion = read_bvh(path)
@@ -84,7 +84,7 @@ def read_clip(path: pathlib.Path, start_frame: int | None = None, stop_frame: in
     bm = infer_body_map(motion, up=up, overrides=body_map)
     axis = "y"
     if (bm.up_axis, bm.up_sign) != (1, 1):
-        axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
+        axis = up_name(bm.up_axis, bm.up_sign)
         print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
         motion = to_y_up(motion, axis)
         bm = infer_body_map(motion, overrides=body_map)
@@ -189,8 +189,10 @@ def load_gait_pair(args: argparse.Namespace):
 def source_up(provenance: dict) -> str:
     """The up axis of the file a model was fitted from, as `fourierjax fit` records it in the
     model file's provenance ("y" for files written before it did, and for Y-up files)."""
+    from fourierjax.cli._outputs import UP_AXES
+
     up = str((provenance or {}).get("up", "y")).strip().lower().lstrip("+")
-    return up if up in ("x", "y", "z", "-x", "-y", "-z") else "y"
+    return up if up in UP_AXES else "y"
 
 
 def _check_units(a: Gait, b: Gait, args) -> None:

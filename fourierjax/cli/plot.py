@@ -72,14 +72,14 @@ def _load(text: str):
 
     from fourierjax.body import BodyMapError, infer_body_map
     from fourierjax.data import detect_rest_frames
-    from fourierjax.io.axes import to_y_up
+    from fourierjax.io.axes import to_y_up, up_name
 
     try:  # A Z-up file (Blender) is drawn standing, as `fit` reads it (issue 20).
         bm = infer_body_map(motion)
     except BodyMapError:
         bm = None  # no legs to tell up by: drawn as the file has it
     if bm is not None and (bm.up_axis, bm.up_sign) != (1, 1):
-        axis = ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis]
+        axis = up_name(bm.up_axis, bm.up_sign)
         print(f"fourierjax: notice: {path}: {axis} is up; turned Y-up on reading", file=sys.stderr)
         motion = to_y_up(motion, axis)
     return "bvh", motion, detect_rest_frames(motion)

@@ -148,12 +148,12 @@ def _foot_lock_inputs(mf):
     # as read, the source's skating took a horizontal axis for up (02_03 as Z up: 10.41 units/s
     # against 7.17).
     from fourierjax.body import BodyMapError, infer_body_map
-    from fourierjax.io.axes import to_y_up
+    from fourierjax.io.axes import to_y_up, up_name
 
     try:
         bm = infer_body_map(clip)
     except BodyMapError:
         return intervals, None
     if (bm.up_axis, bm.up_sign) != (1, 1):
-        clip = to_y_up(clip, ("-" if bm.up_sign < 0 else "") + "xyz"[bm.up_axis])
+        clip = to_y_up(clip, up_name(bm.up_axis, bm.up_sign))
     return intervals, clip

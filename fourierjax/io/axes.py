@@ -10,7 +10,7 @@ from jaxtyping import Float
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import Motion
 
-__all__ = ["from_y_up", "rotate_root", "to_y_up", "up_rotation"]
+__all__ = ["from_y_up", "rotate_root", "to_y_up", "up_name", "up_rotation"]
 
 _AXES = "XYZ"
 
@@ -36,6 +36,12 @@ def up_rotation(up: str) -> Float[np.ndarray, "3 3"]:
     if key not in table:
         raise UserError(f"up_rotation: `up` must be one of x, y, z, -x, -y, -z; got {up!r}")
     return table[key]
+
+
+def up_name(axis: int, sign: int) -> str:
+    """The signed axis name `up_rotation` takes ("z", "-z", ...) of an up axis index and sign
+    (`BodyMap.up_axis`, `BodyMap.up_sign`)."""
+    return ("-" if sign < 0 else "") + "xyz"[axis]
 
 
 def to_y_up(motion: Motion, up: str = "z") -> Motion:
