@@ -239,6 +239,27 @@ def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
 # wall clock measures the other processes.
 _FK_CHUNK = 2048
 
+#: Joint-frames per chunk on an accelerator. A chunk's temporaries are about 13 values per joint
+#: and frame (`fk_frames` on CPU, `Compiled.memory_analysis`: 12.6, and 7.9 for
+#: `joint_positions`), so 2^25 joint-frames hold under 2 GB in float32; a GPU kernel over a chunk
+#: that size is far past its launch overhead. With the CPU's 2048-frame chunks an H200 was
+#: launch-bound: 24 kernels per chunk at about 7 us each, 0.73 G joint transforms/s at every
+#: batch size from 1024 x 240 to 65536 x 240 frames (`experiments.benchmarks.gpu`).
+_ACCELERATOR_JOINT_FRAMES = 1 << 25
+
+
+def _chunk_frames(num_joints: int, backend: str | None = None) -> int:
+    """Frames per chunk of a large FK batch on `backend` (default: JAX's default backend).
+
+    The CPU keeps a chunk's working set in cache (`_FK_CHUNK`); an accelerator takes chunks as
+    large as `_ACCELERATOR_JOINT_FRAMES` allows for this many joints (at least `_FK_CHUNK`), so
+    that its kernels are not launch-bound.
+    """
+    backend = jax.default_backend() if backend is None else backend
+    if backend == "cpu":
+        return _FK_CHUNK
+    return max(_FK_CHUNK, _ACCELERATOR_JOINT_FRAMES // max(1, num_joints))
+
 
 def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
     """`_fk_chunk` of `[..., C]` channels, in chunks of frames when there are many."""
@@ -246,19 +267,20 @@ def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
     batch = channels.shape[:-1]
     m = int(np.prod(batch))
     flat = channels.reshape(m, topology.num_channels)  # not -1: a skeleton may have no channels
-    if m <= 2 * _FK_CHUNK:
+    size = _chunk_frames(topology.num_joints)
+    if m <= 2 * size:
         out = _fk_chunk(skeleton, flat, all_rotations)
     else:
         # Chunks of frames keep the working set in cache (one pass over [J, 7, M] per level is
         # memory-bound once M is large). The last chunk is clamped to end at M (it recomputes
         # a few frames), so nothing is padded and nothing is copied afterwards.
-        n = -(-m // _FK_CHUNK)
-        shapes = jax.eval_shape(lambda f: _fk_chunk(skeleton, f, all_rotations), flat[:_FK_CHUNK])
+        n = -(-m // size)
+        shapes = jax.eval_shape(lambda f: _fk_chunk(skeleton, f, all_rotations), flat[:size])
         init = jax.tree.map(lambda s: jnp.zeros((m, *s.shape[1:]), s.dtype), shapes)
 
         def body(i, acc):
-            start = jnp.minimum(i * _FK_CHUNK, m - _FK_CHUNK)
-            chunk = jax.lax.dynamic_slice_in_dim(flat, start, _FK_CHUNK)
+            start = jnp.minimum(i * size, m - size)
+            chunk = jax.lax.dynamic_slice_in_dim(flat, start, size)
             res = _fk_chunk(skeleton, chunk, all_rotations)
             return jax.tree.map(lambda a, r: jax.lax.dynamic_update_slice_in_dim(a, r, start, 0), acc, res)
 
