@@ -95,3 +95,47 @@ def test_a_run_stopped_part_way_keeps_the_records_it_made(tmp_path, monkeypatch)
     assert not (tmp_path / "results.json").exists()
     assert suite.main(["--out", str(tmp_path), "--small", "--only", "fk"]) == 0
     assert (tmp_path / "results.json").exists() and not (tmp_path / "results.partial.json").exists()
+
+
+@pytest.mark.timeout(300)
+def test_gpu_script_runs_small_on_cpu_and_checks_positions(tmp_path):
+    # `experiments.benchmarks.gpu` is what a lent GPU runs (issue 26); its tiny form runs here on
+    # the CPU, so it cannot rot between lends. No timings asserted: the positions must equal the
+    # NumPy reference and every stage must be measured.
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    proc = subprocess.run(
+        [sys.executable, "-m", "experiments.benchmarks.gpu", "--out", str(tmp_path), "--small",
+         "--only", "fk,fkparts,crowd"],
+        cwd=root, env=env, capture_output=True, text=True, timeout=290,
+    )
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    out = json.loads((tmp_path / "gpu.json").read_text())
+    assert out["meta"]["ceilings"]["copy_bytes_per_s"] > 0
+    names = [r["name"] for r in out["records"]]
+    assert any(n.startswith("gpu_fk_parts_") for n in names), names
+    for r in out["records"]:
+        assert r["ours"] is not None and r["ours"] > 0, r
+        if "max_abs_position_diff_vs_numpy" in r["details"]:
+            assert r["details"]["max_abs_position_diff_vs_numpy"] < 1e-3, r
+        kernels = r["details"].get("joint_positions_kernels") or r["details"].get("kernels")
+        if kernels is not None:
+            assert "error" not in kernels and kernels["entry_kernels"] >= 1, kernels
+
+
+def test_kernel_count_reads_loops_and_their_bodies():
+    from experiments.benchmarks.gpu import kernel_count
+
+    hlo = """HloModule m
+
+%body.1 (p: (s32[], f32[8])) -> (s32[], f32[8]) {
+  %a = f32[8] fusion(%x), kind=kLoop, calls=%f1
+  %b = f32[8] custom-call(%a), custom_call_target="x"
+}
+
+ENTRY %main (x: f32[8]) -> f32[8] {
+  %c = f32[8] fusion(%x), kind=kLoop, calls=%f2
+  %w = (s32[], f32[8]) while(%t), condition=%cond.1, body=%body.1
+}
+"""
+    assert kernel_count(hlo) == {"entry_kernels": 1, "loops": 1, "loop_body_kernels": 2}
