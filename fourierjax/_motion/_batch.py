@@ -122,10 +122,19 @@ def _batchable(clip, bm, representation, passes, segment) -> bool:
     return bm.trajectory == bm.pelvis or bm.trajectory in ancestors(clip.topology, bm.pelvis)
 
 
+def _with_channels(motion, channels: np.ndarray):
+    """``motion.with_channels(channels)`` for a float64 array made here and held nowhere else:
+    frozen in place, not copied (a chunk's frames are copied once, not once per Motion)."""
+    from fourierjax.io._bvh_motion import _owned_arrays
+
+    with _owned_arrays():
+        return motion.with_channels(channels)
+
+
 def _concat(motions):
     """One Motion of all the frames of ``motions`` (one skeleton) and each one's first frame."""
     starts = np.cumsum([0] + [m.num_frames for m in motions])
-    cat = dataclasses.replace(motions[0], channels=np.concatenate([m.channels for m in motions]))
+    cat = _with_channels(motions[0], np.concatenate([m.channels for m in motions]))
     return cat, starts
 
 
@@ -148,7 +157,7 @@ def _rot(name: str, *arrays, **static) -> np.ndarray:
 def _blocked_motion(cat):
     """``cat`` with its frames padded like `_blocked` (pose functions of it: cut to
     ``cat.num_frames``)."""
-    return dataclasses.replace(cat, channels=_blocked(cat.channels))
+    return _with_channels(cat, _blocked(cat.channels))
 
 
 def _world_pose(cat, joint):
