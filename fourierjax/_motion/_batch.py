@@ -343,7 +343,7 @@ def _euler_continuous(e, order, ok_all, layouts) -> np.ndarray:
 
 #: Columns per call of the expmap continuity (`_expmap_continuous`): a fixed width, so that its
 #: scan compiles once per length bucket, whatever the number of clips and joints.
-EXPMAP_COLUMNS = 1024
+EXPMAP_COLUMNS = 256
 
 
 def _expmap_continuous(v, layouts) -> np.ndarray:
