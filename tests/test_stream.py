@@ -155,13 +155,23 @@ def chunk():
     return ms + [read_bvh(p)[:250] for p in files]
 
 
-def test_prepare_chunk_equals_the_per_clip_path(chunk):
+@pytest.mark.parametrize("representation", ["euler", "tangent", "expmap"])
+def test_prepare_chunk_equals_the_per_clip_path(chunk, representation, monkeypatch):
     from fourierjax._motion import _batch
 
-    opts = dict(representation="euler", segment=True, use_contacts=True, start_frame=None,
+    opts = dict(representation=representation, segment=True, use_contacts=True, start_frame=None,
                 stop_frame=None, timings=None)
     ref = [_pipeline._prepare(k, m, None, **opts) for k, m in enumerate(chunk)]
+    batched = []
+    prepare_group = _batch._prepare_group
+
+    def spy(items, **kw):
+        batched.extend(it.index for it in items)
+        return prepare_group(items, **kw)
+
+    monkeypatch.setattr(_batch, "_prepare_group", spy)
     got = _batch.prepare_chunk([(k, m, None) for k, m in enumerate(chunk)], **opts)
+    assert sorted(batched) == list(range(len(chunk)))  # every clip on the batched path
     assert [g.index for g in got] == list(range(len(chunk)))
     for r, g in zip(ref, got, strict=True):
         assert (g.start, g.stop, g.names) == (r.start, r.stop, r.names)
@@ -212,3 +222,26 @@ def test_a_clips_fit_does_not_depend_on_the_clips_fitted_with_it(monkeypatch):
     np.testing.assert_allclose(paired[0].omega_spectral, alone.omega_spectral, rtol=1e-7)
     np.testing.assert_allclose(paired[0].omega_fit, alone.omega_fit, rtol=1e-7)
     np.testing.assert_allclose(b.amplitude, a.amplitude, rtol=1e-6, atol=1e-6)
+
+
+@pytest.mark.parametrize("representation", ["euler", "tangent"])
+def test_fit_motions_equals_the_per_clip_path(chunk, representation, monkeypatch):
+    # The fitted models of the batched preparation (`_batch.prepare_chunk`) and of each clip
+    # prepared alone (`_pipeline._prepare`) are the same, on bundled and Bandai clips.
+    got = M.fit_motions(chunk, 3, representation)
+
+    def per_clip(entries, **opts):
+        return [_pipeline._prepare(i, m, bm, **opts) for i, m, bm in entries]
+
+    monkeypatch.setattr(_pipeline, "prepare_chunk", per_clip)
+    ref = M.fit_motions(chunk, 3, representation)
+    for g, r in zip(got, ref, strict=True):
+        assert g.successful and r.successful
+        assert (g.frame_start, g.frame_stop, g.alignment) == (r.frame_start, r.frame_stop, r.alignment)
+        np.testing.assert_allclose(g.omega_fit, r.omega_fit, rtol=1e-5)
+        a, b = g.model, r.model
+        np.testing.assert_allclose(a.offset, b.offset, atol=1e-4)
+        np.testing.assert_allclose(a.amplitude * np.cos(a.phase), b.amplitude * np.cos(b.phase),
+                                   atol=1e-4)
+        np.testing.assert_allclose(a.amplitude * np.sin(a.phase), b.amplitude * np.sin(b.phase),
+                                   atol=1e-4)

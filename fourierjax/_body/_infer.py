@@ -282,8 +282,10 @@ def _mean_local(points, rotations, pelvis: int, u: np.ndarray):
     if rotations is None:
         return rel.mean(axis=0), u
     R = _matrices(rotations[:, pelvis])  # [F, 3, 3] world from pelvis
-    local = np.einsum("fji,fpj->fpi", R, rel).mean(axis=0)
-    return local, _unit(np.einsum("fji,j->fi", R, u).mean(axis=0))
+    # R^T rel and R^T u of every frame as row vectors times R (a matmul: einsum's generic loop
+    # cost a clip 0.5 ms, a third of its map)
+    local = np.matmul(rel, R).mean(axis=0)
+    return local, _unit((u @ R).mean(axis=0))
 
 
 def _matrices(q: np.ndarray) -> np.ndarray:
@@ -399,7 +401,7 @@ def _world_facing(rotations, pelvis: int, facing_local, u) -> np.ndarray:
     if rotations is None:
         f = facing_local
     else:
-        per_frame = np.einsum("fij,j->fi", _matrices(rotations[:, pelvis]), facing_local)
+        per_frame = _matrices(rotations[:, pelvis]) @ facing_local
         per_frame = per_frame - np.outer(per_frame @ u, u)
         f = per_frame.mean(axis=0)
         if np.linalg.norm(f) < 0.25 * np.linalg.norm(per_frame, axis=-1).mean():

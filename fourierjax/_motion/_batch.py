@@ -41,8 +41,7 @@ def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame
     through the steady segment, glitch masks, features and contacts together, as array ops
     over their concatenated frames (one call per rotation function and one FK per chunk, not
     per clip). Clips the batched path does not cover (no body map, not Y up, a trajectory joint
-    off the pelvis's chain, expmap features, ``passes="auto"``, under 3 frames) take the
-    per-clip path."""
+    off the pelvis's chain, ``passes="auto"``, under 3 frames) take the per-clip path."""
     from fourierjax._motion._clip import _frame_range
     from fourierjax._motion._pipeline import _Clock, _prepare
     from fourierjax.io.bvh import read_bvh
@@ -72,8 +71,8 @@ def prepare_chunk(entries, *, representation, segment, use_contacts, start_frame
         key = (clip.topology, clip.offsets.tobytes(), clip.end_site_offsets.tobytes(), bm.pelvis)
         groups.setdefault(key, []).append(_Item(index, m, lo, clip, bm))
     for items in groups.values():
-        for c in _prepare_group(items, segment=segment, use_contacts=use_contacts,
-                                timings=timings):
+        for c in _prepare_group(items, representation=representation, segment=segment,
+                                use_contacts=use_contacts, timings=timings):
             done[c.index] = c
     return [done[index] for index, _, _ in entries]
 
@@ -116,17 +115,26 @@ def infer_body_maps(clips) -> list:
 
 
 def _batchable(clip, bm, representation, passes, segment) -> bool:
-    if bm is None or representation != "euler" or (segment and passes == "auto"):
+    if bm is None or (segment and passes == "auto"):
         return False
     if (bm.up_axis, bm.up_sign) != (1, 1) or clip.num_frames < 3:
         return False
     return bm.trajectory == bm.pelvis or bm.trajectory in ancestors(clip.topology, bm.pelvis)
 
 
+def _with_channels(motion, channels: np.ndarray):
+    """``motion.with_channels(channels)`` for a float64 array made here and held nowhere else:
+    frozen in place, not copied (a chunk's frames are copied once, not once per Motion)."""
+    from fourierjax.io._bvh_motion import _owned_arrays
+
+    with _owned_arrays():
+        return motion.with_channels(channels)
+
+
 def _concat(motions):
     """One Motion of all the frames of ``motions`` (one skeleton) and each one's first frame."""
     starts = np.cumsum([0] + [m.num_frames for m in motions])
-    cat = dataclasses.replace(motions[0], channels=np.concatenate([m.channels for m in motions]))
+    cat = _with_channels(motions[0], np.concatenate([m.channels for m in motions]))
     return cat, starts
 
 
@@ -145,10 +153,11 @@ def _rot(name: str, *arrays, **static) -> np.ndarray:
     return rot(name, *map(_blocked, arrays), **static)[:len(arrays[0])]
 
 
+
 def _blocked_motion(cat):
     """``cat`` with its frames padded like `_blocked` (pose functions of it: cut to
     ``cat.num_frames``)."""
-    return dataclasses.replace(cat, channels=_blocked(cat.channels))
+    return _with_channels(cat, _blocked(cat.channels))
 
 
 def _world_pose(cat, joint):
@@ -156,7 +165,7 @@ def _world_pose(cat, joint):
     return pos[:cat.num_frames], q[:cat.num_frames]
 
 
-def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> list:
+def _prepare_group(items: list[_Item], *, representation, segment, use_contacts, timings) -> list:
     from fourierjax._motion._clip import _steps, closed_loop
     from fourierjax._motion._pipeline import _Clip, _Clock
 
@@ -180,9 +189,9 @@ def _prepare_group(items: list[_Item], *, segment, use_contacts, timings) -> lis
     dt_f = np.repeat(dts, n)  # per frame
     glitch = _glitch_joints(cat, starts, dt_f, dts)
     clock("glitch")
-    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis)
+    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation)
     mask = feature_mask(glitch, topo, pelvis)
-    names = channel_names_for(topo, "euler")
+    names = channel_names_for(topo, representation)
     clock("features")
     contacts = _contacts(cat, starts, dts, items) if use_contacts else [None] * len(items)
     out = []
@@ -265,12 +274,9 @@ def _gradient(v, starts, dt_f):
     return g
 
 
-def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
-    """`features_from_motion(sub, "euler", valid=~glitch, body_map=bm)` of every clip, rows
-    concatenated ``[N, C]``."""
-    from fourierjax import rotations
-    from fourierjax._eulerscan import continuous
-
+def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation) -> np.ndarray:
+    """`features_from_motion(sub, representation, valid=~glitch, body_map=bm)` of every clip,
+    rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does)."""
     topo = cat.topology
     B = len(items)
     pos, q_root = _world_pose(cat, pelvis)
@@ -300,24 +306,63 @@ def _features(cat, starts, dt_f, items, subs, glitch, pelvis) -> np.ndarray:
         group = [(j, idx) for j, o, idx in joints if o == order]
         members = [j for j, _ in group]
         e = np.radians(cat.channels[:, np.array([idx for _, idx in group])])
-        if pelvis in members:
-            e[:, members.index(pelvis)] = _rot("euler_from_quat", q_rel, order=order)
-        ok_all = ~glitch[:, members]
-        flat = np.empty_like(e)
-        for index, valid in layouts:
-            # [T, G * J_g, 3]: the group's clips' frames side by side; frames after a clip's end
-            # repeat its last and come after it, so they never serve as a reference.
-            T = len(index)
-            padded = e[index].reshape(T, -1, 3)
-            ok = ok_all[index].reshape(T, -1)
-            ang = continuous(padded, rotations.euler_twin(padded.copy(), order), ok)
-            flat[index[valid]] = ang.reshape(T, index.shape[1], len(members), 3)[valid]
+        if representation == "euler":
+            if pelvis in members:
+                e[:, members.index(pelvis)] = _rot("euler_from_quat", q_rel, order=order)
+            flat = _euler_continuous(e, order, ~glitch[:, members], layouts)
+        else:
+            q = _rot("quat_from_euler", e, order=order)
+            if pelvis in members:
+                q[:, members.index(pelvis)] = q_rel
+            flat = _expmap_continuous(_rot("expmap_from_quat", q), layouts)
         for k, (j, _) in enumerate(group):
             blocks[j] = flat[:, k]
     for j, _, _ in joints:
         cols += [blocks[j][:, 0], blocks[j][:, 1], blocks[j][:, 2]]
     assert len(cols) == len(ROOT_CHANNELS) + 3 * len(joints)
     return np.stack(cols, axis=1)
+
+
+def _euler_continuous(e, order, ok_all, layouts) -> np.ndarray:
+    """`features.make_euler_continuous` of each clip's rows of ``e [N, J_g, 3]`` (``ok_all [N,
+    J_g]``: valid), the clips of each layout side by side."""
+    from fourierjax import rotations
+    from fourierjax._eulerscan import continuous
+
+    flat = np.empty_like(e)
+    for index, valid in layouts:
+        # [T, G * J_g, 3]: the group's clips' frames side by side; frames after a clip's end
+        # repeat its last and come after it, so they never serve as a reference.
+        T = len(index)
+        padded = e[index].reshape(T, -1, 3)
+        ok = ok_all[index].reshape(T, -1)
+        ang = continuous(padded, rotations.euler_twin(padded.copy(), order), ok)
+        flat[index[valid]] = ang.reshape(T, index.shape[1], e.shape[1], 3)[valid]
+    return flat
+
+
+#: Columns per call of the expmap continuity (`_expmap_continuous`): a fixed width, so that its
+#: scan compiles once per length bucket, whatever the number of clips and joints.
+EXPMAP_COLUMNS = 256
+
+
+def _expmap_continuous(v, layouts) -> np.ndarray:
+    """`rotations.make_expmap_continuous` of each clip's rows of ``v [N, J_g, 3]`` (as
+    `features._joint_rotations` runs it, through `rot`), the clips of each layout side by side
+    in blocks of `EXPMAP_COLUMNS` columns (each column's scan is its own: the blocks change no
+    value)."""
+    flat = np.empty_like(v)
+    W = EXPMAP_COLUMNS
+    for index, valid in layouts:
+        T = len(index)
+        padded = v[index].reshape(T, -1, 3)
+        K = padded.shape[1]
+        cols = np.minimum(np.arange(-(-K // W) * W), K - 1)  # padded with the last column
+        # Not `_rot`: the scan runs over time, padded only to the group's length bucket.
+        ang = np.concatenate([rot("make_expmap_continuous", padded[:, cols[s:s + W]])
+                              for s in range(0, len(cols), W)], axis=1)[:, :K]
+        flat[index[valid]] = ang.reshape(T, index.shape[1], v.shape[1], 3)[valid]
+    return flat
 
 
 def _length_groups(n, *, slack=1.25, pad=16) -> list[np.ndarray]:
