@@ -27,6 +27,7 @@ from experiments._style_transfer import (
     METHODS,
     amplitude_ratio,
     branch_vectors,
+    fit_recognition_weight,
     max_jump,
     max_phase_jump,
     vector_layout,
@@ -258,7 +259,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         first_take.setdefault((c, s), i)
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
-    trows, flips, wrows, gain_omega, ftrows = [], [], [], [], []
+    trows, flips, wrows, gain_omega, ftrows, rec_weights = [], [], [], [], [], []
     fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
     # per-channel gains are refused on tangent models (`style.fit_transfer_gains`): a gain per
     # tangent channel does not commute with a change of joint frames; those methods get a row
@@ -336,6 +337,16 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             gain_omega.append(float(cadence[-1]))
             cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                              gains=cadence, weight=w_cv)
+            # the weight the scorer recognises best on the other styles (their real target clips
+            # only, s left out of the scorer too), with the cadence gain; grid: the sweep's weights
+            keep = [k for k, x in enumerate(sty) if x != s]
+            w_rec = fit_recognition_weight(
+                {x: models[g[(src, x)]] for x in rest}, {x: models[g[(dst, x)]] for x in rest}, x_real[keep],
+                lambda m: feature_matrix([features(m, skel, bm)], FEATURE_SETS[MAIN_FEATURES])[0][0],
+                sweep_weights(cfg), column_weights=cw)[0]
+            rec_weights.append(w_rec)
+            cand["content_mean_rec_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                         gains=cadence, weight=w_rec)
             # the weight sweep: recognition rises with w, the distance is best near 0.5
             sweep = {}
             for w in sweep_weights(cfg):
@@ -394,7 +405,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
-                              "weight": w_cv if mth.endswith("_cv") else None,
+                              "weight": {"content_mean_rec_cv": w_rec}.get(mth, w_cv if mth.endswith("_cv") else None),
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
                               "recognised_previous_ncm": bool(rec_prev[k] == s),
                               **{f"recognised_oc_{c}": bool(rec_oc[c][k] == s) for c in CLASSIFIERS}})
@@ -474,6 +485,9 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 {"representation": representation, "transfer": tname, "map": mth,
                  **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs])) for c in CLASSIFIERS},
                  "n": len(rs)})
+    if rec_weights:
+        summary.setdefault("recognition_weight", {})[representation] = {
+            "median": float(np.median(rec_weights)), "values": [float(w) for w in rec_weights]}
     if gain_omega:
         summary.setdefault("gain_log_omega", {})[representation] = {
             "median": float(np.median(gain_omega)), "min": float(np.min(gain_omega)),
