@@ -315,3 +315,23 @@ def test_fit_transfer_weight_picks_the_weight_that_carries_the_style(cmu):
         style.transfer(styled, src[0], dst[0], weight="cv", skeleton=skel)
     with pytest.raises(UserError, match="held_out"):
         style.fit_transfer_weight(src, dst, skel, held_out=[7])
+
+
+def test_recognition_weight_recovers_the_clips_when_the_contents_are_one(cmu):
+    """`fit_recognition_weight` (the experiment's `content_mean_rec_cv`): with the target content
+    equal to the source content, the transfer at w = 1 of each left-out style is its own clip, so
+    the scorer of the target clips recognises every one at w = 1, and the chosen weight scores
+    the best of the grid."""
+    from experiments._style_classify import classify
+    from experiments._style_transfer import fit_recognition_weight
+
+    _, names = cmu
+    clips = {f"s{k}": model(names, 10 + k, scale=0.2) for k in range(5)}
+    def featurise(m):
+        return np.asarray(style.style_vector(m), float)
+
+    x = np.stack([featurise(m) for m in clips.values()])
+    assert (classify("ncm", x, np.array(list(clips), object), x) == np.array(list(clips))).all()
+    w, scores = fit_recognition_weight(clips, clips, x, featurise, (0.5, 1.0, 2.0))
+    assert scores[1.0] == 1.0
+    assert scores[w] == max(scores.values()) and set(scores) == {0.5, 1.0, 2.0}
