@@ -19,7 +19,7 @@ import pathlib
 
 import numpy as np
 
-from experiments._style_ceiling import feature_targets, one_per_style
+from experiments._style_ceiling import feature_targets, one_per_style, scorer_distances, span_bound
 from experiments._style_classify import CLASSIFIERS, classify, pca_fit
 from experiments._style_data import find_clips, fit_clips
 from experiments._style_features import feature_matrix, features
@@ -284,6 +284,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         xp_real, cwp = feature_matrix(fx_real, FEATURE_SETS[PREVIOUS_FEATURES])
         x_src, _ = feature_matrix([features(models[g[(src, x)]], skels[g[(src, x)]], maps[g[(src, x)]])
                                    for x in sty], FEATURE_SETS[MAIN_FEATURES])
+        # where a style's identity lives in the scorer's space and how much of it the source carries
+        summary.setdefault("span_bound", []).append(
+            {"representation": representation, "transfer": f"{src}->{dst}",
+             **span_bound(x_src, x_real, cw, np.array(sty, object), normal)})
         # a second scorer that reads neither content: every real clip of the OTHER contents (all
         # takes, uncentred, as in the across-contents table), several per style
         oc = [i for i, c in enumerate(clips) if c["content"] not in (src, dst) and c["style"] in sty]
@@ -376,6 +380,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             # ideal points of transfers made in the scorer's own (z-scored) feature space, maps fitted
             # on the other styles: the recognition any inversion of them back to a model could reach
             k_s = sty.index(s)
+            d_tgt, d_oth = scorer_distances(x_real, cw, k_s, x_c)
             rest_k = [k for k in range(len(sty)) if k != k_s]
             pts = feature_targets(x_src[rest_k], x_real[rest_k], x_src[k_s] - x_src[rest_k].mean(0),
                                   sd=x_real[rest_k].std(0) + 1e-12, column_weights=cw)
@@ -408,6 +413,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                               "weight": {"content_mean_rec_cv": w_rec}.get(mth, w_cv if mth.endswith("_cv") else None),
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
                               "recognised_previous_ncm": bool(rec_prev[k] == s),
+                              "scorer_to_target": float(d_tgt[k]), "scorer_to_other": float(d_oth[k]),
                               **{f"recognised_oc_{c}": bool(rec_oc[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
             # Reference: the largest jump of the clips a method reads, through the same fit ->
@@ -454,6 +460,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
                           "recognised_previous_ncm": float(np.mean([r["recognised_previous_ncm"] for r in rs])),
+                          "scorer_to_target": float(np.median([r["scorer_to_target"] for r in rs])),
+                          "scorer_to_other": float(np.median([r["scorer_to_other"] for r in rs])),
                           **{f"recognised_oc_{c}": float(np.mean([r[f"recognised_oc_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
                           "flip_free": all(f["ok"] for f in fl) if fl else None,
@@ -541,6 +549,9 @@ def body(argv=None) -> None:
     summary["transfer_weights"] = all_w
     write_table(summary.get("other_contents_scorer", []), out, "other_contents_scorer",
                 "The other-contents scorer on the real target clips (nearest mean)")
+    write_table(summary.get("span_bound", []), out, "transfer_span_bound",
+                "A style's deviation from the other styles' mean in the scorer's space: recognition of its part "
+                "in the other styles' span and outside it; cosines between source and target deviations")
     write_table(summary.get("feature_targets", []), out, "transfer_feature_targets",
                 "Ideal points of transfers in the scorer's feature space: share recognised as the intended style")
     write_table(rep_rows, out, "recognition_representations",
