@@ -5,8 +5,10 @@ Every locomotion clip whose file name matches the config's pattern (named groups
 cached on disk). Recognition: nearest class mean, shrinkage LDA, logistic regression and k-NN
 on feature sets (style vectors, joint-angle and body-space harmonics), leaving one take out,
 in PCA spaces, and across contents. Transfer from one content to another (walk -> run ...):
-eq. 8 and the method-search variants against the baseline, scored by ``style.cycle_distance``
-to the real target and by classifiers trained on real target-content clips only, once per
+eq. 8 and the method-search variants against the baseline and the oracle rows (`ORACLES`: the
+real target scored by the same path), scored by ``style.cycle_distance`` to the real target and
+by classifiers trained on real target-content clips only; limb flips as the largest joint jump
+per radian of phase (`max_phase_jump`) along the weights, against the clips read; once per
 channel representation of the config (Euler, expmap, tangent; on tangent models the per-channel
 gain methods get a "skipped" row, `fit_transfer_gains` refusing them; the cadence gain runs). Writes CSV,
 Markdown and JSON tables, ``summary.json`` and PNG figures under ``<out>/style_space``.
