@@ -90,3 +90,66 @@ def feature_targets(xs, xt, u, *, sd, column_weights, ridge=(1.0, 10.0)) -> dict
         out[f"ridge{lam:g}"] = mt + p
         out[f"ridge{lam:g}_norm"] = mt + p * norm / max(float(np.linalg.norm(p / sd * column_weights)), 1e-12)
     return out
+
+
+def _scorer_space(x, cw):
+    """Rows of ``x`` in the scorer's metric space (z-scored on ``x``, group-weighted) and the map of new rows."""
+    mu, sd = x.mean(0), x.std(0)
+    sd = np.where(sd > 1e-9 * max(sd.max(), 1e-300), sd, 1.0)
+    return (x - mu) / sd * cw, lambda r: (np.asarray(r, float) - mu) / sd * cw
+
+
+def _deviations(z, k):
+    """Row ``k``'s deviation from the mean of the other rows and its part in their span."""
+    o = [j for j in range(len(z)) if j != k]
+    m = z[o].mean(0)
+    d, dev = z[k] - m, z[o] - m
+    return m, d, dev.T @ np.linalg.lstsq(dev.T, d, rcond=None)[0]
+
+
+def span_bound(x_src, x_dst, cw, y, normal) -> dict:
+    """Where a style's identity lives in the scorer's space (``x_dst``: the real target-content
+    clips, one per style, labels ``y``), and how much of it the source content carries.
+
+    For every style ``k`` but ``normal``: its deviation ``d`` from the mean of the other styles'
+    clips, split into the part in the span of the other styles' deviations and the rest.
+    Returns the share recognised as ``k`` by the scorer (nearest class mean on ``x_dst``) of the
+    mean plus the in-span part, plus twice it, plus the out-of-span part alone; the median share
+    of ``|d|^2`` in the span; and the median cosine between each style's deviation in the source
+    content (``x_src``, the same styles in the same order, in its own scorer space) and in the
+    target content, whole and out-of-span (``_other``: between different styles).
+    """
+    zs, _ = _scorer_space(x_src, cw)
+    zt, _ = _scorer_space(x_dst, cw)
+    mu, sd = x_dst.mean(0), x_dst.std(0)
+    sd = np.where(sd > 1e-9 * max(sd.max(), 1e-300), sd, 1.0)
+    hits = {"in_span": [], "in_span_x2": [], "out_of_span": []}
+    energy, rs, rt, cos_all = [], {}, {}, []
+    ks = [k for k in range(len(y)) if y[k] != normal]
+    for k in ks:
+        m, d, p = _deviations(zt, k)
+        energy.append(float(p @ p / max(d @ d, 1e-300)))
+        pts = np.stack([m + p, m + 2 * p, m + d - p]) / cw * sd + mu
+        pred = classify("ncm", x_dst, y, pts, column_weights=cw)
+        for name, hit in zip(hits, pred == y[k], strict=True):
+            hits[name].append(bool(hit))
+        _, ds, ps = _deviations(zs, k)
+        rs[k], rt[k] = ds - ps, d - p
+        cos_all.append(float(ds @ d / max(np.linalg.norm(ds) * np.linalg.norm(d), 1e-300)))
+
+    def cos(a, b):
+        return float(a @ b / max(np.linalg.norm(a) * np.linalg.norm(b), 1e-300))
+
+    return {**{f"recognised_{k}": float(np.mean(v)) for k, v in hits.items()},
+            "span_energy_share": float(np.median(energy)), "cosine_deviation": float(np.median(cos_all)),
+            "cosine_out_of_span": float(np.median([cos(rs[k], rt[k]) for k in ks])),
+            "cosine_out_of_span_other": float(np.median([cos(rs[a], rt[b]) for a in ks for b in ks if a != b])),
+            "n": len(ks)}
+
+
+def scorer_distances(x_real, cw, k, rows) -> tuple[np.ndarray, np.ndarray]:
+    """Distances, in the scorer's space of the real clips ``x_real``, of ``rows`` to real clip
+    ``k`` (the target) and to the nearest other real clip."""
+    z, to = _scorer_space(x_real, cw)
+    d = np.linalg.norm(to(rows)[:, None] - z[None], axis=-1)
+    return d[:, k], np.delete(d, k, axis=1).min(1)

@@ -9,7 +9,8 @@ import numpy as np
 #: no limb-flip rows (their weights are swept directly, the ``transfer_weights`` rows).
 METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
            "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
-           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv")
+           "content_mean_cv", "content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv",
+           "content_mean_rec_cv")
 
 
 def branch_vectors(models, reference):
@@ -123,11 +124,72 @@ def amplitude_ratio(base, a, b):
     return eqx.tree_at(lambda m: m.amplitude, out, base.amplitude * ratio)
 
 
-def max_jump(model, skeleton, frame_time_s, num_samples: int = 256, *, body_map=None) -> float:
-    """Largest joint displacement between consecutive frames over one synthesized cycle (file units)."""
+def max_phase_jump(model, skeleton, num_samples: int = 256, *, body_map=None) -> float:
+    """Largest joint displacement per radian of cycle phase over one synthesized cycle (file
+    units per radian): the limb-flip criterion of the transfer tables.
+
+    A flip is a change of POSE between neighbouring phases of the cycle: a joint crossing an
+    angle branch (an offset or a harmonic 2π off, averaged to π) turns its limb through a large
+    angle while the rest of the body moves a little, so some joint covers far more distance per
+    radian of phase than any joint of the clips read. Cadence does not change the poses of a
+    cycle, only how many frames a radian takes: the per-frame jump (`max_jump`) is this value
+    times ``omega * frame_time_s``, so a transfer that carries a faster cadence (the walk's
+    cadence ratio at w = 1.5 made a run's omega 1.9x the neutral run's) reads as a flip per frame
+    with no pose changing faster within the cycle. Per radian of phase, a pure cadence change
+    leaves the value exactly as it was and a branch change still shows
+    (`tests/test_transfer.py::test_phase_jump_catches_a_branch_change_not_a_faster_cadence`).
+    The amplitude extrapolation of weights above 1 is not removed: larger swings cover more
+    distance per radian, and the tables compare with the largest of the clips read.
+
+    Arguments:
+        model: one FourierModel; skeleton: its Skeleton; num_samples: phases per cycle;
+        body_map: the rig's body map (its pelvis is the origin; `style.cycle_positions`).
+
+    Returns:
+        The largest joint displacement between consecutive phase samples over the phase step.
+    """
     from fourierjax import style
 
     p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map))
     per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
-    # the per-sample jump scaled to a frame (a smooth cycle, so linear)
-    return per_sample * num_samples * float(model.omega) * frame_time_s / (2 * np.pi)
+    return per_sample * num_samples / (2 * np.pi)
+
+
+def max_jump(model, skeleton, frame_time_s, num_samples: int = 256, *, body_map=None) -> float:
+    """Largest joint displacement between consecutive frames over one synthesized cycle (file
+    units): `max_phase_jump` times the radians of phase per frame, ``omega * frame_time_s``
+    (a smooth cycle, so linear). It grows with the cadence; the flip criterion is per phase."""
+    return max_phase_jump(model, skeleton, num_samples, body_map=body_map) * float(model.omega) * frame_time_s
+
+
+def fit_recognition_weight(sources, targets, x_targets, featurise, grid, *, column_weights=None,
+                           classifier: str = "ncm") -> tuple[float, dict]:
+    """The content-mean transfer's weight that the runs-only scorer recognises best, chosen
+    by leaving one reference style out at a time.
+
+    For every style ``k`` of ``sources`` / ``targets`` (dicts style -> model of the source and
+    the target content; the held-out style of the experiment is in neither) and every weight
+    ``w`` of ``grid``: ``k``'s source clip transferred with the references and the cadence gain
+    of the other styles (`style.fit_transfer_gains(..., cadence_only=True)`), featurised by
+    ``featurise`` (model -> feature row) and classified by ``classifier`` trained on
+    ``x_targets`` (the real target clips of ``targets``' styles, in their order). Returns the
+    weight with the largest share recognised as ``k`` (ties: the smaller weight, the nearer the
+    real clips) and ``{w: share}``.
+    """
+    from experiments._style_classify import classify
+    from fourierjax import style
+
+    labels = np.array(list(targets), object)
+    hits = {float(w): [] for w in grid}
+    for k in targets:
+        rest = [s for s in targets if s != k]
+        src, dst = [sources[s] for s in rest], [targets[s] for s in rest]
+        cadence = style.fit_transfer_gains(src, dst, cadence_only=True)
+        rows = [featurise(style.transfer(sources[k], src, dst, method="content_mean", weight=float(w),
+                                         gains=cadence)) for w in grid]
+        pred = classify(classifier, x_targets, labels, np.stack(rows), column_weights=column_weights)
+        for w, p in zip(grid, pred, strict=True):
+            hits[float(w)].append(p == k)
+    scores = {w: float(np.mean(h)) for w, h in hits.items()}
+    best = max(scores.values())
+    return min(w for w, v in scores.items() if v == best), scores

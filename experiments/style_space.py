@@ -5,8 +5,10 @@ Every locomotion clip whose file name matches the config's pattern (named groups
 cached on disk). Recognition: nearest class mean, shrinkage LDA, logistic regression and k-NN
 on feature sets (style vectors, joint-angle and body-space harmonics), leaving one take out,
 in PCA spaces, and across contents. Transfer from one content to another (walk -> run ...):
-eq. 8 and the method-search variants against the baseline, scored by ``style.cycle_distance``
-to the real target and by classifiers trained on real target-content clips only, once per
+eq. 8 and the method-search variants against the baseline and the oracle rows (`ORACLES`: the
+real target scored by the same path), scored by ``style.cycle_distance`` to the real target and
+by classifiers trained on real target-content clips only; limb flips as the largest joint jump
+per radian of phase (`max_phase_jump`) along the weights, against the clips read; once per
 channel representation of the config (Euler, expmap, tangent; on tangent models the per-channel
 gain methods get a "skipped" row, `fit_transfer_gains` refusing them; the cadence gain runs). Writes CSV,
 Markdown and JSON tables, ``summary.json`` and PNG figures under ``<out>/style_space``.
@@ -19,7 +21,7 @@ import pathlib
 
 import numpy as np
 
-from experiments._style_ceiling import feature_targets, one_per_style
+from experiments._style_ceiling import feature_targets, one_per_style, scorer_distances, span_bound
 from experiments._style_classify import CLASSIFIERS, classify, pca_fit
 from experiments._style_data import find_clips, fit_clips
 from experiments._style_features import feature_matrix, features
@@ -27,7 +29,9 @@ from experiments._style_transfer import (
     METHODS,
     amplitude_ratio,
     branch_vectors,
+    fit_recognition_weight,
     max_jump,
+    max_phase_jump,
     vector_layout,
     vector_methods,
 )
@@ -52,6 +56,15 @@ CEILING_SETS = ("style_vector", "angles", "positions", "angles+positions", "quat
 #: The transfer methods with per-channel gains, which `style.fit_transfer_gains` refuses for
 #: tangent models (their log-omega gain alone, `content_mean_cadence_cv`, is allowed).
 GAIN_METHODS = ("content_mean_gains", "content_mean_gains_cv")
+#: Rows built from the REAL target clip, scored exactly as the transfers (features of a model
+#: through synthesize -> FK, the same scorer): ``oracle``, the target's own fit (a point of the
+#: scorer's training set: any recognition below 1 would mean the two sides are featurised
+#: differently); ``oracle_take_noise``, the target plus the source content's take-to-take
+#: difference of the style (``characteristic(take 2, take 1)`` of the source, where it has two
+#: takes): a simulated second capture of the target, which a runs-only scorer cannot otherwise
+#: be tested on (Bandai-1 has one run per style); ``oracle_other_take``, the target content's
+#: real second take (run -> walk). None of them enters a flip check.
+ORACLES = ("oracle", "oracle_take_noise", "oracle_other_take")
 GAINS_SKIPPED = ("skipped: style.fit_transfer_gains refuses per-channel gains on tangent models (a gain per "
                  "tangent channel does not commute with a change of joint frames)")
 
@@ -248,7 +261,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         first_take.setdefault((c, s), i)
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
-    trows, flips, wrows, gain_omega, ftrows = [], [], [], [], []
+    trows, flips, wrows, gain_omega, ftrows, rec_weights = [], [], [], [], [], []
     fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
     # per-channel gains are refused on tangent models (`style.fit_transfer_gains`): a gain per
     # tangent channel does not commute with a change of joint frames; those methods get a row
@@ -273,6 +286,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         xp_real, cwp = feature_matrix(fx_real, FEATURE_SETS[PREVIOUS_FEATURES])
         x_src, _ = feature_matrix([features(models[g[(src, x)]], skels[g[(src, x)]], maps[g[(src, x)]])
                                    for x in sty], FEATURE_SETS[MAIN_FEATURES])
+        # where a style's identity lives in the scorer's space and how much of it the source carries
+        summary.setdefault("span_bound", []).append(
+            {"representation": representation, "transfer": f"{src}->{dst}",
+             **span_bound(x_src, x_real, cw, np.array(sty, object), normal)})
         # a second scorer that reads neither content: every real clip of the OTHER contents (all
         # takes, uncentred, as in the across-contents table), several per style
         oc = [i for i, c in enumerate(clips) if c["content"] not in (src, dst) and c["style"] in sty]
@@ -326,6 +343,16 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             gain_omega.append(float(cadence[-1]))
             cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                              gains=cadence, weight=w_cv)
+            # the weight the scorer recognises best on the other styles (their real target clips
+            # only, s left out of the scorer too), with the cadence gain; grid: the sweep's weights
+            keep = [k for k, x in enumerate(sty) if x != s]
+            w_rec = fit_recognition_weight(
+                {x: models[g[(src, x)]] for x in rest}, {x: models[g[(dst, x)]] for x in rest}, x_real[keep],
+                lambda m: feature_matrix([features(m, skel, bm)], FEATURE_SETS[MAIN_FEATURES])[0][0],
+                sweep_weights(cfg), column_weights=cw)[0]
+            rec_weights.append(w_rec)
+            cand["content_mean_rec_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                         gains=cadence, weight=w_rec)
             # the weight sweep: recognition rises with w, the distance is best near 0.5
             sweep = {}
             for w in sweep_weights(cfg):
@@ -334,7 +361,13 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 if gains is not None:
                     sweep[("content_mean_gains", w)] = style.transfer(a, others_src, others_dst,
                                                                       method="content_mean", gains=gains, weight=w)
-            # oracle: another take of the real target, where the target content has one
+            # oracles (`ORACLES`): the real target itself; with the source content's take-to-take
+            # difference of the style; another take of the real target, where there is one
+            cand["oracle"] = target
+            src_takes = sorted(i for (c2, s2, _), i in lab.items() if c2 == src and s2 == s)
+            if len(src_takes) > 1:
+                noise = style.characteristic(models[src_takes[1]], models[src_takes[0]])
+                cand["oracle_take_noise"] = style.superpose(target, [noise], [1.0], method="phasor")
             other = [i for (c2, s2, t2), i in lab.items() if c2 == dst and s2 == s and i != i_t]
             if other:
                 cand["oracle_other_take"] = models[other[0]]
@@ -349,6 +382,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             # ideal points of transfers made in the scorer's own (z-scored) feature space, maps fitted
             # on the other styles: the recognition any inversion of them back to a model could reach
             k_s = sty.index(s)
+            d_tgt, d_oth = scorer_distances(x_real, cw, k_s, x_c)
             rest_k = [k for k in range(len(sty)) if k != k_s]
             pts = feature_targets(x_src[rest_k], x_real[rest_k], x_src[k_s] - x_src[rest_k].mean(0),
                                   sd=x_real[rest_k].std(0) + 1e-12, column_weights=cw)
@@ -358,8 +392,10 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 ftrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                                "map": mth, **{f"recognised_{c}": bool(rec_pts[c][k] == s) for c in CLASSIFIERS}})
             fts = motions[i_t].frame_time_s
-            ref_sweep = max(max_jump(models[g[(c, x)]], skel, fts, body_map=bm)
+            ref_sweep = max(max_phase_jump(models[g[(c, x)]], skel, body_map=bm)
                             for c in (src, dst) for x in sty if (c, x) != (dst, s))
+            ref_sweep_frame = max(max_jump(models[g[(c, x)]], skel, fts, body_map=bm)
+                                  for c in (src, dst) for x in sty if (c, x) != (dst, s))
             x_s, _ = feature_matrix([features(m, skel, maps[i_t]) for m in sweep.values()],
                                     FEATURE_SETS[MAIN_FEATURES])
             rec_s = {c: classify(c, x_real, y[real], x_s, column_weights=cw, **kw) for c in CLASSIFIERS}
@@ -368,43 +404,52 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 wrows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "weight": w,
                               "ratio": float(style.cycle_distance(m, target, skel, num_samples=ns, body_map=bm)) / d0,
-                              "jump_ratio": max_jump(m, skel, fts, body_map=bm) / ref_sweep,
+                              "jump_ratio": max_phase_jump(m, skel, body_map=bm) / ref_sweep,
+                              "frame_jump_ratio": max_jump(m, skel, fts, body_map=bm) / ref_sweep_frame,
                               **{f"recognised_{c}": bool(rec_s[c][k] == s) for c in CLASSIFIERS},
                               "recognised_oc_ncm": bool(rec_s_oc[k] == s)})
             for k, mth in enumerate(names):
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
-                              "weight": w_cv if mth.endswith("_cv") else None,
+                              "weight": {"content_mean_rec_cv": w_rec}.get(mth, w_cv if mth.endswith("_cv") else None),
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
                               "recognised_previous_ncm": bool(rec_prev[k] == s),
+                              "scorer_to_target": float(d_tgt[k]), "scorer_to_other": float(d_oth[k]),
                               **{f"recognised_oc_{c}": bool(rec_oc[c][k] == s) for c in CLASSIFIERS}})
             # limb flips: weights along the phasor line from the base to each transferred model
             # Reference: the largest jump of the clips a method reads, through the same fit ->
             # synthesize -> FK path: eq. 8 and its variants read three (the two neutral clips and
             # the styled source), the style-space methods every clip of both contents but the
             # target's.
+            # The criterion is per radian of phase (`max_phase_jump`): a flip changes the poses of
+            # the cycle, a faster cadence only how many frames a radian takes; the per-frame jump
+            # (the previous criterion) is kept as `frame_*` columns.
             for i in {i_b, *g.values()} - set(jump):
-                jump[i] = max_jump(models[i], skel, fts, body_map=bm)
-            ref_eq8 = max(jump[i] for i in (i_b, g[(src, s)], g[(src, normal)]))
-            ref_all = max(jump[g[(c, x)]] for c in (src, dst) for x in sty if (c, x) != (dst, s))
+                jump[i] = (max_phase_jump(models[i], skel, body_map=bm), max_jump(models[i], skel, fts, body_map=bm))
+            ref_eq8 = [max(jump[i][k] for i in (i_b, g[(src, s)], g[(src, normal)])) for k in (0, 1)]
+            ref_all = [max(jump[g[(c, x)]][k] for c in (src, dst) for x in sty if (c, x) != (dst, s)) for k in (0, 1)]
             for mth in names:
-                if mth in ("baseline", "oracle_other_take"):
+                if mth == "baseline" or mth in ORACLES:
                     continue
                 ref_jump = ref_eq8 if mth in ("eq8", "eq8_phasor", "amplitude_ratio") else ref_all
                 char = style.characteristic(cand[mth], base)
-                jumps = {w: max_jump(style.superpose(base, [char], [w], method="phasor"), skel, fts, body_map=bm)
-                         for w in cfg["weights"]}
-                worst = max(jumps.values())
+                line = {w: style.superpose(base, [char], [w], method="phasor") for w in cfg["weights"]}
+                jumps = {w: max_phase_jump(m, skel, body_map=bm) for w, m in line.items()}
+                fjumps = {w: max_jump(m, skel, fts, body_map=bm) for w, m in line.items()}
+                worst, fworst = max(jumps.values()), max(fjumps.values())
                 upto1 = max((v for w, v in jumps.items() if w <= 1.0), default=float("nan"))
+                fupto1 = max((v for w, v in fjumps.items() if w <= 1.0), default=float("nan"))
                 flips.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "max_jump": worst, "max_jump_w_le_1": upto1,
-                              "source_max_jump": ref_jump, "ratio": worst / ref_jump,
-                              "ratio_w_le_1": upto1 / ref_jump, "ok": worst <= ref_jump * 1.01})
+                              "source_max_jump": ref_jump[0], "ratio": worst / ref_jump[0],
+                              "ratio_w_le_1": upto1 / ref_jump[0], "ok": worst <= ref_jump[0] * 1.01,
+                              "frame_ratio": fworst / ref_jump[1], "frame_ratio_w_le_1": fupto1 / ref_jump[1],
+                              "frame_ok": fworst <= ref_jump[1] * 1.01})
         print(f"{representation} transfer {src}->{dst}: {len(sty) - 1} styles", flush=True)
     srows = []
     for tname in dict.fromkeys(r["transfer"] for r in trows):
-        for mth in [*METHODS, "oracle_other_take"]:
+        for mth in [METHODS[0], *ORACLES, *METHODS[1:]]:
             rs = [r for r in trows if r["transfer"] == tname and r["method"] == mth]
             if mth in skipped:
                 srows.append(_skipped_row(srows, representation, tname, mth, skipped[mth]))
@@ -417,11 +462,15 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
                           "recognised_previous_ncm": float(np.mean([r["recognised_previous_ncm"] for r in rs])),
+                          "scorer_to_target": float(np.median([r["scorer_to_target"] for r in rs])),
+                          "scorer_to_other": float(np.median([r["scorer_to_other"] for r in rs])),
                           **{f"recognised_oc_{c}": float(np.mean([r[f"recognised_oc_{c}"] for r in rs]))
                              for c in CLASSIFIERS},
                           "flip_free": all(f["ok"] for f in fl) if fl else None,
                           "max_jump_ratio": max((f["ratio"] for f in fl), default=None),
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
+                          "frame_flip_free": all(f["frame_ok"] for f in fl) if fl else None,
+                          "max_frame_jump_ratio": max((f["frame_ratio"] for f in fl), default=None),
                           "n": len(rs), "note": ""})
     wsum = []
     for tname in dict.fromkeys(r["transfer"] for r in wrows):
@@ -436,7 +485,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                              **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs]))
                                 for c in CLASSIFIERS},
                              "recognised_oc_ncm": float(np.mean([r["recognised_oc_ncm"] for r in rs])),
-                             "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)), "n": len(rs),
+                             "max_jump_ratio": float(max(r["jump_ratio"] for r in rs)),
+                             "max_frame_jump_ratio": float(max(r["frame_jump_ratio"] for r in rs)), "n": len(rs),
                              "note": ""})
     for tname in dict.fromkeys(r["transfer"] for r in ftrows):
         for mth in dict.fromkeys(r["map"] for r in ftrows):
@@ -445,6 +495,9 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 {"representation": representation, "transfer": tname, "map": mth,
                  **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs])) for c in CLASSIFIERS},
                  "n": len(rs)})
+    if rec_weights:
+        summary.setdefault("recognition_weight", {})[representation] = {
+            "median": float(np.median(rec_weights)), "values": [float(w) for w in rec_weights]}
     if gain_omega:
         summary.setdefault("gain_log_omega", {})[representation] = {
             "median": float(np.median(gain_omega)), "min": float(np.min(gain_omega)),
@@ -489,7 +542,8 @@ def body(argv=None) -> None:
         all_f += f
         all_s += s
     write_table(all_t, out, "transfer", "Transfer per style: cycle distance to the real target and recognition")
-    write_table(all_f, out, "flips", "Largest joint jump per frame at the configured weights vs the sources'")
+    write_table(all_f, out, "flips", "Largest joint jump per radian of phase (frame_*: per frame) at the configured "
+                "weights vs the sources'")
     write_table(all_s, out, "transfer_summary", "Transfer methods: median distance ratio and recognition rate")
     summary["transfer"] = all_s
     write_table(all_w, out, "transfer_weights", "Transfer by weight: median distance ratio, recognition by the "
@@ -497,6 +551,9 @@ def body(argv=None) -> None:
     summary["transfer_weights"] = all_w
     write_table(summary.get("other_contents_scorer", []), out, "other_contents_scorer",
                 "The other-contents scorer on the real target clips (nearest mean)")
+    write_table(summary.get("span_bound", []), out, "transfer_span_bound",
+                "A style's deviation from the other styles' mean in the scorer's space: recognition of its part "
+                "in the other styles' span and outside it; cosines between source and target deviations")
     write_table(summary.get("feature_targets", []), out, "transfer_feature_targets",
                 "Ideal points of transfers in the scorer's feature space: share recognised as the intended style")
     write_table(rep_rows, out, "recognition_representations",

@@ -119,6 +119,14 @@ def test_style_space_runs_small(tmp_path):
                          "group_weights"}
     assert rows["content_mean_w"]["median_ratio"] < rows["baseline"]["median_ratio"]
     assert {"content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv"} <= set(rows)
+    # the oracle (the real target's fit, featurised as the transfers are) is a point of the
+    # scorer's training set: anything below 1 would mean the two sides take different paths
+    assert all(rows["oracle"][f"recognised_{c}"] == 1.0 for c in ("ncm", "lda", "logreg", "knn"))
+    assert rows["oracle"]["median_ratio"] == pytest.approx(0.0, abs=1e-6) and "oracle_take_noise" in rows
+    assert "content_mean_rec_cv" in rows and s["recognition_weight"]["euler"]["values"]
+    span = s["span_bound"][0]
+    assert 0 <= span["span_energy_share"] <= 1 and span["recognised_out_of_span"] >= span["recognised_in_span"]
+    assert rows["oracle"]["scorer_to_target"] == pytest.approx(0.0, abs=1e-6)
     assert {r["map"] for r in s["feature_targets"]} >= {"identity", "spread", "slope"}
     sweep = {(r["method"], r["weight"]) for r in s["transfer_weights"]}
     assert sweep == {(m, w) for m in ("content_mean", "content_mean_gains") for w in (1.5, 2.0)}

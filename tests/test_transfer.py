@@ -140,17 +140,56 @@ def bandai_walk_run():
 
 def test_no_limb_flip_at_any_weight_on_bandai(bandai_walk_run):
     """Walk -> run on Bandai-1 through fit -> synthesize -> FK: at weights 0 to 1.5 the
-    content-mean transfer's largest joint jump per frame stays within the sources' (issue #22,
+    content-mean transfer's largest joint jump per radian of phase stays within the sources' (issue #22,
     item 4); a transfer that crossed an angle branch would jump by a limb length."""
-    from experiments._style_transfer import max_jump
+    from experiments._style_transfer import max_phase_jump
 
     models, skel, bm, dt = bandai_walk_run
-    ref = max(max_jump(m, skel, dt, body_map=bm) for m in models.values())
+    ref = max(max_phase_jump(m, skel, body_map=bm) for m in models.values())
     others = ["normal", "happy", "old"]
     for w in (0.0, 0.5, 1.0, 1.5):
         m = style.transfer(models[("walk", "sad")], [models[("walk", s)] for s in others],
                            [models[("run", s)] for s in others], method="content_mean", weight=w)
-        assert max_jump(m, skel, dt, body_map=bm) <= 1.01 * ref, w
+        assert max_phase_jump(m, skel, body_map=bm) <= 1.01 * ref, w
+
+
+def _branch_changed(base, channel, turns=1, n=8, k=256):
+    """``base`` with one channel 2π higher over a quarter of the cycle (the same rotations
+    sampled, another angle branch), fitted back with ``n`` harmonics by least squares: the
+    band-limited series turns that joint through a full turn in and out of the quarter."""
+    phase = np.arange(k) * (2 * np.pi / k)
+    x = np.asarray(fourier.synthesize_phase(base, jnp.asarray(phase)), float)
+    x[(phase >= np.pi / 2) & (phase < np.pi), channel] += 2 * np.pi * turns
+    h = np.arange(1, n + 1)
+    basis = np.concatenate([np.ones((k, 1)), np.sin(np.outer(phase, h)), np.cos(np.outer(phase, h))], 1)
+    coef = np.linalg.lstsq(basis, x, rcond=None)[0]  # [1 + 2n, C]
+    return fourier.FourierModel.from_sin_cos(coef[0], coef[1 : n + 1].T, coef[n + 1 :].T, base.omega,
+                                             channel_names=base.channel_names)
+
+
+def test_phase_jump_catches_a_branch_change_not_a_faster_cadence(cmu):
+    """The flip criterion (`max_phase_jump`, per radian of phase) flags a joint that crosses a
+    2π branch within the cycle and is unchanged by a pure cadence speed-up, which doubles the
+    per-frame jump (`max_jump`) that the criterion used to be (docs/findings.md, section 3)."""
+    from experiments._style_transfer import max_jump, max_phase_jump
+    from fourierjax.body import infer_body_map
+
+    skel, names = cmu
+    bm = infer_body_map(data.load("07_01"))
+    base = model(names, 3, scale=0.2, n=3)
+    ref, ref_frame = max_phase_jump(base, skel, body_map=bm), max_jump(base, skel, 1 / 120, body_map=bm)
+    # the same poses at twice the cadence: per frame twice the jump, per phase the same
+    faster = eqx.tree_at(lambda m: m.omega, base, 2 * base.omega)
+    assert max_phase_jump(faster, skel, body_map=bm) == pytest.approx(ref, rel=1e-6)
+    assert max_jump(faster, skel, 1 / 120, body_map=bm) == pytest.approx(2 * ref_frame, rel=1e-6)
+    # the base fitted back with 8 harmonics is the base (no false alarm from the refit itself)
+    knee = names.index("LeftLeg.Xrotation")
+    assert max_phase_jump(_branch_changed(base, knee, turns=0), skel, body_map=bm) == pytest.approx(ref, rel=1e-3)
+    # a knee crossing a 2π branch over a quarter cycle: flagged, at any cadence
+    flip = _branch_changed(base, knee)
+    assert max_phase_jump(flip, skel, body_map=bm) > 2 * ref
+    slower = eqx.tree_at(lambda m: m.omega, flip, 0.5 * flip.omega)
+    assert max_phase_jump(slower, skel, body_map=bm) > 2 * ref
 
 
 def test_gains_carry_less_of_the_walks_cadence_onto_the_run(bandai_walk_run):
@@ -276,3 +315,23 @@ def test_fit_transfer_weight_picks_the_weight_that_carries_the_style(cmu):
         style.transfer(styled, src[0], dst[0], weight="cv", skeleton=skel)
     with pytest.raises(UserError, match="held_out"):
         style.fit_transfer_weight(src, dst, skel, held_out=[7])
+
+
+def test_recognition_weight_recovers_the_clips_when_the_contents_are_one(cmu):
+    """`fit_recognition_weight` (the experiment's `content_mean_rec_cv`): with the target content
+    equal to the source content, the transfer at w = 1 of each left-out style is its own clip, so
+    the scorer of the target clips recognises every one at w = 1, and the chosen weight scores
+    the best of the grid."""
+    from experiments._style_classify import classify
+    from experiments._style_transfer import fit_recognition_weight
+
+    _, names = cmu
+    clips = {f"s{k}": model(names, 10 + k, scale=0.2) for k in range(5)}
+    def featurise(m):
+        return np.asarray(style.style_vector(m), float)
+
+    x = np.stack([featurise(m) for m in clips.values()])
+    assert (classify("ncm", x, np.array(list(clips), object), x) == np.array(list(clips))).all()
+    w, scores = fit_recognition_weight(clips, clips, x, featurise, (0.5, 1.0, 2.0))
+    assert scores[1.0] == 1.0
+    assert scores[w] == max(scores.values()) and set(scores) == {0.5, 1.0, 2.0}
