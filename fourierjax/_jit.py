@@ -7,7 +7,6 @@ import functools
 import logging
 from collections.abc import Callable
 
-import equinox as eqx
 import jax
 
 _log = logging.getLogger(__name__)
@@ -95,7 +94,7 @@ def filter_jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None
     """
     if fun is None:
         return functools.partial(filter_jit, cpu_compiler_options=cpu_compiler_options, **jit_kwargs)
-    return _per_backend(eqx.filter_jit, fun, jit_kwargs, cpu_compiler_options)
+    return _per_backend(_filter_jit, fun, jit_kwargs, cpu_compiler_options)
 
 
 def jit(fun: Callable | None = None, *, cpu_compiler_options: dict | None = None, **jit_kwargs) -> Callable:
@@ -127,6 +126,14 @@ def is_entry_point(fun: object) -> bool:
         of the package goes through the one wrapper.
     """
     return getattr(fun, "__fourierjax_jit__", False) is True
+
+
+def _filter_jit(fun: Callable, **kwargs) -> Callable:
+    # equinox is imported at the first call of a filtered entry point, not with this module:
+    # reading a BVH file and posing it (`jit` entry points only) never imports it.
+    import equinox as eqx
+
+    return eqx.filter_jit(fun, **kwargs)
 
 
 def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict, cpu_options: dict | None) -> Callable:

@@ -2,22 +2,26 @@
 
 from __future__ import annotations
 
-import equinox as eqx
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from fourierjax import _fk, _jit, rotations
 from fourierjax._fourier._buckets import length_bucket as _bucket
+from fourierjax._pytree import Record
 from fourierjax.errors import UserError
 from fourierjax.skeleton import Skeleton, Topology
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, Float
 
 _AXIS_INDEX = {"X": 0, "Y": 1, "Z": 2}
 
 
-class FKResult(eqx.Module):
-    """World-space pose of one frame.
+class FKResult(Record):
+    """World-space pose of one frame (a pytree of three arrays; leading axes for batches).
 
     - `rotations`: `[J, 4]` world orientation of every joint (unit quaternion, wxyz).
     - `positions`: `[J, 3]` world position of every joint.
@@ -25,9 +29,15 @@ class FKResult(eqx.Module):
       parent's).
     """
 
+    __leaves__ = ("rotations", "positions", "end_site_positions")
     rotations: Float[Array, "joints 4"]
     positions: Float[Array, "joints 3"]
     end_site_positions: Float[Array, "end_sites 3"]
+
+    def __init__(self, rotations, positions, end_site_positions):
+        self._set("rotations", rotations)
+        self._set("positions", positions)
+        self._set("end_site_positions", end_site_positions)
 
 
 def _elementary_quat(axis: str, angle: Float[Array, ...]) -> Float[Array, "... 4"]:
@@ -305,13 +315,16 @@ def _bucketed(jitted, skeleton: Skeleton, channels):
 
     Frames are independent, so padding is exact. On CPU the padding and the cut are NumPy
     copies, not XLA programs, so a new length compiles nothing at all; elsewhere they are two
-    small eager ops. Traced channels (inside jit, vmap or grad) are passed through: the caller's
-    program has one shape anyway.
+    small eager ops. Traced channels or skeletons (inside jit, vmap or grad) are passed through:
+    the caller's program has one shape anyway.
     """
     batch = channels.shape[:-1]
     m = int(np.prod(batch))
     rows = _bucket(m)
-    if isinstance(channels, jax.core.Tracer) or m > PAD_LIMIT or (rows == m and len(batch) == 1):
+    # A traced skeleton (FK vmapped over skeletons with concrete channels) is traced too: the
+    # outputs are tracers, which the host-side cut below cannot read.
+    traced = any(isinstance(a, jax.core.Tracer) for a in (channels, *jax.tree.leaves(skeleton)))
+    if traced or m > PAD_LIMIT or (rows == m and len(batch) == 1):
         return jitted(skeleton, channels)
     cpu = isinstance(channels, np.ndarray) or jax.default_backend() == "cpu"
     width = channels.shape[-1]

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import dataclasses
 from functools import cached_property
+from typing import TYPE_CHECKING
 
-import equinox as eqx
 import numpy as np
-from jaxtyping import Array, Float
 
 from fourierjax._host import as_default_float
+from fourierjax._pytree import Record
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, Float
 
 POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
@@ -162,8 +165,11 @@ def common_ancestor(parents: tuple[int, ...], a: int, b: int) -> int:
     return b
 
 
-class Skeleton(eqx.Module):
+class Skeleton(Record):
     """A topology with its geometry: bone offsets are arrays, so they can be fitted or batched.
+
+    A pytree: `offsets` and `end_site_offsets` are its leaves, `topology` is static (in the
+    tree structure). Immutable; edit with `equinox.tree_at` or make a new one.
 
     Arguments:
         topology: the static `Topology`.
@@ -171,19 +177,22 @@ class Skeleton(eqx.Module):
         end_site_offsets: `[E, 3]` local translation of each End Site from its parent joint.
     """
 
+    __leaves__ = ("offsets", "end_site_offsets")
+    __static__ = ("topology",)
     offsets: Float[Array, "joints 3"]
     end_site_offsets: Float[Array, "end_sites 3"]
-    topology: Topology = eqx.field(static=True)
+    topology: Topology
 
     def __init__(self, topology: Topology, offsets, end_site_offsets=None):
-        self.topology = topology
+        self._set("topology", topology)
         # On the host for NumPy input: `jnp.asarray(x, float)` of float64 is a program per shape.
-        self.offsets = as_default_float(offsets)
+        self._set("offsets", as_default_float(offsets))
         if end_site_offsets is None:
             end_site_offsets = np.zeros((topology.num_end_sites, 3))
-        self.end_site_offsets = as_default_float(end_site_offsets)
+        self._set("end_site_offsets", as_default_float(end_site_offsets))
+        self._check()
 
-    def __check_init__(self):
+    def _check(self):
         j, e = self.topology.num_joints, self.topology.num_end_sites
         if self.offsets.shape[-2:] != (j, 3):
             raise UserError(f"Skeleton: `offsets` has shape {self.offsets.shape}, expected (..., {j}, 3)")
