@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, ArrayLike, Float
 
 
 def wrap_angle(x: ArrayLike) -> Array:

@@ -6,9 +6,15 @@ use `jnp.sin` / `jnp.cos`. The quadrant is piecewise constant, so gradients are 
 polynomials (accurate to float32 rounding).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
+
+if TYPE_CHECKING:
+    from jaxtyping import Array
 
 # Cody-Waite split of pi/2 (float32) and Cephes sinf/cosf coefficients on [-pi/4, pi/4].
 _PIO2 = (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8)

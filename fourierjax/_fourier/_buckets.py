@@ -3,12 +3,16 @@ new clip length or batch size reuses compiled code; and the per-channel masks' g
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
 
 from fourierjax._memory import check_bytes
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, Bool, Float
 
 #: Batch sizes of the compiled fit programs: a batch is cut into chunks of `LARGE_BATCH` clips
 #: and a remainder in chunks of `SMALL_BATCH` (padded with copies of the last clip), so any

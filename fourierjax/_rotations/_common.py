@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike
 
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, ArrayLike
 
 #: The 6 Tait-Bryan and 6 proper Euler orders. BVH / intrinsic semantics: for order "ZYX" and
 #: angles (a, b, c), R = Rz(a) @ Ry(b) @ Rx(c) (scipy: ``Rotation.from_euler("ZYX", ...)``).

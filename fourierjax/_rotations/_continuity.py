@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float
 
 from fourierjax._rotations._common import _TWO_PI, _safe_normalize, _vec
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, Bool, Float
 
 
 def _time_axis(x: Array, axis: int, name: str, fn: str) -> int:

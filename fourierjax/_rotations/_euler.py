@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, ArrayLike, Float
 
 from fourierjax._math import wrap_angle
 from fourierjax._rotations._common import (
@@ -20,6 +20,9 @@ from fourierjax._rotations._common import (
     _vec,
 )
 from fourierjax._rotations._quat import matrix_multiply, quat_from_matrix, quat_multiply
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, ArrayLike, Float
 
 
 def _axis_matrix(axis: int, c: Array, s: Array) -> Array:

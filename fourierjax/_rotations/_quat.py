@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float
 
 from fourierjax._rotations._common import (
     _as_float,
@@ -20,6 +21,9 @@ from fourierjax._rotations._common import (
     _vec,
 )
 from fourierjax.errors import UserError
+
+if TYPE_CHECKING:
+    from jaxtyping import Array, Float
 
 # ------------------------------------------------------------------------------- matrices
 

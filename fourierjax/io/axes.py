@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
-from jaxtyping import Float
 
 from fourierjax.errors import UserError
 from fourierjax.io.bvh import Motion
+
+if TYPE_CHECKING:
+    from jaxtyping import Float
 
 __all__ = ["from_y_up", "rotate_root", "to_y_up", "up_name", "up_rotation"]
 
