@@ -57,7 +57,8 @@ def _synth(fit, motion, frames):
 def _skating(r, dt, scale):
     from fourierjax import gait
 
-    return float(gait.foot_skating(r.foot_positions, dt, r.clearance[None], height_threshold=0.5 * scale).mean_speed)
+    return float(gait.foot_skating(r.foot_positions, dt, r.floor + r.clearance[None],
+                                   height_threshold=0.5 * scale).mean_speed)
 
 
 def _rel(a, b) -> float:

@@ -61,14 +61,15 @@ def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
     p_cap = M.foot_positions_of(sub, body_map=bm)
     s_syn = float(gait.contact_skating(p_syn, dt, body_map=bm).mean_speed)
     s_cap = float(gait.contact_skating(p_cap, dt, body_map=bm).mean_speed)
-    low = p_syn[..., bm.up_axis] - np.asarray(r.clearance)[None]
+    low = p_syn[..., bm.up_axis] - np.asarray(r.clearance)[None] - float(r.floor)  # over the captured floor
     depth_m = max(0.0, -float(low.min())) * bm.metres_per_unit
     from fourierjax import contacts
 
     ground = contacts.estimate_ground(p_cap, dt, up_axis=bm.up_axis)
     f_cap = float(gait.contact_flight_fraction(p_cap, body_map=bm,
                                                floor=contacts.floor_heights(ground, p_cap, up_axis=bm.up_axis)))
-    f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm, floor=np.asarray(r.clearance)[None]))
+    f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm,
+                                               floor=float(r.floor) + np.asarray(r.clearance)[None]))
     ka_syn = knee_angles(M.motion_joint_positions(out), bm)
     k_syn = np.abs(np.diff(ka_syn, axis=0)).max()
     k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()

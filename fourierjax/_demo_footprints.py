@@ -26,7 +26,7 @@ def footprints(st, clip: str = "07_01") -> None:
     for lock in (False, True):
         r = gait.synthesize_gait(fit.model, m.skeleton(), T, dt, body_map=bm, foot_lock=lock, contact_intervals=iv)
         p = np.asarray(r.foot_positions)  # [T, 2, P, 3]
-        low = p[..., up] - np.asarray(r.clearance)[None] < 0.02 * bm.height
+        low = p[..., up] - float(r.floor) - np.asarray(r.clearance)[None] < 0.02 * bm.height
         panels.append((lock, p, low, float(gait.contact_skating(p, dt, body_map=bm).mean_speed)))
     # The prints span far more travel than side: stretch the side axis by a whole factor so that a
     # panel is about 1.5 in tall rather than a thin strip, and say so on the axis.

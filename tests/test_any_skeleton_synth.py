@@ -103,8 +103,8 @@ def test_renamed_rigs_synthesize_like_cmu(cmu, convention):
     got = gait.synthesize_gait(model, tmpl.skeleton(), 120, dt)
     np.testing.assert_allclose(np.asarray(got.foot_positions), np.asarray(ref.foot_positions), atol=1e-4)
     np.testing.assert_allclose(np.asarray(got.root_position), np.asarray(ref.root_position), atol=1e-4)
-    s_ref = float(gait.foot_skating(ref.foot_positions, dt, ref.clearance[None]).mean_speed)
-    s_got = float(gait.foot_skating(got.foot_positions, dt, got.clearance[None]).mean_speed)
+    s_ref = float(gait.foot_skating(ref.foot_positions, dt, ref.floor + ref.clearance[None]).mean_speed)
+    s_got = float(gait.foot_skating(got.foot_positions, dt, got.floor + got.clearance[None]).mean_speed)
     assert abs(s_got - s_ref) <= 0.01 * s_ref
 
 
@@ -124,9 +124,9 @@ def test_metres_synthesize_like_cmu_units(cmu):
     assert abs(got_adv - adv) <= 0.01 * adv
     np.testing.assert_allclose(np.asarray(got.foot_positions) / s, np.asarray(ref.foot_positions),
                                atol=0.01 * float(np.ptp(np.asarray(ref.foot_positions))))
-    s_ref = float(gait.foot_skating(ref.foot_positions, dt, ref.clearance[None]).mean_speed)
+    s_ref = float(gait.foot_skating(ref.foot_positions, dt, ref.floor + ref.clearance[None]).mean_speed)
     # The skating metric's contact threshold is in file units (0.5): give it in metres.
-    s_got = float(gait.foot_skating(got.foot_positions, dt, got.clearance[None],
+    s_got = float(gait.foot_skating(got.foot_positions, dt, got.floor + got.clearance[None],
                                     height_threshold=0.5 * s).mean_speed) / s
     assert abs(s_got - s_ref) <= 0.01 * s_ref
 
@@ -138,12 +138,12 @@ def test_root_below_the_feet_still_goes_forward(cmu):
     dt = cmu.frame_time_s
     r = gait.synthesize_gait(cmu.model, t.skeleton(), 120, dt)
     foot_local = r.foot_positions - r.root_position[:, None, None, :]
-    lift = 1.5 * float(jnp.max(r.root_position[:, 1]))  # the root far below the feet
+    pelvis = r.root_position[:, 1] - r.floor  # over the floor, as `root_trajectory` takes it
+    lift = 1.5 * float(jnp.max(pelvis))  # the root far below the feet
     shifted = foot_local.at[..., 1].add(lift)
-    height = r.root_position[:, 1] - lift
-    pelvis = r.root_position[:, 1]
+    height = pelvis - lift
     flight = 0.5 * (r.features[1:, :2] + r.features[:-1, :2]) * dt
-    a = gait.root_trajectory(foot_local, r.root_position[:, 1], r.phase, r.clearance, flight_step=flight)
+    a = gait.root_trajectory(foot_local, pelvis, r.phase, r.clearance, flight_step=flight)
     b = gait.root_trajectory(shifted, height, r.phase, r.clearance, flight_step=flight, pelvis_height=pelvis)
     np.testing.assert_allclose(np.asarray(b[:, [0, 2]]), np.asarray(a[:, [0, 2]]), atol=1e-3)
     # Without `pelvis_height` the soft-argmin scale is wrong (τ < 0), which once carried the body
@@ -239,12 +239,12 @@ def new_user_outputs(bandai_models, tmp_path_factory):
 
 
 def test_bandai_new_user_commands(new_user_outputs):
-    """Each works, travels forward and stands on the floor (~1 cm). The hip rule (synth, and
-    interpolate, grounded like synth) puts the lowest foot point on its ground, height 0; the
-    transition keeps A's captured floor, so its feet stand where the capture's do (Bandai's foot
-    points sit ~4 cm above the file's y = 0 in stance)."""
+    """Each works, travels forward and stands on the floor (~1 cm): the captured floor, one rule
+    for all three (`captured_floor`), so their feet stand where the capture's do (Bandai's foot
+    points sit ~4 cm above the file's y = 0 in stance). Synth and interpolate stood on y = 0
+    before, 4 cm lower than the capture and the transition."""
     w, captured_low = new_user_outputs
-    for name, floor in (("i", 0.0), ("s", 0.0), ("t", captured_low)):
+    for name, floor in (("i", captured_low), ("s", captured_low), ("t", captured_low)):
         cos, low = _floor_and_forward(f"{w}/{name}.bvh")
         assert cos >= 0.95, (name, cos)
         assert abs(low - floor) <= 1.0, (name, low, floor)  # cm
@@ -257,10 +257,10 @@ def test_bandai_new_user_extrapolated_synth_stands_on_the_floor(new_user_outputs
     locking plants it and slides the plant where the leg's reach runs out; it used to lift it as a
     sliding point (1.2 contact bands: median lowest foot point 3.4 cm above the floor, 7.0 cm at
     the 90% quantile)."""
-    w, _ = new_user_outputs
+    w, captured_low = new_user_outputs
     cos, low = _floor_and_forward(f"{w}/sa.bvh")
     assert cos >= 0.95, cos
-    assert abs(low) <= 1.0, low  # cm
+    assert abs(low - captured_low) <= 1.0, (low, captured_low)  # cm
 
 
 def _cycle_positions(model, skeleton, num=48):

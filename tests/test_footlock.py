@@ -284,9 +284,9 @@ def test_a_foot_that_slides_through_its_stance_stays_on_the_floor():
     root = r.root_position.at[:, jnp.asarray(horiz)].multiply(2.5)  # the root outruns the stride
     w = gait.contact_weights(r.phase, iv)
     _, feet = gait.lock_feet(r.features, sk, w, body_map=bm, representation="euler", root_position=root,
-                             clearance=r.clearance, return_feet=True, smooth_frames=5)
+                             clearance=r.clearance, ground=r.floor, return_feet=True, smooth_frames=5)
     band = 0.02 * float(bm.height)
-    lowest = np.asarray(feet[..., up] * bm.up_sign - r.clearance[None]).min(-1)  # [T, 2]
+    lowest = np.asarray(feet[..., up] * bm.up_sign - r.clearance[None] - r.floor).min(-1)  # [T, 2]
     stance = np.asarray(w) >= 0.99
     unlocked = np.asarray(r.foot_positions) + np.asarray(root - r.root_position)[:, None, None]
     slide = np.linalg.norm(np.diff(unlocked[..., horiz], axis=0), axis=-1).min(-1)  # [T-1, 2]

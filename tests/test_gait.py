@@ -366,14 +366,14 @@ def test_synthesized_walk_touches_ground_without_skating():
     r = synth("07_01")
     _, mot, _, _, clear, real_skate, th = fitted("07_01")
     lowest = np.asarray(r.lowest).min(axis=1)
-    assert np.max(np.abs(lowest)) <= 1e-3  # the lowest foot point is on the ground every frame
-    ours = G.foot_skating(r.foot_positions, mot.frame_time_s, jnp.asarray(clear)[None],
-                          height_threshold=th)
+    assert np.max(np.abs(lowest)) <= 1e-3  # the lowest foot point is on the floor every frame
+    floor = float(r.floor) + jnp.asarray(clear)[None]  # each point's floor: the captured one
+    ours = G.foot_skating(r.foot_positions, mot.frame_time_s, floor, height_threshold=th)
     print(f"\nskating 07_01: synthesized {float(ours.mean_speed):.2f} units/s "
           f"({float(ours.mean_per_frame):.4f}/frame), real {float(real_skate.mean_speed):.2f} "
           f"units/s ({float(real_skate.mean_per_frame):.4f}/frame)")
     assert float(ours.mean_speed) <= float(real_skate.mean_speed)
-    depth_max, _ = G.ground_penetration(r.foot_positions, clear)
+    depth_max, _ = G.ground_penetration(r.foot_positions, clear, ground=r.floor)
     assert float(depth_max) <= 1e-3
     # It walks: alternating contacts, double support, no flight, a plausible pace along +Z.
     c = C.foot_contacts(np.asarray(r.foot_positions), mot.frame_time_s)
@@ -474,7 +474,7 @@ def test_exported_bvh_carries_root_motion(tmp_path):
     b = read_bvh_oracle(tmp_path / "walk.bvh")
     pos, es = fk_oracle(b, b["frames"][::7])
     feet = np.asarray(C.gather_foot_positions(pos, es, fp))
-    low = (feet[..., 1] - clear).min(axis=(1, 2))
+    low = (feet[..., 1] - clear).min(axis=(1, 2)) - float(r.floor)
     assert np.max(np.abs(low)) < 2e-3
     assert back.channels[-1, 2] > 150.0
 

@@ -492,5 +492,5 @@ def test_grounded_synthesis_is_rig_invariant(gait_fits, key):
     assert np.abs(pb - pa).max() < 0.01 * leg, np.abs(pb - pa).max() / leg
     advance_a, advance_b = (np.linalg.norm((p[-1] - p[0])[[0, 2]]) for p in (pa, pb))
     assert advance_b == pytest.approx(advance_a, rel=0.01)
-    skate = [float(gait.foot_skating(r.foot_positions, dt, r.clearance[None]).mean_speed) for r in (a, b)]
+    skate = [float(gait.foot_skating(r.foot_positions, dt, r.floor + r.clearance[None]).mean_speed) for r in (a, b)]
     assert skate[1] == pytest.approx(skate[0], rel=0.01), skate

@@ -258,6 +258,46 @@ def contact_height(
     return -jnp.min(lowest_points(foot_local, clearance, up_axis=up_axis), axis=-1)
 
 
+#: The captured floor of a model: this quantile of its lowest foot point's height over one cycle
+#: (`captured_floor`; a walk's every phase, a run's stance; a run is in flight at most ~40% of it).
+FLOOR_QUANTILE = 0.2
+
+
+def cycle_lowest(
+    root_height: Float[ArrayLike, " K"],
+    foot_local: Float[ArrayLike, "K 2 P 3"],
+    clearance: Float[ArrayLike, "2 P"],
+    *,
+    up_axis: int = 1,
+) -> Float[Array, " K"]:
+    """`[K]` the lowest foot point's height (clearance off) over a model's own cycle, where the
+    model's own root height (its `root.y` channel, the capture's) puts it.
+
+    Arguments:
+        root_height: `[K]` the model's own root height at K phases (file units).
+        foot_local: `[K, 2, P, 3]` foot points, pelvis at the origin.
+        clearance: `[2, P]` sole clearances.
+        up_axis: index of the up axis.
+    """
+    return jnp.asarray(root_height) + jnp.min(lowest_points(foot_local, clearance, up_axis=up_axis), axis=-1)
+
+
+def captured_floor(own_lowest: Float[ArrayLike, " K"]) -> Float[Array, ""]:
+    """The floor a model was captured on: the `FLOOR_QUANTILE` of its own lowest foot point over
+    one cycle (`cycle_lowest`). The one floor rule of every grounded synthesis (`synthesize_gait`,
+    hence `synth` and `interpolate`, and `grounded_transition`): the hip rule's lowest foot point
+    stands on it, so the feet stand where the capture's stood (Bandai-1's foot joints ~4 cm above
+    the file's y = 0, CMU's toe tips about at it), not on the file's y = 0.
+
+    Arguments:
+        own_lowest: `[K]` heights from `cycle_lowest` (file units).
+
+    Returns:
+        The floor's height (file units, up axis).
+    """
+    return jnp.quantile(jnp.asarray(own_lowest), FLOOR_QUANTILE)
+
+
 def root_height(
     groins: Float[ArrayLike, "T 2 3"],
     foot_local: Float[ArrayLike, "T 2 P 3"],

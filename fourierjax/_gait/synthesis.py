@@ -19,7 +19,16 @@ from fourierjax._gait.common import (
     pose_points,
     resolve_body,
 )
-from fourierjax._gait.hip import HipRule, contact_height, hip_rule, hip_rule_curves, leg_heights, lowest_points
+from fourierjax._gait.hip import (
+    HipRule,
+    captured_floor,
+    contact_height,
+    cycle_lowest,
+    hip_rule,
+    hip_rule_curves,
+    leg_heights,
+    lowest_points,
+)
 from fourierjax._gait.metrics import estimate_sole_clearance
 from fourierjax._gait.root import apply_step, root_trajectory
 from fourierjax._jit import filter_jit
@@ -43,10 +52,13 @@ class GaitResult(eqx.Module):
     - `phase`: `[T]` cycle phase of each frame (radians).
     - `root_position`: `[T, 3]` world root (pelvis) position, file units.
     - `foot_positions`: `[T, 2, P, 3]` world foot points (left, right).
-    - `lowest`: `[T, 2]` height of each foot's lowest point above the ground (sole clearance
+    - `lowest`: `[T, 2]` height of each foot's lowest point above the floor (sole clearance
       taken off).
     - `hip`: the `HipRule` (L, N, lift, flight, l_max).
     - `clearance`: `[2, P]` the sole clearances used.
+    - `floor`: the floor's height (file units, up axis): the model's captured floor
+      (`captured_floor`), where the hip rule's lowest foot point stands; each foot point's
+      floor is `floor + clearance`.
     """
 
     features: Array
@@ -56,6 +68,7 @@ class GaitResult(eqx.Module):
     lowest: Array
     hip: HipRule
     clearance: Array
+    floor: Array
 
 
 def _integrate_trapezoid(v, dt):
@@ -84,20 +97,20 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
         return pose_points(skeleton, rep, idx, (*groins, pelvis), f, pelvis)
 
     # Lmax over one whole cycle of the (stepped) model, whatever the speed schedule; the sole
-    # clearances (if not given) from a cycle of the unstepped model (the foot's geometry must
-    # not change with the step length). One vmapped FK over all poses: one FK graph to compile.
+    # clearances (if not given) and the captured floor from a cycle of the unstepped model (the
+    # foot's geometry and the floor must not change with the step length). One vmapped FK over
+    # all poses: one FK graph to compile.
     K = num_cycle_samples
     grid = jnp.linspace(0.0, 2 * jnp.pi, K, endpoint=False, dtype=phase.dtype)
-    poses = [feats, synthesize_phase(stepped, grid)]
-    if clearance is None:
-        poses.append(synthesize_phase(model, grid))
-    all_feet, all_joints = jax.vmap(points)(jnp.concatenate(poses, axis=0))
+    own = synthesize_phase(model, grid)
+    all_feet, all_joints = jax.vmap(points)(jnp.concatenate([feats, synthesize_phase(stepped, grid), own], axis=0))
     all_groins, pelvis_local = all_joints[:, :2], all_joints[:num_frames, 2]
     foot_local, groin_local = all_feet[:num_frames], all_groins[:num_frames]
     cyc_feet = all_feet[num_frames : num_frames + K]
     cyc_groins = all_groins[num_frames : num_frames + K]
     if clearance is None:
         clearance = estimate_sole_clearance(all_feet[num_frames + K :], up_axis=up_axis)
+    floor = captured_floor(cycle_lowest(own[:, 2], all_feet[num_frames + K :], clearance, up_axis=up_axis))
     soft = temperature if rule == "smooth" else None
     cyc_leg = leg_heights(cyc_groins, cyc_feet, clearance, up_axis=up_axis, temperature=soft)
     leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
@@ -111,12 +124,17 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     # Both roots are cheap next to FK: compute both and select, so `root_motion` is traced
     # (one compilation serves both).
     speed_t = jnp.broadcast_to(jnp.asarray(speed, feats.dtype), (num_frames,))
-    height = contact_height(foot_local, clearance, up_axis=up_axis) + hip.lift
+    height = contact_height(foot_local, clearance, up_axis=up_axis) + hip.lift  # over the floor
     # In flight the root moves with the model's own (captured) root velocity at this pace.
     v_model = feats[:, :2] * speed_t[:, None]
     flight_step = 0.5 * (v_model[1:] + v_model[:-1]) * frame_time_s
     root_on = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis,
                               flight_step=flight_step, pelvis_height=height + pelvis_local[:, up_axis])
+    # The lowest foot point on the model's captured floor, not the file's height 0: Bandai-1's
+    # synthesized walks stood 4 cm lower than their capture. (`root_trajectory` works over the
+    # floor: its contacts are heights above it.)
+    height = height + floor
+    root_on = root_on.at[:, up_axis].set(height)
     vel = jnp.gradient(root_on, axis=0) / frame_time_s
     feats_on = feats.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]])
     feats_on = feats_on.at[:, 2].set(height)
@@ -129,8 +147,8 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     feats = jnp.where(root_motion, feats_on, feats_off)
     root = jnp.where(root_motion, root_on, root_off)
     foot_world = foot_local + root[:, None, None, :]  # explicit ranks: [T, 2, P, 3]
-    lowest = lowest_points(foot_world, clearance, up_axis=up_axis)
-    return GaitResult(feats, phase, root, foot_world, lowest, hip, clearance)
+    lowest = lowest_points(foot_world, clearance, up_axis=up_axis) - floor
+    return GaitResult(feats, phase, root, foot_world, lowest, hip, clearance, floor)
 
 
 def synthesize_gait(
@@ -163,7 +181,8 @@ def synthesize_gait(
 
     Joint angles come from the model at the integrated phase (`apply_step`,
     `integrate_phase`); with `root_motion` the root height is the hip-height rule's
-    (`root_height`: the lowest foot point on the ground, plus the flight lift of eq. 5) and its
+    (`root_height`: the lowest foot point on the ground, plus the flight lift of eq. 5), the
+    ground being the model's captured floor (`captured_floor`, as `grounded_transition`'s), and its
     horizontal path comes from the feet on the ground (`root_trajectory`; in flight, from the
     model's own root velocity at the current pace). Without it, the root
     follows the model's own `root.*` channels (velocities scaled by `speed`). `Lmax` is taken
@@ -310,7 +329,7 @@ def _world_feet(result, skeleton, *, body_map, representation):
     foot_local, _ = jax.vmap(lambda f: pose_points(skeleton, representation, idx, (body_map.pelvis,), f,
                                                    body_map.pelvis))(result.features)
     feet = foot_local + result.root_position[:, None, None, :]
-    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
+    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis)) - result.floor
     return eqx.tree_at(lambda r: (r.foot_positions, r.lowest), result, (feet, lowest))
 
 
@@ -343,9 +362,9 @@ def _locked_result(result, skeleton, intervals, *, body_map, representation, smo
 
     weights = contact_weights(result.phase, intervals)  # in the program: 15 eager ones outside
     feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
-                            root_position=result.root_position, clearance=result.clearance, return_feet=True,
-                            smooth_frames=smooth_frames)
-    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis))
+                            root_position=result.root_position, clearance=result.clearance, ground=result.floor,
+                            return_feet=True, smooth_frames=smooth_frames)
+    lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis)) - result.floor
     return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
 
 

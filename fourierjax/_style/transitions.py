@@ -254,9 +254,6 @@ def transition(
 
 # ------------------------------------------------------------------------- grounded transition
 
-#: The captured floor of a model: this quantile of its lowest foot point's height over one
-#: cycle (a run's stance frames, a walk's every frame; a run is in flight at most ~40% of it).
-_FLOOR_QUANTILE = 0.2
 #: Phases of the cycle grid of a model's floor and own flight lift.
 _FLIGHT_GRID = 64
 #: In stance the blend's own height may lift the lowest foot point this many contact bands.
@@ -293,8 +290,8 @@ def _lowest_local(feet, root, clearance, up):
 
 
 def _captured_floor(model, skeleton, representation, frame_time_s, bmap, clearance, intervals):
-    """The floor under a model's own root height, the `_FLOOR_QUANTILE` of its lowest foot point
-    over one cycle (file units, up axis), and the model's own flight lift `[K]` on that cycle's
+    """The floor under a model's own root height (`gait`'s one floor rule, `captured_floor`, as
+    `synthesize_gait` stands on), and the model's own flight lift `[K]` on that cycle's
     phase grid (`_FLIGHT_GRID` phases from 0): its lowest point's height over the straight line
     joining that height at take-off and at landing, where no foot is in contact
     (`gait.contact_weights` < 1 for both), 0 in contact. A periodic fit drifts in stance (02_03,
@@ -302,6 +299,7 @@ def _captured_floor(model, skeleton, representation, frame_time_s, bmap, clearan
     right's, against 0.5 for the contact band): the height over the floor would count that as
     flight, the height over the take-off line does not."""
     from fourierjax import gait
+    from fourierjax._gait.hip import captured_floor, cycle_lowest
     from fourierjax.fourier import synthesize_phase
 
     K = _FLIGHT_GRID
@@ -309,8 +307,8 @@ def _captured_floor(model, skeleton, representation, frame_time_s, bmap, clearan
     x = synthesize_phase(model, grid)
     _, root, feet, _ = gait.ground_features(x, skeleton, representation, frame_time_s, body_map=bmap,
                                             clearance=clearance)
-    own = jnp.min(x[:, 2, None] + _lowest_local(feet, root, clearance, bmap.up_axis), axis=-1)
-    floor = jnp.quantile(own, _FLOOR_QUANTILE)
+    own = cycle_lowest(x[:, 2], feet - root[:, None, None, :], clearance, up_axis=bmap.up_axis)
+    floor = captured_floor(own)
     contact = jnp.tile(jnp.max(gait.contact_weights(grid, intervals), axis=-1) >= 1.0, 3)
     idx = jnp.arange(3 * K)
     prev = jax.lax.cummax(jnp.where(contact, idx, -1))[K : 2 * K]

@@ -210,7 +210,7 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
     advance[bmap.up_axis] = 0.0
     if args.root_motion:
         n_peak = float(np.max(np.asarray(result.hip.N)))
-        # Both feet off the ground (the hip rule puts the ground at height 0).
+        # Both feet off the ground (the hip rule's ground is the model's captured floor).
         # The hip rule's flight frames (N(t) > gait): the foot lock may lift a foot a leg
         # cannot reach, which is not flight.
         flight = float(np.mean(np.asarray(result.hip.flight) > 0.5))
