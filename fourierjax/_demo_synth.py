@@ -146,9 +146,17 @@ def _gait_bvh(st: _State, name: str, clip: str, model, **kw) -> dict:
     _write_motion(st, name, _import("fourierjax.io.gait_bvh").gait_motion(m[:1], r, model.channel_names, dt))
     lowest = np.asarray(r.lowest).min(axis=1)
     # Flight is the hip rule's (N(t) > gait), as in `synth`'s summary: foot locking may lift a
-    # foot that the leg cannot reach, which is not flight (that is `feet_off_floor_fraction`).
+    # foot that the leg cannot reach, which is not flight (that is `feet_off_floor_fraction`:
+    # no foot within the library's contact band, 2% of the body height, of the floor; a fixed
+    # 1e-3 units counted a foot 0.06 mm up as off the floor, 0.7 of walk_normal's frames).
+    fit = st.fits.get(clip)
+    bm = fit.body_map if fit is not None and fit.body_map is not None else None
+    if bm is None:
+        from fourierjax.body import infer_body_map
+
+        bm = infer_body_map(m)
     info = {"flight_fraction": float(np.mean(np.asarray(r.hip.flight) > 0.5)),
-            "feet_off_floor_fraction": float(np.mean(lowest > 1e-3)),
+            "feet_off_floor_fraction": float(np.mean(lowest > 0.02 * bm.height)),
             "distance_units": float(np.hypot(*(np.asarray(r.root_position[-1] - r.root_position[0])[[0, 2]])))}
     return info
 
