@@ -321,56 +321,54 @@ def _fit_floors(h, hz, slow, starts, threshold, iters=3):
     slopes ``[B, 2]``.
 
     One intercept per point and a shared slope make the least squares separable: the slope
-    solves the 2 × 2 normal equations of the positions centred per point, the intercepts are
-    the per-point means of what is left (equal to `_fit_floor`'s `lstsq` to rounding). A clip
-    whose centred positions leave a chosen direction (near) empty, where `lstsq` would return
-    its minimum-norm answer, is fitted by `_fit_floor` itself.
+    solves the 2 × 2 normal equations of the positions centred per point, each intercept is its
+    point's mean height less the slope times its mean position (equal to `_fit_floor`'s
+    `lstsq` to rounding). All of it comes from each point's weighted moments, one reduction
+    per iteration. A clip whose centred positions leave a chosen direction (near) empty, where
+    `lstsq` would return its minimum-norm answer, is fitted by `_fit_floor` itself.
     """
     N, F, P = h.shape
-    B = len(starts) - 1
+    B, M = len(starts) - 1, F * P
     seg = np.repeat(np.arange(B), np.diff(starts))
-
-    def sums(x):
-        return np.add.reduceat(x, starts[:-1], axis=0)
-
     s = _sorted_within(h, seg)
     cand = slow & (h <= _percentile_rows(s, starts, 30)[seg])
     intercepts = _percentile_rows(s, starts, 2)
     slope = np.zeros((B, 2))
+    # Moments about each point's first frame in its clip: the centred sums cancel little.
+    h0, z0 = h.reshape(N, M)[starts[:-1]], hz.reshape(N, M, 2)[starts[:-1]]
+    dh, dz = h.reshape(N, M) - h0[seg], hz.reshape(N, M, 2) - z0[seg]
+    prods = np.concatenate([np.ones((N, M, 1)), dz, (dz[..., :, None] * dz[..., None, :]).reshape(N, M, 4),
+                            dh[..., None], dh[..., None] * dz], axis=-1)
     going = np.ones(B, bool)
     odd = np.zeros(B, bool)
-    hf, hzf = h.reshape(N, -1), hz.reshape(N, -1, 2)
     for _ in range(iters):
-        w = cand.reshape(N, -1).astype(float)
-        per_point = sums(w)
-        count = per_point.sum(1)
-        going &= (count >= F * P + 2) & (per_point > 0).all(1)
+        mom = np.add.reduceat(cand.reshape(N, M, 1) * prods, starts[:-1], axis=0)  # [B, M, 10]
+        n = mom[..., 0]
+        count = n.sum(1)
+        going &= (count >= M + 2) & (n > 0).all(1)
         if not going.any():
             break
-        centre = sums((w[..., None] * hzf).sum(1)) / np.maximum(count, 1)[:, None]
-        d = hzf - centre[seg, None]
-        wd = w[..., None] * d
-        cov = sums((wd[..., :, None] * d[..., None, :]).sum(1))
+        k = np.maximum(n, 1)
+        mu, hbar = mom[..., 1:3] / k[..., None], mom[..., 7] / k
+        scatter = (mom[..., 3:7].reshape(B, M, 2, 2) - n[..., None, None] * mu[..., :, None] * mu[..., None, :]).sum(1)
+        cross = (mom[..., 8:10] - (n * hbar)[..., None] * mu).sum(1)
+        pos = z0 + mu  # each point's mean position
+        centre = (n[..., None] * pos).sum(1) / np.maximum(count, 1)[:, None]
+        e = pos - centre[:, None]
+        cov = scatter + (n[..., None, None] * e[..., :, None] * e[..., None, :]).sum(1)
         evals, evecs = np.linalg.eigh(cov / np.maximum(count - 1, 1)[:, None, None])
         use = 4 * np.sqrt(np.maximum(evals, 0)) > 10 * threshold[:, None]
-        x = (d @ evecs[seg]) * use[seg, None]  # coordinates along the chosen directions, else 0
-        cnt = np.maximum(per_point, 1)
-        xm = sums(w[..., None] * x) / cnt[..., None]
-        hm = sums(w * hf) / cnt
-        xc, hc = x - xm[seg], hf - hm[seg]
-        wxc = w[..., None] * xc
-        S = sums((wxc[..., :, None] * xc[..., None, :]).sum(1))
-        r = sums((wxc * hc[..., None]).sum(1)) * use
-        pair = use[:, :, None] & use[:, None, :]
-        trace = np.where(use.any(1), np.trace(S * pair, axis1=1, axis2=2), 1.0)
-        S = np.where(pair, S, 0) + np.eye(2) * np.where(use, 0, trace[:, None])[:, None]
+        V = evecs * use[:, None, :]  # the chosen directions, 0 for the others
+        S = np.swapaxes(V, 1, 2) @ scatter @ V
+        r = (np.swapaxes(V, 1, 2) @ cross[..., None])[..., 0]
+        trace = np.where(use.any(1), np.trace(S, axis1=1, axis2=2), 1.0)
+        S = S + np.eye(2) * np.where(use, 0, trace[:, None])[:, None]
         ev = np.linalg.eigvalsh(S)
         bad = going & use.any(1) & (ev[:, 0] <= 1e-9 * ev[:, 1])
         odd |= bad
         S[bad] = np.eye(2)
-        sol = np.linalg.solve(S, r[..., None])[..., 0]
-        new_slope = (evecs @ sol[..., None])[..., 0]
-        new_icpt = (hm - (xm * sol[:, None]).sum(-1) - (centre * new_slope).sum(-1)[:, None])
+        new_slope = (V @ np.linalg.solve(S, r[..., None]))[..., 0]
+        new_icpt = h0 + hbar - (pos * new_slope[:, None]).sum(-1)
         intercepts = np.where(going[:, None, None], new_icpt.reshape(B, F, P), intercepts)
         slope = np.where(going[:, None], new_slope, slope)
         resid = h - intercepts[seg] - (hz * slope[seg, None, None]).sum(-1)
