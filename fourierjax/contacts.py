@@ -255,7 +255,9 @@ def _scale(p: np.ndarray, up_axis: int) -> float:
 
 
 def _fit_floor(h, hz, slow, threshold, iters=3):
-    """Least squares floor with one shared slope and one intercept per point.
+    """Least squares floor with one shared slope and one intercept per point, for one clip
+    (`_fit_floors` fits many at once in closed form; this is its reference, and its answer
+    where the slope is not determined).
 
     The slope is fitted only along horizontal directions the feet actually cover (spread of
     the planted points > 10 thresholds); CMU capture floors tilt by ~1 unit over a walk.
