@@ -401,11 +401,13 @@ def test_batched_floors_and_contacts_equal_the_per_clip_path(source):
     for (p, dt), g in zip(clips, grounds, strict=True):
         ref = _ground_per_clip(p, dt)
         assert (g.height_threshold, g.speed_threshold) == (ref.height_threshold, ref.speed_threshold)
-        # Floors to rounding (the closed form against lstsq), in float64 whatever the input.
+        # Floors to rounding (the closed form against lstsq), in float64 whatever the input:
+        # within 1e-10 of the height threshold (all 175 Bandai-1 clips: 1e-11 units at most,
+        # while the closest height to a threshold is 1.7e-5 away, so no contact frame flips).
         np.testing.assert_allclose(C.floor_heights(g, p), C.floor_heights(ref, p), rtol=0,
-                                   atol=1e-12 * ref.height_threshold)
-        np.testing.assert_allclose(g.intercepts, ref.intercepts, rtol=0, atol=1e-12 * ref.height_threshold)
-        np.testing.assert_allclose(g.slope, ref.slope, rtol=0, atol=1e-13)
+                                   atol=1e-10 * ref.height_threshold)
+        np.testing.assert_allclose(g.intercepts, ref.intercepts, rtol=0, atol=1e-10 * ref.height_threshold)
+        np.testing.assert_allclose(g.slope, ref.slope, rtol=0, atol=1e-12)
         one = C.estimate_ground(p, dt)
         np.testing.assert_allclose(one.intercepts, g.intercepts, rtol=0, atol=1e-12 * ref.height_threshold)
     # Contact masks identical, frame for frame, to the per-clip loop on the per-clip floor.
