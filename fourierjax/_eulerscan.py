@@ -29,8 +29,10 @@ def continuous(flat: np.ndarray, twins: np.ndarray, ok: np.ndarray) -> np.ndarra
     out = np.empty_like(flat)
     chain = ok[1:].all(axis=0)  # columns where every frame follows the frame before
     cols = np.flatnonzero(chain)
-    for b in range(0, cols.size, _BLOCK):  # blocks of columns stay in cache
-        c = cols[b:b + _BLOCK]
+    # Blocks of columns stay in cache; slices (views, not copies) when every column chains.
+    blocks = ([slice(b, b + _BLOCK) for b in range(0, K, _BLOCK)] if cols.size == K
+              else [cols[b:b + _BLOCK] for b in range(0, cols.size, _BLOCK)])
+    for c in blocks:
         f, w = flat[:, c], twins[:, c]
         state, shift = _transitions(f, w, f[:-1], w[:-1])
         out[:, c] = _apply(f, w, *_along_chain(state, shift))
@@ -61,15 +63,33 @@ def _transitions(flat, twins, prev0, prev1):
     shift = np.zeros((2, F, K, 3), np.int64)
     cur, alt = flat[1:], twins[1:]
     for s, prev in ((0, prev0), (1, prev1)):
-        k0 = np.round((prev - cur) / _TWO_PI)
-        k1 = np.round((prev - alt) / _TWO_PI)
-        d0 = np.sum((cur + _TWO_PI * k0 - prev) ** 2, axis=-1)
-        d1 = np.sum((alt + _TWO_PI * k1 - prev) ** 2, axis=-1)
+        k0, k1 = _turns(prev, cur), _turns(prev, alt)
+        d0, d1 = _distance(cur, k0, prev), _distance(alt, k1, prev)
         pick = d1 < d0 - 1e-12
         state[s, 1:] = pick
         shift[s, 1:] = np.where(pick[..., None], k1, k0)
     state[1, 0] = 1
     return state, shift
+
+
+# The two helpers below compute what `np.round((prev - cur) / 2 pi)` and
+# `np.sum((cur + 2 pi k - prev) ** 2, axis=-1)` do, bit for bit, in place (fewer fresh
+# temporaries) and without a reduction over a length-3 axis (numpy adds its three terms in
+# order; its per-row cost is more than the arithmetic).
+def _turns(prev, cur):
+    k = np.subtract(prev, cur)
+    k /= _TWO_PI
+    return np.round(k, out=k)
+
+
+def _distance(cur, k, prev):
+    d = _TWO_PI * k
+    d += cur
+    d -= prev
+    d *= d
+    x = d[..., 0] + d[..., 1]
+    x += d[..., 2]
+    return x
 
 
 def _apply(flat, twins, s, k):

@@ -255,7 +255,9 @@ def _scale(p: np.ndarray, up_axis: int) -> float:
 
 
 def _fit_floor(h, hz, slow, threshold, iters=3):
-    """Least squares floor with one shared slope and one intercept per point.
+    """Least squares floor with one shared slope and one intercept per point, for one clip
+    (`_fit_floors` fits many at once in closed form; this is its reference, and its answer
+    where the slope is not determined).
 
     The slope is fitted only along horizontal directions the feet actually cover (spread of
     the planted points > 10 thresholds); CMU capture floors tilt by ~1 unit over a walk.
@@ -287,6 +289,95 @@ def _fit_floor(h, hz, slow, threshold, iters=3):
         intercepts = sol[: F * P].reshape(F, P) - centre @ slope
         resid = h - intercepts - hz @ slope
         cand = slow & (resid < threshold)
+    return intercepts, slope
+
+
+def _percentile_rows(s: np.ndarray, starts: np.ndarray, q: float) -> np.ndarray:
+    """`np.percentile(x[a:b], q, axis=0)` of every clip ``[a, b)`` of ``starts [B + 1]``, bit for
+    bit (numpy's "linear" method: the same index, weight and interpolation): ``s [N, ...]``
+    sorted within each clip."""
+    n = np.diff(starts)
+    v = (n - 1) * (q / 100)
+    lo = np.floor(v)
+    gamma = (v - lo).reshape((-1,) + (1,) * (s.ndim - 1))
+    lo = np.minimum(lo.astype(np.intp), n - 1)
+    a, b = s[starts[:-1] + lo], s[starts[:-1] + np.minimum(lo + 1, n - 1)]
+    diff = b - a
+    # numpy's _lerp: from the far end when the weight is ≥ 1/2 (exact at both ends).
+    return np.where(gamma >= 0.5, b - diff * (1 - gamma), a + diff * gamma)
+
+
+def _sorted_within(x: np.ndarray, seg: np.ndarray) -> np.ndarray:
+    """Each column of ``x [N, ...]`` sorted within each clip (``seg [N]``, ascending)."""
+    flat = x.reshape(len(x), -1)
+    out = np.empty_like(flat)
+    for c in range(flat.shape[1]):
+        out[:, c] = flat[np.lexsort((flat[:, c], seg)), c]
+    return out.reshape(x.shape)
+
+
+def _fit_floors(h, hz, slow, starts, threshold, iters=3):
+    """`_fit_floor` of B clips at once, in closed form: ``h [N, F, P]`` heights, ``hz
+    [N, F, P, 2]`` horizontal positions and ``slow`` of all clips' frames end to end, clip ``b``
+    at ``[starts[b], starts[b + 1])``, ``threshold [B]``. Returns intercepts ``[B, F, P]`` and
+    slopes ``[B, 2]``.
+
+    One intercept per point and a shared slope make the least squares separable: the slope
+    solves the 2 × 2 normal equations of the positions centred per point, each intercept is its
+    point's mean height less the slope times its mean position (equal to `_fit_floor`'s
+    `lstsq` to rounding). All of it comes from each point's weighted moments, one reduction
+    per iteration. A clip whose centred positions leave a chosen direction (near) empty, where
+    `lstsq` would return its minimum-norm answer, is fitted by `_fit_floor` itself.
+    """
+    N, F, P = h.shape
+    B, M = len(starts) - 1, F * P
+    seg = np.repeat(np.arange(B), np.diff(starts))
+    s = _sorted_within(h, seg)
+    cand = slow & (h <= _percentile_rows(s, starts, 30)[seg])
+    intercepts = _percentile_rows(s, starts, 2)
+    slope = np.zeros((B, 2))
+    # Moments about each point's first frame in its clip: the centred sums cancel little.
+    h0, z0 = h.reshape(N, M)[starts[:-1]], hz.reshape(N, M, 2)[starts[:-1]]
+    dh, dz = h.reshape(N, M) - h0[seg], hz.reshape(N, M, 2) - z0[seg]
+    prods = np.concatenate([np.ones((N, M, 1)), dz, (dz[..., :, None] * dz[..., None, :]).reshape(N, M, 4),
+                            dh[..., None], dh[..., None] * dz], axis=-1)
+    going = np.ones(B, bool)
+    odd = np.zeros(B, bool)
+    for _ in range(iters):
+        mom = np.add.reduceat(cand.reshape(N, M, 1) * prods, starts[:-1], axis=0)  # [B, M, 10]
+        n = mom[..., 0]
+        count = n.sum(1)
+        going &= (count >= M + 2) & (n > 0).all(1)
+        if not going.any():
+            break
+        k = np.maximum(n, 1)
+        mu, hbar = mom[..., 1:3] / k[..., None], mom[..., 7] / k
+        scatter = (mom[..., 3:7].reshape(B, M, 2, 2) - n[..., None, None] * mu[..., :, None] * mu[..., None, :]).sum(1)
+        cross = (mom[..., 8:10] - (n * hbar)[..., None] * mu).sum(1)
+        pos = z0 + mu  # each point's mean position
+        centre = (n[..., None] * pos).sum(1) / np.maximum(count, 1)[:, None]
+        e = pos - centre[:, None]
+        cov = scatter + (n[..., None, None] * e[..., :, None] * e[..., None, :]).sum(1)
+        evals, evecs = np.linalg.eigh(cov / np.maximum(count - 1, 1)[:, None, None])
+        use = 4 * np.sqrt(np.maximum(evals, 0)) > 10 * threshold[:, None]
+        V = evecs * use[:, None, :]  # the chosen directions, 0 for the others
+        S = np.swapaxes(V, 1, 2) @ scatter @ V
+        r = (np.swapaxes(V, 1, 2) @ cross[..., None])[..., 0]
+        trace = np.where(use.any(1), np.trace(S, axis1=1, axis2=2), 1.0)
+        S = S + np.eye(2) * np.where(use, 0, trace[:, None])[:, None]
+        ev = np.linalg.eigvalsh(S)
+        bad = going & use.any(1) & (ev[:, 0] <= 1e-9 * ev[:, 1])
+        odd |= bad
+        S[bad] = np.eye(2)
+        new_slope = (V @ np.linalg.solve(S, r[..., None]))[..., 0]
+        new_icpt = h0 + hbar - (pos * new_slope[:, None]).sum(-1)
+        intercepts = np.where(going[:, None, None], new_icpt.reshape(B, F, P), intercepts)
+        slope = np.where(going[:, None], new_slope, slope)
+        resid = h - intercepts[seg] - (hz * slope[seg, None, None]).sum(-1)
+        cand = np.where(going[seg, None, None], slow & (resid < threshold[seg, None, None]), cand)
+    for b in np.flatnonzero(odd):
+        a, e = starts[b], starts[b + 1]
+        intercepts[b], slope[b] = _fit_floor(h[a:e], hz[a:e], slow[a:e], threshold[b], iters)
     return intercepts, slope
 
 
@@ -325,30 +416,40 @@ def estimate_ground(
     Returns:
         A `GroundEstimate`.
     """
-    return _ground(_as_points(foot_positions), frame_time_s, up_axis, ground_height,
-                   height_threshold, speed_threshold)
+    return _grounds([_as_points(foot_positions)], [frame_time_s], up_axis, ground_height,
+                    height_threshold, speed_threshold)[0][0]
 
 
-def _ground(p, frame_time_s, up_axis, ground_height, height_threshold, speed_threshold,
-            speed=None) -> GroundEstimate:
-    """`estimate_ground` of points ``p`` (`_as_points`), given their speeds (`_speeds`) where
-    the caller has them."""
-    frame_time_s = number(frame_time_s, "frame_time_s:", positive=True)
-    up_axis = _axis(up_axis)
-    scale = _scale(p, up_axis)
-    th = (0.25 * scale if height_threshold is None
-          else number(height_threshold, "height_threshold:", positive=True))
-    tv = (6.0 * scale if speed_threshold is None
-          else number(speed_threshold, "speed_threshold:", positive=True))
-    h = p[..., up_axis]
-    hz = np.delete(p, up_axis, axis=-1)
+def _grounds(ps, frame_times_s, up_axis, ground_height, height_threshold, speed_threshold):
+    """`estimate_ground` of every clip of ``ps`` (each from `_as_points`), the floors fitted
+    together (`_fit_floors`). Returns the grounds and, for all clips' frames end to end
+    (``[N, F, P]``), each point's height above its floor and its speed, with each clip's first
+    frame there (``starts [B + 1]``)."""
+    dts = [number(dt, "frame_time_s:", positive=True) for dt in frame_times_s]
+    up = _axis(up_axis)
+    if height_threshold is not None:
+        height_threshold = number(height_threshold, "height_threshold:", positive=True)
+    if speed_threshold is not None:
+        speed_threshold = number(speed_threshold, "speed_threshold:", positive=True)
     if ground_height is not None:
         ground_height = number(ground_height, "ground_height:")
-        intercepts = np.maximum(np.percentile(h, 2, axis=0), ground_height)
-        return GroundEstimate(intercepts, np.zeros(2), th, tv)
-    speed = _speeds(p, frame_time_s) if speed is None else speed
-    intercepts, slope = _fit_floor(h, hz, speed < tv, th)
-    return GroundEstimate(intercepts, slope, th, tv)
+    starts = np.cumsum([0] + [len(p) for p in ps])
+    pts = np.concatenate(ps)
+    speed = np.concatenate([_speeds(p, dt) for p, dt in zip(ps, dts, strict=True)])
+    scale = np.array([_scale(p, up) for p in ps])
+    B = len(ps)
+    th = 0.25 * scale if height_threshold is None else np.full(B, height_threshold)
+    tv = 6.0 * scale if speed_threshold is None else np.full(B, speed_threshold)
+    h, hz = pts[..., up], np.delete(pts, up, axis=-1)
+    seg = np.repeat(np.arange(B), np.diff(starts))
+    if ground_height is None:
+        intercepts, slope = _fit_floors(h, hz, speed < tv[seg, None, None], starts, th)
+    else:
+        lowest = _percentile_rows(_sorted_within(h, seg), starts, 2)
+        intercepts, slope = np.maximum(lowest, ground_height), np.zeros((B, 2))
+    above = h - intercepts[seg] - (hz * slope[seg, None, None]).sum(-1)
+    grounds = [GroundEstimate(intercepts[b], slope[b], float(th[b]), float(tv[b])) for b in range(B)]
+    return grounds, above, speed, starts
 
 
 def foot_contacts(
@@ -427,23 +528,20 @@ def foot_contacts_many(
     ps = [_as_points(p) for p in foot_positions]
     if not ps:
         return []
-    T = max(len(p) for p in ps)
-    F, P = ps[0].shape[1:3]
-    enter = np.zeros((T, len(ps), F, P), bool)
+    grounds, above, speed, starts = _grounds(ps, frame_times_s, up_axis, ground_height,
+                                             height_threshold, speed_threshold)
+    seg = np.repeat(np.arange(len(ps)), np.diff(starts))
+    th = np.array([g.height_threshold for g in grounds])[seg, None, None]
+    tv = np.array([g.speed_threshold for g in grounds])[seg, None, None]
+    # Padded to the longest clip, time first: [T, B, F, P] (frames after a clip's end: off).
+    at = (np.arange(len(seg)) - starts[seg], seg)
+    enter = np.zeros((max(len(p) for p in ps), len(ps)) + above.shape[1:], bool)
     stay = np.zeros_like(enter)
-    min_len = np.zeros(len(ps), int)
-    max_gap = np.zeros(len(ps), int)
-    for i, (p, dt) in enumerate(zip(ps, frame_times_s, strict=True)):
-        dt = number(dt, "frame_time_s:", positive=True)
-        speed = _speeds(p, dt)
-        g = _ground(p, dt, up_axis, ground_height, height_threshold, speed_threshold, speed)
-        up = int(up_axis)  # checked by _ground
-        above = p[..., up] - g.intercepts - np.delete(p, up, axis=-1) @ g.slope
-        n = len(p)
-        enter[:n, i] = (above < g.height_threshold) & (speed < g.speed_threshold)
-        stay[:n, i] = (above < 1.5 * g.height_threshold) & (speed < 1.5 * g.speed_threshold)
-        min_len[i] = max(1, int(round(min_contact_s / dt)))
-        max_gap[i] = int(round(max_gap_s / dt))
+    enter[at] = (above < th) & (speed < tv)
+    stay[at] = (above < 1.5 * th) & (speed < 1.5 * tv)
+    dts = np.array([float(dt) for dt in frame_times_s])
+    min_len = np.maximum(1, np.round(min_contact_s / dts).astype(int))
+    max_gap = np.round(max_gap_s / dts).astype(int)
     on = _hysteresis(enter, stay).any(axis=3)  # [T, B, F]: any point of the foot
     lengths = np.array([len(p) for p in ps])[:, None]
     out = np.zeros(on.shape, bool)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import pathlib
 
 import jax
 import jax.numpy as jnp
@@ -333,7 +334,7 @@ def test_vectorised_hysteresis_and_cleanup_equal_the_loops():
 def _foot_contacts_loop(p, dt):
     """The detection as it was: eager `point_speeds`, per-point hysteresis and cleanup loops."""
     p = C._as_points(p)
-    g = C.estimate_ground(p, dt)
+    g = _ground_per_clip(p, dt)
     above = p[..., 1] - g.intercepts - np.delete(p, 1, axis=-1) @ g.slope
     speed = np.asarray(C.point_speeds(p, dt))
     enter = (above < g.height_threshold) & (speed < g.speed_threshold)
@@ -354,3 +355,92 @@ def test_foot_contacts_many_equals_the_per_clip_loop_on_bundled_clips():
         assert got.shape == ref.shape and np.array_equal(got, ref)
         assert np.array_equal(C.foot_contacts(p, dt), ref)
         assert 0.2 < got.mean() < 0.9  # not a degenerate all-off or all-on detection
+
+
+# -- the batched floor fit against the per-clip least squares ---------------------------------
+BANDAI = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+
+
+def _ground_per_clip(p, dt):
+    """`estimate_ground` as it was: one clip, the floor by `_fit_floor`'s `lstsq` iterations."""
+    p = C._as_points(p)
+    scale = C._scale(p, 1)
+    th, tv = 0.25 * scale, 6.0 * scale
+    speed = C._speeds(p, dt)
+    intercepts, slope = C._fit_floor(p[..., 1], np.delete(p, 1, axis=-1), speed < tv, th)
+    return C.GroundEstimate(intercepts, slope, th, tv)
+
+
+@functools.cache
+def _bandai_feet():
+    """Foot points and frame times of Bandai-1's clips (every 4th), when ``../shared`` has them."""
+    from fourierjax._motion._poses import foot_positions_of
+    from fourierjax.body import infer_body_map
+    from fourierjax.io.bvh import read_bvh
+
+    out = []
+    for path in sorted(BANDAI.glob("*.bvh"))[::4] if BANDAI.is_dir() else []:
+        m = read_bvh(path)
+        out.append((np.asarray(foot_positions_of(m, body_map=infer_body_map(m)), float), m.frame_time_s))
+    return out
+
+
+def _real_feet(source):
+    if source == "cmu":
+        return [clip_feet(n) for n in WALKS + RUNS]
+    if not BANDAI.is_dir():
+        pytest.skip(f"Bandai-Namco data not found at {BANDAI}")
+    return _bandai_feet()
+
+
+@pytest.mark.parametrize("source", ["cmu", "bandai"])
+def test_batched_floors_and_contacts_equal_the_per_clip_path(source):
+    clips = _real_feet(source)
+    feet, dts = [p for p, _ in clips], [dt for _, dt in clips]
+    grounds = C._grounds([C._as_points(p) for p in feet], dts, 1, None, None, None)[0]
+    for (p, dt), g in zip(clips, grounds, strict=True):
+        ref = _ground_per_clip(p, dt)
+        assert (g.height_threshold, g.speed_threshold) == (ref.height_threshold, ref.speed_threshold)
+        # Floors to rounding (the closed form against lstsq), in float64 whatever the input:
+        # within 1e-10 of the height threshold (all 175 Bandai-1 clips: 1e-11 units at most,
+        # while the closest height to a threshold is 1.7e-5 away, so no contact frame flips).
+        np.testing.assert_allclose(C.floor_heights(g, p), C.floor_heights(ref, p), rtol=0,
+                                   atol=1e-10 * ref.height_threshold)
+        np.testing.assert_allclose(g.intercepts, ref.intercepts, rtol=0, atol=1e-10 * ref.height_threshold)
+        np.testing.assert_allclose(g.slope, ref.slope, rtol=0, atol=1e-12)
+        one = C.estimate_ground(p, dt)
+        np.testing.assert_allclose(one.intercepts, g.intercepts, rtol=0, atol=1e-12 * ref.height_threshold)
+    # Contact masks identical, frame for frame, to the per-clip loop on the per-clip floor.
+    for got, (p, dt) in zip(C.foot_contacts_many(feet, dts), clips, strict=True):
+        assert np.array_equal(got, _foot_contacts_loop(p, dt))
+
+
+def test_percentile_rows_are_numpy_percentiles_bit_for_bit():
+    rng = np.random.default_rng(0)
+    n = np.array([1, 2, 3, 7, 50, 51, 101])
+    starts = np.concatenate([[0], np.cumsum(n)])
+    x = rng.normal(size=(starts[-1], 2, 3))
+    seg = np.repeat(np.arange(len(n)), n)
+    s = C._sorted_within(x, seg)
+    for q in (0, 2, 30, 50, 97.5, 100):
+        got = C._percentile_rows(s, starts, q)
+        for b in range(len(n)):
+            assert np.array_equal(got[b], np.percentile(x[starts[b]:starts[b + 1]], q, axis=0))
+
+
+def test_batched_floor_falls_back_on_a_degenerate_clip():
+    # Each foot planted on one spot, the two spots 100 units apart: the slope's direction is
+    # chosen (the spread) but each point's centred positions are 0 along it, so the slope is not
+    # determined and lstsq's minimum-norm answer is the floor (the clip goes through `_fit_floor`).
+    T = 20
+    p = np.zeros((T, 2, 1, 3))
+    p[:, 1, 0, 2] = 100.0
+    p[:, 1, 0, 1] = 1.0
+    p[::2, :, 0, 1] += 0.01  # not a constant height
+    h, hz = p[..., 1], np.delete(p, 1, axis=-1)
+    slow = np.ones(h.shape, bool)
+    got = C._fit_floors(h, hz, slow, np.array([0, T]), np.array([0.5]))
+    ref = C._fit_floor(h, hz, slow, 0.5)
+    assert np.abs(ref[1]).max() > 1e-6  # lstsq spread the step over the slope
+    np.testing.assert_allclose(got[0][0], ref[0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got[1][0], ref[1], rtol=0, atol=1e-14)

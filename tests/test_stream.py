@@ -140,6 +140,21 @@ def test_euler_continuity_without_a_frame_loop_equals_the_loop():
     assert np.abs(got - e).max() > 1.0  # something was unwrapped
 
 
+def test_euler_continuity_in_blocks_of_columns_equals_the_loop():
+    # More columns than one block (`_eulerscan._BLOCK`): every column chained (slices of the
+    # columns), then a few with a glitch (the others picked out by index).
+    from fourierjax import _eulerscan
+
+    rng = np.random.default_rng(3)
+    F, K = 40, 2 * _eulerscan._BLOCK + 37
+    a = np.cumsum(rng.normal(0, 0.4, (F, K, 3)), axis=0)
+    a = (a + np.pi) % (2 * np.pi) - np.pi
+    valid = np.ones((F, K), bool)
+    assert np.array_equal(M.make_euler_continuous(a, "ZXY", valid), _euler_continuous_loop(a, "ZXY", valid))
+    valid[rng.integers(1, F, 9), rng.integers(0, K, 9)] = False
+    assert np.array_equal(M.make_euler_continuous(a, "ZXY", valid), _euler_continuous_loop(a, "ZXY", valid))
+
+
 @pytest.fixture(scope="module")
 def chunk():
     """Short clips (one length bucket) of different lengths and skeletons: a CMU walk and a run,
