@@ -35,6 +35,20 @@ def crowd_models(num_chars: int, seed: int = 0):
     return m.skeleton(), models
 
 
+def frame_clock(fps: float = 60.0):
+    """`(clock, tick)`: `tick()` advances `clock["t"]` (seconds) by one animation frame and returns
+    it as a float32 scalar, so each timed call of a crowd sees a new time (nothing is cached)."""
+    import jax.numpy as jnp
+
+    clock = {"t": 0.0}
+
+    def tick():
+        clock["t"] += 1 / fps
+        return jnp.asarray(clock["t"], jnp.float32)
+
+    return clock, tick
+
+
 def make_crowd_frame(fused_basis: bool = False):
     """The jitted per-frame step: `(skeleton, models, t) -> joint positions [B, J, 3]`.
 
@@ -71,11 +85,7 @@ def run(size: str) -> list[Record]:
     repeats = 15 if size == "full" else 2
     skel, models = crowd_models(B)
     crowd = crowd_mod.make_crowd(skel, models)
-    clock = {"t": 0.0}
-
-    def tick():
-        clock["t"] += 1 / 60
-        return jnp.asarray(clock["t"], jnp.float32)
+    clock, tick = frame_clock()
 
     t0 = time.perf_counter()
     jax.block_until_ready(crowd_mod.crowd_positions(crowd, jnp.float32(0.0)))

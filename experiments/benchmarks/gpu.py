@@ -282,7 +282,7 @@ def crowd_records(small: bool, device: str) -> list[Record]:
     import jax
     import jax.numpy as jnp
 
-    from experiments.benchmarks.crowd import crowd_models
+    from experiments.benchmarks.crowd import crowd_models, frame_clock
     from experiments.benchmarks.numpy_fk import numpy_fk
     from experiments.benchmarks.synthesis import numpy_synthesize
     from fourierjax import _fk
@@ -295,11 +295,7 @@ def crowd_records(small: bool, device: str) -> list[Record]:
         try:
             skel, models = crowd_models(num)
             crowd = crowd_mod.make_crowd(skel, models)
-            clock = {"t": 0.0}
-
-            def tick():
-                clock["t"] += 1 / 60
-                return jnp.asarray(clock["t"], jnp.float32)
+            _, tick = frame_clock()
 
             t0 = time.perf_counter()
             jax.block_until_ready(crowd_mod.crowd_positions(crowd, jnp.float32(0.0)))

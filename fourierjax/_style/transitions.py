@@ -283,12 +283,6 @@ class GroundedTransition(eqx.Module):
     floor: Array
 
 
-def _lowest_local(feet, root, clearance, up):
-    """`[T, 2]` each foot's lowest point (clearance off) relative to the pelvis, up axis."""
-    y = feet[..., up] - root[:, None, None, up]
-    return jnp.min(y - clearance[None], axis=-1)
-
-
 def _captured_floor(model, skeleton, representation, frame_time_s, bmap, clearance, intervals):
     """The floor under a model's own root height (`gait`'s one floor rule, `captured_floor`, as
     `synthesize_gait` stands on), and the model's own flight lift `[K]` on that cycle's
@@ -417,6 +411,7 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
     ``smooth_frames`` None for no foot lock."""
     from fourierjax import gait
     from fourierjax._gait.footlock import CONTACT_HEIGHT_FRACTION
+    from fourierjax._gait.hip import lowest_points
 
     rep, up = a.representation, int(body_map.up_axis)
     feats, root, feet, clearance = gait.ground_features(x, skeleton, rep, frame_time_s, body_map=body_map,
@@ -448,7 +443,7 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
         feats, feet = gait.lock_feet(feats, skeleton, weights, body_map=body_map, representation=rep,
                                      root_position=root, clearance=clearance, ground=floor_a, return_feet=True,
                                      smooth_frames=smooth_frames)
-    lowest = _lowest_local(feet, jnp.zeros_like(root), clearance, up) - floor[:, None]
+    lowest = lowest_points(feet, clearance, up_axis=up) - floor[:, None]
     return GroundedTransition(feats, root, feet, lowest, s, theta, clearance, jnp.asarray(floor_a))
 
 
