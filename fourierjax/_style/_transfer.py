@@ -143,9 +143,9 @@ def transfer(
             Weights in [0, 1] are unchanged. To exaggerate a finished transfer `t` (say one
             with `weight="cv"`), superpose its characteristic against the neutral target:
             `superpose(neutral, [characteristic(t, neutral)], [1.5], method="phasor",
-            saturation=0.05)`; on Bandai-1 that keeps every weight in [0, 1.5] within the
-            clips' joint speeds per radian of phase, where the plain extrapolation reached
-            1.21x (`docs/findings.md`, section 3).
+            saturation=0.05)`; on Bandai-1 that keeps every weight in [0, 1.5] within 1 % of
+            the clips' largest joint jump per radian of phase (worst 1.008x), where the plain
+            extrapolation reached 1.21x (`docs/findings.md`, section 3b).
 
     Tangent models: eq8 and content_mean work through `characteristic`, `superpose` and
     `content_mean` (the clip means' differences composed on the target's, rig-invariant).

@@ -347,8 +347,9 @@ def superpose(
             with slope 1 at the knees; weights in [0, 1] are unchanged). A characteristic
             then never adds more than `1 + s` of its swings or its cadence. On Bandai-1 the
             best content-mean transfer, extrapolated to 1.5 plainly, moved the toes 1.21x
-            faster per radian of phase than any clip it was built from; `s = 0.05` keeps
-            every weight in [0, 1.5] within them (`docs/findings.md`, section 3).
+            faster per radian of phase than any clip it was built from; with `s = 0.05` every
+            weight in [0, 1.5] stays within 1 % of them (worst 1.008x; `s = 0.02`: 0.995x;
+            `docs/findings.md`, section 3b).
 
     Returns:
         A FourierModel with the static fields of `base`. Raises `UserError` for non-finite
