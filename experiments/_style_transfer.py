@@ -10,7 +10,17 @@ import numpy as np
 METHODS = ("baseline", "content_mean_only", "eq8", "eq8_phasor", "amplitude_ratio", "eq8_ls_weight",
            "ls_weights", "harmonic_weights", "group_weights", "ridge_map", "content_mean", "content_mean_w",
            "content_mean_cv", "content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv",
-           "content_mean_rec_cv")
+           "content_mean_cadence_cv_sat", "content_mean_rec_cv")
+#: Methods whose extrapolation saturates (`style.superpose(saturation=SATURATION)`): the
+#: transfer is the unsaturated method's at its weight (<= 1), and the limb-flip line beyond 1
+#: moves the posture by the weight, the swings and the cadence by the saturated weight.
+SATURATED = {"content_mean_cadence_cv_sat": "content_mean_cadence_cv"}
+#: Their saturation: the swings and the cadence never beyond 1.05 of the transfer's. Not tuned
+#: per data set (0.02 and 0.1 are compared in docs/findings.md, section 3).
+SATURATION = 0.05
+#: Methods of the per-weight limb-flip table (`flips_by_weight`): eq. 8 plain, the distance
+#: winner and its saturated form.
+FLIP_TABLE_METHODS = ("eq8", "content_mean_cadence_cv", "content_mean_cadence_cv_sat")
 
 
 def branch_vectors(models, reference):

@@ -26,7 +26,10 @@ from experiments._style_classify import CLASSIFIERS, classify, pca_fit
 from experiments._style_data import find_clips, fit_clips
 from experiments._style_features import feature_matrix, features
 from experiments._style_transfer import (
+    FLIP_TABLE_METHODS,
     METHODS,
+    SATURATED,
+    SATURATION,
     amplitude_ratio,
     branch_vectors,
     fit_recognition_weight,
@@ -261,7 +264,7 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
         first_take.setdefault((c, s), i)
     styles = sorted({c["style"] for c in clips})
     y = np.array([c["style"] for c in clips], object)
-    trows, flips, wrows, gain_omega, ftrows, rec_weights = [], [], [], [], [], []
+    trows, flips, wrows, gain_omega, ftrows, rec_weights, fwrows = [], [], [], [], [], [], []
     fx_all: dict[int, dict] = {}  # features of the real clips the other-contents scorer reads
     # per-channel gains are refused on tangent models (`style.fit_transfer_gains`): a gain per
     # tangent channel does not commute with a change of joint frames; those methods get a row
@@ -343,6 +346,11 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
             gain_omega.append(float(cadence[-1]))
             cand["content_mean_cadence_cv"] = style.transfer(a, others_src, others_dst, method="content_mean",
                                                              gains=cadence, weight=w_cv)
+            # the same with its extrapolation saturated: the same model at w_cv <= 1; the flip line
+            # beyond 1 saturates the swings and the cadence (below)
+            cand["content_mean_cadence_cv_sat"] = style.transfer(a, others_src, others_dst, method="content_mean",
+                                                                 gains=cadence, weight=w_cv,
+                                                                 saturation=SATURATION)
             # the weight the scorer recognises best on the other styles (their real target clips
             # only, s left out of the scorer too), with the cadence gain; grid: the sweep's weights
             keep = [k for k, x in enumerate(sty) if x != s]
@@ -412,7 +420,8 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 d = float(style.cycle_distance(cand[mth], target, skel, num_samples=ns, body_map=bm))
                 trows.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "distance": d, "ratio": d / d0,
-                              "weight": {"content_mean_rec_cv": w_rec}.get(mth, w_cv if mth.endswith("_cv") else None),
+                              "weight": {"content_mean_rec_cv": w_rec}.get(
+                                  mth, w_cv if mth.endswith(("_cv", "_cv_sat")) else None),
                               **{f"recognised_{c}": bool(rec[c][k] == s) for c in CLASSIFIERS},
                               "recognised_previous_ncm": bool(rec_prev[k] == s),
                               "scorer_to_target": float(d_tgt[k]), "scorer_to_other": float(d_oth[k]),
@@ -434,9 +443,14 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                     continue
                 ref_jump = ref_eq8 if mth in ("eq8", "eq8_phasor", "amplitude_ratio") else ref_all
                 char = style.characteristic(cand[mth], base)
-                line = {w: style.superpose(base, [char], [w], method="phasor") for w in cfg["weights"]}
+                sat = SATURATION if mth in SATURATED else None
+                line = {w: style.superpose(base, [char], [w], method="phasor", saturation=sat) for w in cfg["weights"]}
                 jumps = {w: max_phase_jump(m, skel, body_map=bm) for w, m in line.items()}
                 fjumps = {w: max_jump(m, skel, fts, body_map=bm) for w, m in line.items()}
+                if mth in FLIP_TABLE_METHODS:  # per weight: per radian, per frame and their ratio, the cadence's
+                    fwrows += [{"transfer": f"{src}->{dst}", "style": s, "method": mth, "weight": w,
+                                "phase_ratio": jumps[w] / ref_jump[0], "frame_ratio": fjumps[w] / ref_jump[1]}
+                               for w in line]
                 worst, fworst = max(jumps.values()), max(fjumps.values())
                 upto1 = max((v for w, v in jumps.items() if w <= 1.0), default=float("nan"))
                 fupto1 = max((v for w, v in fjumps.items() if w <= 1.0), default=float("nan"))
@@ -495,6 +509,22 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 {"representation": representation, "transfer": tname, "map": mth,
                  **{f"recognised_{c}": float(np.mean([r[f"recognised_{c}"] for r in rs])) for c in CLASSIFIERS},
                  "n": len(rs)})
+    for tname in dict.fromkeys(r["transfer"] for r in fwrows):
+        for mth in FLIP_TABLE_METHODS:
+            for w in cfg["weights"]:
+                rs = [r for r in fwrows if r["transfer"] == tname and r["method"] == mth and r["weight"] == w]
+                if not rs:
+                    continue
+                ph, fr = max(rs, key=lambda r: r["phase_ratio"]), max(rs, key=lambda r: r["frame_ratio"])
+                # per frame = per radian x the cadence ratio (the model's omega over the omega
+                # at which the clips' largest per-radian jump would give their largest per-frame one)
+                summary.setdefault("flips_by_weight", []).append(
+                    {"representation": representation, "transfer": tname, "method": mth, "weight": w,
+                     "phase_ratio": ph["phase_ratio"], "phase_style": ph["style"],
+                     "frame_ratio": fr["frame_ratio"], "frame_style": fr["style"],
+                     "frame_style_phase_ratio": fr["phase_ratio"],
+                     "frame_style_cadence_ratio": fr["frame_ratio"] / fr["phase_ratio"],
+                     "phase_ok": ph["phase_ratio"] <= 1.01, "frame_ok": fr["frame_ratio"] <= 1.01, "n": len(rs)})
     if rec_weights:
         summary.setdefault("recognition_weight", {})[representation] = {
             "median": float(np.median(rec_weights)), "values": [float(w) for w in rec_weights]}
@@ -549,6 +579,9 @@ def body(argv=None) -> None:
     write_table(all_w, out, "transfer_weights", "Transfer by weight: median distance ratio, recognition by the "
                 "classifier of real target-content clips, largest joint jump per frame over the clips'")
     summary["transfer_weights"] = all_w
+    write_table(summary.get("flips_by_weight", []), out, "flips_by_weight",
+                "Limb flips by weight, worst style: per radian of phase and per frame over the clips' largest; "
+                "frame_style_cadence_ratio = frame_ratio / phase_ratio of the worst per-frame style")
     write_table(summary.get("other_contents_scorer", []), out, "other_contents_scorer",
                 "The other-contents scorer on the real target clips (nearest mean)")
     write_table(summary.get("span_bound", []), out, "transfer_span_bound",

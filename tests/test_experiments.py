@@ -119,6 +119,16 @@ def test_style_space_runs_small(tmp_path):
                          "group_weights"}
     assert rows["content_mean_w"]["median_ratio"] < rows["baseline"]["median_ratio"]
     assert {"content_mean_gains", "content_mean_gains_cv", "content_mean_cadence_cv"} <= set(rows)
+    # the saturated form is the same transfer at its weight (<= 1); beyond 1 its swings saturate
+    sat, plain = rows["content_mean_cadence_cv_sat"], rows["content_mean_cadence_cv"]
+    assert sat["median_ratio"] == pytest.approx(plain["median_ratio"], rel=1e-5)
+    by_w = {(r["method"], r["weight"]): r for r in s["flips_by_weight"]}
+    assert set(by_w) == {(m, w) for m in ("eq8", "content_mean_cadence_cv", "content_mean_cadence_cv_sat")
+                         for w in (0.0, 1.5)}
+    assert by_w[("content_mean_cadence_cv_sat", 0.0)]["phase_ratio"] == pytest.approx(
+        by_w[("content_mean_cadence_cv", 0.0)]["phase_ratio"])
+    assert by_w[("content_mean_cadence_cv_sat", 1.5)]["phase_ratio"] <= by_w[("content_mean_cadence_cv", 1.5)][
+        "phase_ratio"] + 1e-9
     # the oracle (the real target's fit, featurised as the transfers are) is a point of the
     # scorer's training set: anything below 1 would mean the two sides take different paths
     assert all(rows["oracle"][f"recognised_{c}"] == 1.0 for c in ("ncm", "lda", "logreg", "knn"))

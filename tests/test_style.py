@@ -328,6 +328,42 @@ def test_phasor_superposition_adds_signals(x64):
     assert float(style.superpose(base, chars, w, include_omega=False).omega) == float(base.omega)
 
 
+@pytest.mark.parametrize("method", ["polar", "phasor"])
+def test_saturation_extrapolates_the_posture_not_the_swings(x64, method):
+    """`superpose(saturation=s)` (issue #22, limb flips): weights in [0, 1] as without it; outside,
+    the offsets follow the weight and the harmonics and ω saturate at `1 + s` (above) and `−s`
+    (below), smoothly (the weight's derivative is 1 at the knee, 0 far beyond it)."""
+    a, base = random_model(41), random_model(42)
+    char = style.characteristic(a, base)
+    s = 0.05
+    for w in (0.0, 0.3, 1.0):
+        assert_models_close(style.superpose(base, char, w, method=method, saturation=s),
+                            style.superpose(base, char, w, method=method))
+    for w, w_h in ((1.5, 1 + s * np.tanh(0.5 / s)), (3.0, 1 + s), (-2.0, -s)):
+        got = style.superpose(base, char, w, method=method, saturation=s)
+        plain = style.superpose(base, char, w, method=method)
+        np.testing.assert_allclose(got.offset, plain.offset, atol=1e-12)  # the posture follows w
+        swings = style.superpose(base, char, w_h, method=method)
+        np.testing.assert_allclose(style.phasor(got), style.phasor(swings), atol=1e-9)
+        assert float(got.omega) == pytest.approx(float(swings.omega), rel=1e-12)
+    # the amplitudes of an extrapolation never exceed those at 1 + s (phasor: exactly a chord point)
+    far = style.superpose(base, char, 50.0, method=method, saturation=s)
+    assert np.all(np.asarray(far.amplitude) <= np.asarray(style.superpose(base, char, 1 + s,
+                                                                             method=method).amplitude) + 1e-9)
+
+    def amp(w):
+        return jnp.sum(style.superpose(base, char, w, method="phasor", saturation=s).amplitude)
+
+    g = [float(jax.grad(amp)(jnp.asarray(w))) for w in (1.0 - 1e-6, 1.0 + 1e-6, 1.5)]
+    assert g[0] == pytest.approx(g[1], rel=1e-4) and abs(g[2]) < 1e-6 * abs(g[0])
+    for bad in (0.0, -0.1, float("nan"), np.ones(2)):
+        with pytest.raises(UserError, match="saturation"):
+            style.superpose(base, char, 1.5, saturation=bad)
+    traced = jax.jit(lambda x: style.superpose(base, char, 1.5, saturation=x).offset)
+    with pytest.raises(Exception, match="saturation"):
+        traced(jnp.asarray(-1.0)).block_until_ready()
+
+
 # --------------------------------------------------------------------------------------- noise
 
 

@@ -114,6 +114,9 @@ def test_transfer_errors(cmu):
         style.content_mean([a, "b"])
     with pytest.raises(UserError, match="stacked"):
         style.transfer(a, style.stack([a, b]), b, method="content_mean")
+    for kw in ({}, {"method": "content_mean"}, {"method": "content_mean", "gains": jnp.ones(len(names) + 1)}):
+        with pytest.raises(UserError, match="`saturation` must be > 0"):
+            style.transfer(a, b, b, weight=1.5, saturation=0.0, **kw)
     other = fourier.FourierModel(a.offset[:5], a.amplitude[:5], a.phase[:5], a.omega, representation="euler",
                                  channel_names=names[:5])
     with pytest.raises(UserError):
@@ -151,6 +154,38 @@ def test_no_limb_flip_at_any_weight_on_bandai(bandai_walk_run):
         m = style.transfer(models[("walk", "sad")], [models[("walk", s)] for s in others],
                            [models[("run", s)] for s in others], method="content_mean", weight=w)
         assert max_phase_jump(m, skel, body_map=bm) <= 1.01 * ref, w
+
+
+def test_saturation_keeps_an_extrapolated_transfer_within_the_clips_on_bandai(bandai_walk_run):
+    """Beyond w = 1 a transfer's swings grow with the weight until some joint moves faster per
+    radian of phase than in any clip it was built from (sad walk -> run, w = 2: 1.2x); with
+    `saturation=` the posture still follows the weight but the swings and the cadence stop near
+    w = 1, and every weight stays within the clips (docs/findings.md, section 3)."""
+    from experiments._style_transfer import max_phase_jump
+
+    models, skel, bm, dt = bandai_walk_run
+    ref = max(max_phase_jump(m, skel, body_map=bm) for m in models.values())
+    others = ["normal", "happy", "old"]
+    src, dst = [models[("walk", s)] for s in others], [models[("run", s)] for s in others]
+    sad = models[("walk", "sad")]
+    plain = style.transfer(sad, src, dst, method="content_mean", weight=2.0)
+    assert max_phase_jump(plain, skel, body_map=bm) > 1.1 * ref  # the case the option is for
+    gains = style.fit_transfer_gains(src, dst, cadence_only=True)
+    for g in (None, gains):
+        for w in (0.0, 0.5, 1.0, 1.5, 2.0):
+            m = style.transfer(sad, src, dst, method="content_mean", weight=w, gains=g, saturation=0.05)
+            assert max_phase_jump(m, skel, body_map=bm) <= 1.01 * ref, (g is None, w)
+            unsat = style.transfer(sad, src, dst, method="content_mean", weight=w, gains=g)
+            np.testing.assert_allclose(m.offset, unsat.offset, atol=1e-5)  # the posture follows w
+            if w <= 1.0:
+                np.testing.assert_allclose(style.phasor(m), style.phasor(unsat), atol=1e-5)
+                assert float(m.omega) == pytest.approx(float(unsat.omega), rel=1e-6)
+    # a finished transfer exaggerated by superposing its characteristic (what the experiment's
+    # limb-flip line does): the same saturation
+    t = style.transfer(sad, src, dst, method="content_mean", weight=1.0)
+    base = models[("run", "normal")]
+    line = style.superpose(base, [style.characteristic(t, base)], [2.0], method="phasor", saturation=0.05)
+    assert max_phase_jump(line, skel, body_map=bm) <= 1.01 * ref
 
 
 def _branch_changed(base, channel, turns=1, n=8, k=256):

@@ -18,7 +18,15 @@ from fourierjax._style._common import (
     on_branch_of,
     replace,
 )
-from fourierjax._style.characteristics import characteristic, common_harmonics, refuse_tangent, stack, superpose
+from fourierjax._style.characteristics import (
+    characteristic,
+    check_saturation,
+    common_harmonics,
+    refuse_tangent,
+    saturate_weight,
+    stack,
+    superpose,
+)
 from fourierjax._style.distance import _pelvis, cycle_distance
 from fourierjax._style.space import _model_from_style_vector, style_vector_core
 from fourierjax.errors import UserError
@@ -91,6 +99,7 @@ def transfer(
     skeleton: Skeleton | None = None,
     body_map: BodyMap | None = None,
     weight_grid: Sequence[float] = WEIGHT_GRID,
+    saturation: Float[ArrayLike, ""] | None = None,
 ) -> FourierModel:
     """A style carried from one content to another (a walk's style put on a run).
 
@@ -128,6 +137,15 @@ def transfer(
             style offset, `m_t + weight · g ⊙ (source − m_s)` (`fit_transfer_gains` fits them
             across the reference styles); `None`: all 1.
         skeleton, body_map, weight_grid: for `weight="cv"` only (see `fit_transfer_weight`).
+        saturation: `None` (default) or a float > 0: a weight outside [0, 1] moves the offsets
+            as given and the harmonics and log ω by the saturated weight of
+            `superpose(saturation=)` (exaggerate the posture, not the swings or the cadence).
+            Weights in [0, 1] are unchanged. To exaggerate a finished transfer `t` (say one
+            with `weight="cv"`), superpose its characteristic against the neutral target:
+            `superpose(neutral, [characteristic(t, neutral)], [1.5], method="phasor",
+            saturation=0.05)`; on Bandai-1 that keeps every weight in [0, 1.5] within 1 % of
+            the clips' largest joint jump per radian of phase (worst 1.008x), where the plain
+            extrapolation reached 1.21x (`docs/findings.md`, section 3b).
 
     Tangent models: eq8 and content_mean work through `characteristic`, `superpose` and
     `content_mean` (the clip means' differences composed on the target's, rig-invariant).
@@ -165,11 +183,14 @@ def transfer(
         raise UserError("transfer: `gains` are a content_mean option")
     ms, mt = reference(source_reference, "source_reference"), reference(target_reference, "target_reference")
     if method == "eq8":
-        return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None])
+        return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None], saturation=saturation)
     if gains is None:
-        return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None], method="phasor")
+        return superpose(mt, [characteristic(source, ms)], jnp.asarray(weight)[None], method="phasor",
+                         saturation=saturation)
+    weight = jnp.asarray(weight, dtype=mt.amplitude.dtype)
+    saturation, weight = check_saturation("transfer", saturation, weight)
     if getattr(source, "representation", "") == "tangent":
-        return _cadence_transfer(source, ms, mt, gains, weight)
+        return _cadence_transfer(source, ms, mt, gains, weight, saturation)
     check_compatible(mt, source, names=("target_reference", "source"))
     check_compatible(mt, ms, names=("target_reference", "source_reference"))
     source, ms, mt = common_harmonics(source, ms, mt)
@@ -177,7 +198,7 @@ def transfer(
     if gains.shape != (mt.offset.shape[0] + 1,):
         raise UserError(f"transfer: `gains` must have shape ({mt.offset.shape[0] + 1},) (channels, then log omega), "
                         f"got {gains.shape}")
-    return _gain_transfer(source, ms, mt, gains, jnp.asarray(weight, dtype=mt.amplitude.dtype))
+    return _gain_transfer(source, ms, mt, gains, weight, saturation)
 
 
 _TANGENT_GAINS = ("transfer(gains=): tangent models take the log-omega gain only (every channel's gain 1: "
@@ -186,7 +207,7 @@ _TANGENT_GAINS = ("transfer(gains=): tangent models take the log-omega gain only
                   "(representation='euler')")
 
 
-def _cadence_transfer(source, ms, mt, gains, weight):
+def _cadence_transfer(source, ms, mt, gains, weight, saturation=None):
     """The content-mean transfer of tangent models with a log-ω gain: the plain transfer (phasor
     form, clip means composed by `superpose`), its ω `ω_t (ω_s / ω_ms)^(g w)`. Channel gains
     other than 1 are refused (concrete: `UserError`; traced: `eqx.error_if`)."""
@@ -200,17 +221,24 @@ def _cadence_transfer(source, ms, mt, gains, weight):
     gains = eqx.error_if(gains, jnp.any(gains[:-1] != 1.0), _TANGENT_GAINS)
     weight = jnp.asarray(weight, dtype=mt.amplitude.dtype)
     char = characteristic(source, ms)
-    out = superpose(mt, [char], weight[None], method="phasor", include_omega=False)
-    return replace(out, omega=mt.omega * jnp.exp(gains[-1] * weight * char.log_omega))
+    out = superpose(mt, [char], weight[None], method="phasor", include_omega=False, saturation=saturation)
+    wh = weight if saturation is None else saturate_weight(weight, saturation)
+    return replace(out, omega=mt.omega * jnp.exp(gains[-1] * wh * char.log_omega))
 
 
 @filter_jit
-def _gain_transfer(source, ms, mt, gains, weight):
+def _gain_transfer(source, ms, mt, gains, weight, saturation=None):
     n = mt.amplitude.shape[1]
     # the style offset on the source mean's branch (Euler turns, expmap antipodes)
     d = style_vector_core(on_branch_of(ms, source)) - style_vector_core(ms)
     g = jnp.concatenate([jnp.repeat(gains[:-1], 1 + 2 * n), gains[-1:]])
-    return _model_from_style_vector(style_vector_core(mt) + weight * g * d, mt)
+    w = weight
+    if saturation is not None:  # offsets by the weight, harmonics and log omega saturated
+        wh = saturate_weight(weight, saturation)
+        is_offset = jnp.concatenate([jnp.tile(jnp.arange(1 + 2 * n) == 0, g.shape[0] // (1 + 2 * n)),
+                                     jnp.zeros(1, bool)])
+        w = jnp.where(is_offset, weight, wh)
+    return _model_from_style_vector(style_vector_core(mt) + w * g * d, mt)
 
 
 def fit_transfer_gains(
