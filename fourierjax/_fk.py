@@ -415,6 +415,26 @@ def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None):
     return world(the_plan, lq, lt, keep=keep)
 
 
+def positions(the_plan: Plan, x, bone_offsets, *, sincos=None):
+    """World joint positions `[J, 3, *S]` (file order) of input rows `x` `[R, *S]`.
+
+    The FK of every batched entry point: `kinematics.joint_positions`, `fk_frames` (positions
+    of a plan without leaf rotations), `joint_positions_frames_last` and the crowd. Batch axes
+    minor, each level's world pose computed once and stored (`store`).
+
+    Arguments:
+        the_plan: from `plan` (`all_rotations=False` reads only the rotations that move a joint).
+        x: `[R, *S]` channel values in plan row order, as `pose_rows`.
+        bone_offsets: `[J, 3]` OFFSETs.
+        sincos: as `pose_rows`.
+
+    Returns:
+        `[J, 3, *S]` positions in file units, joints in file order.
+    """
+    _, p = pose_rows(the_plan, x, bone_offsets, keep=store, sincos=sincos)
+    return gather_levels(the_plan, p, 3, False, x.shape[1:], x.dtype)
+
+
 def gather_levels(the_plan: Plan, per_level, num_components: int, rotated_only: bool, shape, dtype):
     """Per-level components back to file order: `[J, num_components, *S]`."""
     comps = []
