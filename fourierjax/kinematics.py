@@ -235,14 +235,14 @@ def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
     the_plan = _fk.plan(topology, all_rotations)
     m, dtype = flat.shape[0], flat.dtype
     x = flat[:, np.asarray(the_plan.rows, np.int32)].T  # [R, M]: frames minor, plan row order
-    q, p = _fk.pose_rows(the_plan, x, skeleton.offsets, keep=_fk.store)
-    world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
 
-    def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D tiled transpose
+    def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D transpose
         return a.reshape(a.shape[0] * a.shape[1], m).T.reshape(m, a.shape[0], a.shape[1])
 
-    if not all_rotations:
-        return None, frames_major(world_p), None
+    if not all_rotations:  # the FK of `joint_positions_frames_last` and the crowd
+        return None, frames_major(_fk.positions(the_plan, x, skeleton.offsets)), None
+    q, p = _fk.pose_rows(the_plan, x, skeleton.offsets, keep=_fk.store)
+    world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
     world_q = _fk.gather_levels(the_plan, q, 4, True, (m,), dtype)
     ends = _end_sites(skeleton, world_q, world_p, (m,), dtype)
     return frames_major(world_q), frames_major(world_p), frames_major(ends)
