@@ -405,11 +405,13 @@ def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     return _bucketed(_fk_frames_jit, skeleton, channels)
 
 
-#: Frames per chunk of `joint_positions_frames_last` on CPU. Unchunked, 245,760 frames ran 2.5x
-#: slower than in chunks (each level's stored pose, [n, M] per component, leaves the cache);
-#: chunks of 2048, 8192 and 32768 frames were equal within the noise of the loaded 2-core
-#: machine (201, 188 and 196 ms at load 4.4, one run), and fewer chunks mean fewer loop steps.
-_FRAMES_LAST_CHUNK = 8192
+#: Frames per chunk of `joint_positions_frames_last` on CPU, as `_FK_CHUNK`. Unchunked, 245,760
+#: frames (1024 x 240) ran 2.5x slower than in chunks: each level's stored pose, `[n, M]` per
+#: component, leaves the cache. Chunk sizes at 1024 x 240 frames, interleaved rounds on the
+#: shared 2-core machine (median wall / CPU ms): 2048 frames 108 / 104 and 142 / 102, 4096 131 /
+#: 106, 8192 142 / 119 and 165 / 116, 16384 124 / 108, 32768 145 / 120, 1024 160 / 111 (loads
+#: 2.8 and 3.8; 9 rounds each).
+_FRAMES_LAST_CHUNK = 2048
 
 
 def _frames_last_chunk(num_joints: int, backend: str | None = None) -> int:
