@@ -174,9 +174,7 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     dtype = crowd.coefficients.dtype
     t = jnp.asarray(t, dtype)
     the_plan = _fk.plan(topology, all_rotations=False)
-    x = _channels(crowd, t, _fk.store)
-    _, p = _fk.pose_rows(the_plan, x, crowd.bone_offsets, keep=_fk.store)
-    return _fk.gather_levels(the_plan, p, 3, False, (crowd.num_characters,), dtype)
+    return _fk.positions(the_plan, _channels(crowd, t, _fk.store), crowd.bone_offsets)
 
 
 def crowd_positions(

@@ -201,14 +201,20 @@ def fk_from_channels(skeleton: Skeleton, channels: Float[Array, " channels"]) ->
 # -------------------------------------------------------------------- batched entry points
 
 
-def _check_batch(skeleton: Skeleton, channels, name: str):
+def _check_batch(skeleton: Skeleton, channels, name: str, frames_last: bool = False):
     """`channels` as an array: a jax array or Tracer as it is, anything else as NumPy (the jitted
-    call moves it to the device; `jnp.asarray` would compile a `stage` program per shape)."""
+    call moves it to the device; `jnp.asarray` would compile a `stage` program per shape).
+    `[..., C]`, or `[C, M]` with `frames_last`."""
     topology = skeleton.topology
     if not isinstance(channels, jax.Array):
         channels = np.asarray(channels)
         channels = channels.astype(jax.dtypes.canonicalize_dtype(channels.dtype), copy=False)
-    if channels.ndim < 1 or channels.shape[-1] != topology.num_channels:
+    if frames_last and (channels.ndim != 2 or channels.shape[0] != topology.num_channels):
+        raise UserError(
+            f"{name}: `channels` has shape {channels.shape}, expected ({topology.num_channels}, M): "
+            "channels first, frames last"
+        )
+    if not frames_last and (channels.ndim < 1 or channels.shape[-1] != topology.num_channels):
         raise UserError(
             f"{name}: `channels` has shape {channels.shape}, expected (..., "
             f"{topology.num_channels}) for this skeleton"
@@ -229,14 +235,14 @@ def _fk_chunk(skeleton: Skeleton, flat, all_rotations: bool):
     the_plan = _fk.plan(topology, all_rotations)
     m, dtype = flat.shape[0], flat.dtype
     x = flat[:, np.asarray(the_plan.rows, np.int32)].T  # [R, M]: frames minor, plan row order
-    q, p = _fk.pose_rows(the_plan, x, skeleton.offsets, keep=_fk.store)
-    world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
 
-    def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D tiled transpose
+    def frames_major(a):  # [J, K, M] -> [M, J, K]: one 2-D transpose
         return a.reshape(a.shape[0] * a.shape[1], m).T.reshape(m, a.shape[0], a.shape[1])
 
-    if not all_rotations:
-        return None, frames_major(world_p), None
+    if not all_rotations:  # the FK of `joint_positions_frames_last` and the crowd
+        return None, frames_major(_fk.positions(the_plan, x, skeleton.offsets)), None
+    q, p = _fk.pose_rows(the_plan, x, skeleton.offsets, keep=_fk.store)
+    world_p = _fk.gather_levels(the_plan, p, 3, False, (m,), dtype)
     world_q = _fk.gather_levels(the_plan, q, 4, True, (m,), dtype)
     ends = _end_sites(skeleton, world_q, world_p, (m,), dtype)
     return frames_major(world_q), frames_major(world_p), frames_major(ends)
@@ -399,6 +405,90 @@ def fk_frames(skeleton: Skeleton, channels: Float[Array, "... channels"]) -> FKR
     return _bucketed(_fk_frames_jit, skeleton, channels)
 
 
+#: Frames per chunk of `joint_positions_frames_last` on CPU, as `_FK_CHUNK`. Unchunked, 245,760
+#: frames (1024 x 240) ran 2.5x slower than in chunks: each level's stored pose, `[n, M]` per
+#: component, leaves the cache. Chunk sizes at 1024 x 240 frames, interleaved rounds on the
+#: shared 2-core machine (median wall / CPU ms): 2048 frames 108 / 104 and 142 / 102, 4096 131 /
+#: 106, 8192 142 / 119 and 165 / 116, 16384 124 / 108, 32768 145 / 120, 1024 160 / 111 (loads
+#: 2.8 and 3.8; 9 rounds each).
+_FRAMES_LAST_CHUNK = 2048
+
+
+def _frames_last_chunk(num_joints: int, backend: str | None = None) -> int:
+    """Frames per chunk of `joint_positions_frames_last` on `backend` (as `_chunk_frames`)."""
+    backend = jax.default_backend() if backend is None else backend
+    if backend == "cpu":
+        return _FRAMES_LAST_CHUNK
+    return max(_FRAMES_LAST_CHUNK, _ACCELERATOR_JOINT_FRAMES // max(1, num_joints))
+
+
+def _positions_frames_last(skeleton: Skeleton, channels):
+    """`[J, 3, M]` positions of `[C, M]` channels: FK's own layout, no transposes.
+
+    Large batches in chunks of frames (`_frames_last_chunk`) in one loop; the last chunk is
+    clamped to end at M, as in `_fk_batch`.
+    """
+    the_plan = _fk.plan(skeleton.topology, all_rotations=False)
+    rows = np.asarray(the_plan.rows, np.int32)
+    m = channels.shape[1]
+    size = _frames_last_chunk(skeleton.topology.num_joints)
+    if m <= 2 * size:
+        return _fk.positions(the_plan, channels[rows], skeleton.offsets)
+    init = jnp.zeros((skeleton.topology.num_joints, 3, m), channels.dtype)
+
+    def body(i, acc):
+        start = jnp.minimum(i * size, m - size)
+        chunk = jax.lax.dynamic_slice_in_dim(channels, start, size, 1)
+        res = _fk.positions(the_plan, chunk[rows], skeleton.offsets)
+        return jax.lax.dynamic_update_slice_in_dim(acc, res, start, 2)
+
+    return jax.lax.fori_loop(0, -(-m // size), body, init)
+
+
+_joint_positions_frames_last_jit = _jit.jit(_positions_frames_last)
+
+
+def _bucketed_frames_last(skeleton: Skeleton, channels):
+    """`_joint_positions_frames_last_jit` with concrete frames padded to their length bucket and
+    the output cut back (as `_bucketed`, along the last axis)."""
+    jitted = _joint_positions_frames_last_jit
+    width, m = channels.shape
+    rows = _bucket(m)
+    traced = any(isinstance(a, jax.core.Tracer) for a in (channels, *jax.tree.leaves(skeleton)))
+    if traced or m > PAD_LIMIT or rows == m:
+        return jitted(skeleton, channels)
+    if isinstance(channels, np.ndarray) or jax.default_backend() == "cpu":
+        padded = np.zeros((width, rows), channels.dtype)
+        padded[:, :m] = np.asarray(channels)
+        return jax.device_put(np.ascontiguousarray(np.asarray(jitted(skeleton, padded))[..., :m]))
+    return jitted(skeleton, jnp.pad(channels, ((0, 0), (0, rows - m))))[..., :m]
+
+
+def joint_positions_frames_last(skeleton: Skeleton, channels: Float[Array, "channels frames"]
+                                ) -> Float[Array, "joints 3 frames"]:
+    """World positions of every joint for every frame, frames last (jitted entry point).
+
+    FK's own layout (the crowd's): one row per channel in, one row per joint coordinate out,
+    frames along each row, so no transpose is made on the way in or out. Same values as
+    `jnp.moveaxis(joint_positions(skeleton, channels.T), 0, -1)`; faster where the caller can
+    take this layout. Concrete batches of up to `PAD_LIMIT` frames are padded to their length
+    bucket, as in `joint_positions`.
+
+    Arguments:
+        skeleton: the skeleton (unbatched offsets).
+        channels: `[C, M]` BVH channel values (degrees, file units), one column per frame.
+
+    Returns:
+        `[J, 3, M]` joint positions in file units, joints in file order.
+
+    Raises:
+        `UserError` naming `channels` or the skeleton's offsets when the shapes do not fit.
+    """
+    channels = _check_batch(skeleton, channels, "joint_positions_frames_last", frames_last=True)
+    return _bucketed_frames_last(skeleton, channels)
+
+
 # The retrace guard of the tests counts the compiled programs behind each entry point.
 joint_positions.num_traces = _joint_positions_jit.num_traces  # type: ignore[attr-defined]
 fk_frames.num_traces = _fk_frames_jit.num_traces  # type: ignore[attr-defined]
+joint_positions_frames_last.num_traces = _joint_positions_frames_last_jit.num_traces  # type: ignore[attr-defined]

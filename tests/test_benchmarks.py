@@ -139,3 +139,13 @@ ENTRY %main (x: f32[8]) -> f32[8] {
 }
 """
     assert kernel_count(hlo) == {"entry_kernels": 1, "loops": 1, "loop_body_kernels": 2}
+
+
+def test_fk_benchmark_measures_frames_last_and_checks_its_positions():
+    from experiments.benchmarks import fk
+
+    records = {r.name: r for r in fk.run("small")}
+    for name in ("fk_1x1000", "fk_1024x240"):
+        details = records[name].details
+        assert details["joint_positions_frames_last_rate"] > 0
+        assert details["joint_positions_frames_last_max_abs_diff"] < 1e-3

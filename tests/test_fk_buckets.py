@@ -112,3 +112,15 @@ def test_batches_above_the_limit_keep_their_shape(walk, monkeypatch):
     monkeypatch.setattr(kinematics, "PAD_LIMIT", 32)
     assert kinematics.joint_positions(skel, ch).shape == (37, 31, 3)
     assert seen == [(64, 96), (37, 96)]
+
+
+def test_frames_last_lengths_in_one_bucket_compile_once(walk):
+    m, skel = walk
+    before = kinematics.joint_positions_frames_last.num_traces()
+    for n in LENGTHS[:4]:
+        ch = np.asarray(m.channels[:n], np.float32)
+        got = kinematics.joint_positions_frames_last(skel, jnp.asarray(ch.T))
+        assert got.shape == (m.topology.num_joints, 3, n)
+        np.testing.assert_allclose(np.moveaxis(np.asarray(got), -1, 0), kinematics.joint_positions(skel, ch),
+                                   atol=1e-4)
+    assert kinematics.joint_positions_frames_last.num_traces() - before <= 1

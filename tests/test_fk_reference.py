@@ -109,6 +109,8 @@ def test_every_entry_point_matches_numpy_reference_on_random_topologies(topo, se
         np.testing.assert_allclose(dots, 1.0, atol=1e-5)
     # float32: hypothesis once drew a 131.87-unit position, 1.2e-4 (8 ulp) off the float64 reference.
     np.testing.assert_allclose(kinematics.joint_positions(skel, x), ref_p, atol=atol, rtol=2e-6)
+    last = kinematics.joint_positions_frames_last(skel, x.T)
+    np.testing.assert_allclose(np.moveaxis(np.asarray(last), -1, 0), ref_p, atol=atol, rtol=2e-6)
 
 
 @pytest.mark.parametrize("name", data.list())
@@ -119,7 +121,8 @@ def test_positions_match_numpy_reference_on_every_bundled_clip(name):
     ref_p, ref_e = numpy_fk(motion.topology, motion.offsets, motion.end_site_offsets, ch)
     pos = np.asarray(kinematics.joint_positions(skel, jnp.asarray(ch)))
     res = kinematics.fk_frames(skel, jnp.asarray(ch))
-    for got, ref in ((pos, ref_p), (res.positions, ref_p), (res.end_site_positions, ref_e)):
+    last = np.moveaxis(np.asarray(kinematics.joint_positions_frames_last(skel, ch.T)), -1, 0)
+    for got, ref in ((pos, ref_p), (res.positions, ref_p), (res.end_site_positions, ref_e), (last, ref_p)):
         err = float(np.abs(np.asarray(got) - ref).max())
         assert err <= 1e-4, f"{name}: max FK error {err:.3g} units (float32)"
 
@@ -141,10 +144,15 @@ def test_under_jit_vmap_vmap_matches_numpy_reference():
     nested = jax.jit(jax.vmap(jax.vmap(one, in_axes=(None, 0))))(jnp.asarray(offsets, jnp.float32), jnp.asarray(ch))
     batched = jax.jit(jax.vmap(lambda off, c: kinematics.joint_positions(Skeleton(topo, off), c)))(
         jnp.asarray(offsets, jnp.float32), jnp.asarray(ch))
+    # Frames last, vmapped over characters and over a second batch axis of frames.
+    last = jax.jit(jax.vmap(jax.vmap(
+        lambda off, c: kinematics.joint_positions_frames_last(Skeleton(topo, off), c), in_axes=(None, 0))))(
+        jnp.asarray(offsets, jnp.float32), jnp.asarray(np.swapaxes(ch.reshape(3, 2, 3, -1), -1, -2)))
     for k in range(3):
         ref, _ = numpy_fk(topo, offsets[k], np.zeros((topo.num_end_sites, 3)), ch[k])
         np.testing.assert_allclose(nested[k], ref, atol=1e-4)
         np.testing.assert_allclose(batched[k], ref, atol=1e-4)
+        np.testing.assert_allclose(np.moveaxis(np.asarray(last[k]), -1, 1).reshape(6, -1, 3), ref, atol=1e-4)
 
 
 def test_gradients_match_finite_differences(x64):

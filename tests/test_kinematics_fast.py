@@ -95,3 +95,48 @@ def test_fk_frames_chunked_path_matches():
     ref = jax.vmap(lambda c: kinematics.fk_from_channels(skel, c))(ch[sel])
     for a, b in zip(jax.tree.leaves(fast), jax.tree.leaves(ref)):
         np.testing.assert_allclose(np.asarray(a)[0, sel], b, atol=5e-4, rtol=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_joint_positions_frames_last_is_joint_positions_transposed(seed):
+    rng = np.random.default_rng(100 + seed)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)), rng.normal(size=(topo.num_end_sites, 3)))
+    ch = rng.uniform(-180, 180, size=(37, topo.num_channels)).astype(np.float32)
+    ref = np.asarray(kinematics.joint_positions(skel, jnp.asarray(ch)))
+    for x in (jnp.asarray(ch.T), ch.T.copy()):  # a jax array, and NumPy (padded on the host)
+        got = kinematics.joint_positions_frames_last(skel, x)
+        assert got.shape == (topo.num_joints, 3, 37)
+        np.testing.assert_allclose(np.moveaxis(np.asarray(got), -1, 0), ref, atol=1e-5, rtol=1e-6)
+    # Traced (no host padding) and differentiable.
+    traced = jax.jit(kinematics.joint_positions_frames_last)(skel, jnp.asarray(ch.T))
+    np.testing.assert_allclose(np.moveaxis(np.asarray(traced), -1, 0), ref, atol=1e-5, rtol=1e-6)
+    g = jax.grad(lambda c: kinematics.joint_positions_frames_last(skel, c).sum())(jnp.asarray(ch.T))
+    assert np.isfinite(np.asarray(g)).all()
+
+
+def test_joint_positions_frames_last_chunked_path_matches(monkeypatch):
+    # More than two chunks, not a multiple of one: the loop with its clamped last chunk.
+    monkeypatch.setattr(kinematics, "_FRAMES_LAST_CHUNK", 1000)
+    rng = np.random.default_rng(12)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, rng.normal(size=(topo.num_joints, 3)))
+    m = 2 * 1000 + 77 + kinematics.PAD_LIMIT  # above PAD_LIMIT: no bucket, its own shape
+    ch = rng.uniform(-180, 180, size=(m, topo.num_channels)).astype(np.float32)
+    got = np.asarray(kinematics.joint_positions_frames_last(skel, jnp.asarray(ch.T)))
+    sel = np.array([0, 999, 1000, 2000, m - 1001, m - 1])
+    ref = np.asarray(kinematics.joint_positions(skel, jnp.asarray(ch[sel])))
+    np.testing.assert_allclose(np.moveaxis(got[..., sel], -1, 0), ref, atol=5e-4, rtol=1e-5)
+
+
+def test_joint_positions_frames_last_rejects_bad_shapes():
+    rng = np.random.default_rng(0)
+    topo = random_topology(rng)
+    skel = Skeleton(topo, np.zeros((topo.num_joints, 3)))
+    c = topo.num_channels
+    for bad in (np.zeros((c + 1, 4)), np.zeros((c,)), np.zeros((1, c, 5))):
+        with pytest.raises(ValueError, match="joint_positions_frames_last: `channels`"):
+            kinematics.joint_positions_frames_last(skel, bad)
+    batched = Skeleton(topo, np.zeros((2, topo.num_joints, 3)))
+    with pytest.raises(ValueError, match="offsets"):
+        kinematics.joint_positions_frames_last(batched, np.zeros((topo.num_channels, 4)))

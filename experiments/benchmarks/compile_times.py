@@ -20,6 +20,7 @@ def entry_points(size: str):
     m = data.load("07_01")
     skel = m.skeleton()
     ch = jnp.asarray(m.channels[:240], jnp.float32)
+    ch_last = jnp.asarray(np.ascontiguousarray(m.channels[:240].T), jnp.float32)
     B, T, C = (8, 240, 57) if size == "full" else (2, 60, 6)
     x, _ = gait_like_clips(B, T, C, 1 / 120)
     xj = jnp.asarray(x)
@@ -35,6 +36,7 @@ def entry_points(size: str):
     eps = {
         "kinematics.joint_positions": lambda: kinematics.joint_positions(skel, ch),
         "kinematics.fk_frames": lambda: kinematics.fk_frames(skel, ch),
+        "kinematics.joint_positions_frames_last": lambda: kinematics.joint_positions_frames_last(skel, ch_last),
         "fourier.fit_batch (N=3)": lambda: fourier.fit_batch(xj, 1 / 120, 3),
         "fourier.fit_batch (N=7)": lambda: fourier.fit_batch(xj, 1 / 120, 7),
         "fourier.fit": lambda: fourier.fit(x0, 1 / 120, 3),

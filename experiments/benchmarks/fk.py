@@ -127,6 +127,13 @@ def run(size: str) -> list[Record]:
         t0 = time.perf_counter()
         jax.block_until_ready(kinematics.joint_positions(skel, x))
         first_jp = time.perf_counter() - t0
+        # Frames last (issue 26): [C, M] in, [J, 3, M] out, FK's own layout, no transposes.
+        x_last = jnp.asarray(np.ascontiguousarray(ch.reshape(-1, ch.shape[-1]).T))
+        t0 = time.perf_counter()
+        last = jax.block_until_ready(kinematics.joint_positions_frames_last(skel, x_last))
+        first_last = time.perf_counter() - t0
+        last_err = float(np.abs(np.moveaxis(np.asarray(last), -1, 0)
+                                - np.asarray(kinematics.joint_positions(skel, x)).reshape(-1, J, 3)).max())
 
         @jax.jit
         def write(v):  # the bound of merely writing fk_frames' outputs (7 floats a joint, 3 an End Site)
@@ -139,6 +146,7 @@ def run(size: str) -> list[Record]:
 
         ours = timeit(lambda: kinematics.fk_frames(skel, x), repeats=repeats)
         jp = timeit(lambda: kinematics.joint_positions(skel, x), repeats=repeats)
+        jp_last = timeit(lambda: kinematics.joint_positions_frames_last(skel, x_last), repeats=repeats)
         wr = timeit(lambda: write(x), repeats=repeats)
         wr3 = timeit(lambda: write3(x), repeats=repeats)
 
@@ -164,6 +172,9 @@ def run(size: str) -> list[Record]:
                 "max_abs_position_diff_vs_numpy": err,
                 "first_call_s": first, "joint_positions_first_call_s": first_jp,
                 "joint_positions_rate": n_ours / jp["median"],
+                "joint_positions_frames_last_rate": n_ours / jp_last["median"],
+                "joint_positions_frames_last_first_call_s": first_last,
+                "joint_positions_frames_last_max_abs_diff": last_err,
                 "output_write_bound_rate": n_ours / wr["median"],
                 "fraction_of_write_bound": wr["median"] / ours["median"],
                 "positions_write_bound_rate": n_ours / wr3["median"],
@@ -171,6 +182,8 @@ def run(size: str) -> list[Record]:
                 "peak_gflops_measured": peak,
                 **compute_limit(), **fractions(rate, limit),
                 **{f"joint_positions_{k}": v for k, v in fractions(n_ours / jp["median"], limit).items()},
+                **{f"joint_positions_frames_last_{k}": v
+                   for k, v in fractions(n_ours / jp_last["median"], limit).items()},
             },
         )
         if sub != clips:
