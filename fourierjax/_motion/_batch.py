@@ -103,15 +103,33 @@ def infer_body_maps(clips) -> list:
         skeleton = clips[ks[0]].skeleton()
         blocks = [jax.tree.map(np.asarray, _fk_frames_jit(skeleton, ch[s:s + ROW_BLOCK]))
                   for s in range(0, len(ch), ROW_BLOCK)]
-        fk = jax.tree.map(lambda *a: np.concatenate(a), *blocks)
+        # float64 once for the group, as `_infer_from_fk` converts each clip's rows
+        fk = jax.tree.map(lambda *a: np.concatenate(a)[:len(rows)].astype(np.float64), *blocks)
+        pres = _moments(clips[ks[0]].topology, fk, len(ks), len(frames[0]))
         starts = np.cumsum([0] + [len(f) for f in frames])
         for i, k in enumerate(ks):
             s = slice(starts[i], starts[i + 1])
             try:
-                out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk))
+                out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk),
+                                        pre={p: r[i] for p, r in pres.items()})
             except BodyMapError:
                 out[k] = None  # no legs: joint 0 carries the root, no contacts, no alignment
     return out
+
+
+def _moments(topology, fk, num_clips: int, num_frames: int) -> dict:
+    """`_body._infer.moments_many` of a skeleton's clips (``num_frames`` posed rows each, FK
+    ``fk`` of them in order) about each pelvis that names decide: ``{pelvis: rows}``."""
+    from fourierjax._body._infer import moments_many, named_pelvises
+
+    pelvises = named_pelvises(topology)
+    if not pelvises:
+        return {}
+    B, F = num_clips, num_frames
+    points = np.concatenate([fk.positions, fk.end_site_positions], axis=1)
+    points = points.reshape(B, F, *points.shape[1:])
+    rotations = fk.rotations.reshape(B, F, *fk.rotations.shape[1:])
+    return {p: moments_many(points, rotations, p) for p in pelvises}
 
 
 def _batchable(clip, bm, representation, passes, segment) -> bool:
