@@ -426,10 +426,14 @@ def iter_fit_motions(
                 start_frame=start_frame, stop_frame=stop_frame, timings=timings, passes=passes)
     count = [0]
     size = [chunk_size]
+    # The first chunk's preparation overlaps no fit: with the automatic chunk size it is half a
+    # chunk, so that the fit starts sooner (and the stream's last chunk, whose fit overlaps no
+    # preparation, is smaller on average).
+    half = [chunk_size is None]
 
     def read_chunk() -> list[_Clip]:
         entries = []
-        while size[0] is None or len(entries) < size[0]:
+        while size[0] is None or len(entries) < (max(1, size[0] // 2) if half[0] else size[0]):
             try:
                 m = next(items)
             except StopIteration:
@@ -446,6 +450,7 @@ def iter_fit_motions(
             else:
                 entries.append((count[0], m, bm))
             count[0] += 1
+        half[0] = False
         done = [e for e in entries if isinstance(e, _Clip)]
         return done + prepare_chunk([e for e in entries if not isinstance(e, _Clip)], **opts)
 
