@@ -244,22 +244,43 @@ def test_body_maps_of_a_chunk_are_each_clips_own(chunk, monkeypatch):
     assert got[0].to_dict() != got[1].to_dict()  # the same skeleton, its own motion's map
 
 
-def test_body_maps_of_many_bandai_clips_are_each_clips_own():
-    # The pelvis-frame means of a skeleton's clips computed together (`moments_many`) give
-    # each clip the map it gets alone, on Bandai-1's gaits (several actors, one skeleton each).
+def _bandai_clips(step):
+    """Every ``step``-th clip of Bandai-1 (read in place from ../shared; skip without it)."""
     import pathlib
 
-    from fourierjax._motion import _batch
     from fourierjax.io.bvh import read_bvh
 
     bandai = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
-    files = sorted(bandai.glob("dataset-1_*.bvh"))[::4] if bandai.is_dir() else []
+    files = sorted(bandai.glob("dataset-1_*.bvh"))[::step] if bandai.is_dir() else []
     if not files:
         pytest.skip("Bandai-1 is not in ../shared")
-    clips = [read_bvh(p) for p in files]
+    return [read_bvh(p) for p in files]
+
+
+def test_body_maps_of_many_bandai_clips_are_each_clips_own():
+    # The pelvis-frame means of a skeleton's clips computed together (`moments_many`) give
+    # each clip the map it gets alone, on Bandai-1's gaits (several actors, one skeleton each).
+    from fourierjax._motion import _batch
+
+    clips = _bandai_clips(4)
     got = _batch.infer_body_maps(clips)
     for c, g in zip(clips, got, strict=True):
         assert g == infer_body_map(c)
+
+
+def test_closed_loops_of_a_chunk_are_each_clips_own():
+    # Bandai-1's short gait loops (their last frame repeats the first pose) and longer clips
+    # that are no loops, concatenated: `_batch._closed_loops` is `closed_loop` of each.
+    from fourierjax._motion import _batch
+    from fourierjax._motion._clip import closed_loop
+
+    clips = _bandai_clips(3)
+    clips = [c for c in clips if c.topology == clips[0].topology]
+    clips += [clips[0][:2], clips[1][5:40]]  # under 3 frames: never a loop
+    cat, starts = _batch._concat(clips)
+    want = [closed_loop(c) for c in clips]
+    assert _batch._closed_loops(cat, starts) == want
+    assert any(want) and not all(want)
 
 
 def test_a_clips_fit_does_not_depend_on_the_clips_fitted_with_it(monkeypatch):
