@@ -64,10 +64,10 @@ def _sampled_frames(num_frames: int, max_frames: int = MAX_FRAMES) -> np.ndarray
     return np.linspace(0, num_frames - 1, max_frames).round().astype(int)
 
 
-def _infer_from_fk(motion, fk, *, up=None, overrides=None) -> BodyMap:
+def _infer_from_fk(motion, fk, *, up=None, overrides=None, pre=None) -> BodyMap:
     """`infer_body_map` of `motion` given `fk`, the FK of its `_sampled_frames` (anything with
     `positions`, `end_site_positions` and `rotations`): for a caller that poses many clips at
-    once (`fourierjax._motion._batch`)."""
+    once (`fourierjax._motion._batch`; ``pre``: `_body._infer.infer`'s, from `moments_many`)."""
     channels = np.asarray(motion.channels)
     topo = motion.topology
     offsets = topo.channel_offsets
@@ -79,7 +79,7 @@ def _infer_from_fk(motion, fk, *, up=None, overrides=None) -> BodyMap:
         if idx and float(span[idx].max()) > scale:
             moving.append(j)
     return _infer(topo, np.asarray(fk.positions, np.float64), np.asarray(fk.end_site_positions, np.float64),
-                  np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides)
+                  np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides, pre=pre)
 
 
 def infer_body_map_from_positions(

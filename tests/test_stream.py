@@ -73,6 +73,31 @@ def test_paths_body_maps_per_clip_progress_and_timings(clips, capsys):
     assert all(v >= 0 for v in timings.values())
 
 
+def test_the_stream_fits_whole_small_batches_as_they_come(monkeypatch):
+    # Of each group (layout, weights, length bucket), whole batches of SMALL_BATCH clips are
+    # fitted with the chunk that brings them (the fit of chunk k overlaps the reading of chunk
+    # k + 1); the rest waits one chunk at most, oldest first.
+    from fourierjax._fourier._buckets import SMALL_BATCH
+
+    class Clip:
+        def __init__(self, index, group):
+            self.index, self.group = index, group
+
+    monkeypatch.setattr(_pipeline, "_group_key", lambda c, kw: c.group)
+    B = SMALL_BATCH
+    first = [Clip(i, i % 2) for i in range(2 * (B + 4))]  # B + 4 clips of each group
+    now, held, _ = _pipeline._hold_back([], first, {}, final=False)
+    assert len(now) == 2 * B and {c.index for c in held} == {c.index for c in first[-8:]}
+    second = [Clip(100 + i, 0) for i in range(3)] + [Clip(200 + i, 1) for i in range(B)]
+    now, held2, _ = _pipeline._hold_back(held, second, {}, final=False)
+    # group 0: 4 held + 3 new, under a batch: fitted whole; group 1: its 4 held go with its
+    # first batch, 4 new clips wait
+    assert {c.index for c in held} <= {c.index for c in now}
+    assert [c.index for c in held2] == [200 + i for i in range(B - 4, B)]
+    now, held3, _ = _pipeline._hold_back(held2, [], {}, final=True)
+    assert len(now) == 4 and not held3
+
+
 def test_stream_errors(clips):
     ms, bm = clips
     with pytest.raises(UserError, match="no motions given"):
@@ -200,18 +225,62 @@ def test_prepare_chunk_equals_the_per_clip_path(chunk, representation, monkeypat
     assert any(len(g.left) for g in got)
 
 
-def test_body_maps_of_a_chunk_are_each_clips_own(chunk):
+def test_body_maps_of_a_chunk_are_each_clips_own(chunk, monkeypatch):
     # `_batch.infer_body_maps` poses all the clips of one skeleton in one FK: two cuts of one
     # clip (one skeleton, other frames) and clips of other skeletons in the same chunk each get
     # the map that inference of the clip alone gives.
+    from fourierjax._body import _infer
     from fourierjax._motion import _batch
 
     clips = [chunk[0], data.load("07_01")[150:300], *chunk[1:]]
+    moments = []
+    many = _infer.moments_many
+    monkeypatch.setattr(_infer, "moments_many", lambda *a: moments.append(a[2]) or many(*a))
     got = _batch.infer_body_maps(clips)
+    assert moments  # the pelvis-frame means of each skeleton's clips, computed together
     assert len({(c.topology, c.offsets.tobytes()) for c in clips}) >= 3
     for c, g in zip(clips, got, strict=True):
         assert g == infer_body_map(c)
     assert got[0].to_dict() != got[1].to_dict()  # the same skeleton, its own motion's map
+
+
+def _bandai_clips(step):
+    """Every ``step``-th clip of Bandai-1 (read in place from ../shared; skip without it)."""
+    import pathlib
+
+    from fourierjax.io.bvh import read_bvh
+
+    bandai = pathlib.Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+    files = sorted(bandai.glob("dataset-1_*.bvh"))[::step] if bandai.is_dir() else []
+    if not files:
+        pytest.skip("Bandai-1 is not in ../shared")
+    return [read_bvh(p) for p in files]
+
+
+def test_body_maps_of_many_bandai_clips_are_each_clips_own():
+    # The pelvis-frame means of a skeleton's clips computed together (`moments_many`) give
+    # each clip the map it gets alone, on Bandai-1's gaits (several actors, one skeleton each).
+    from fourierjax._motion import _batch
+
+    clips = _bandai_clips(4)
+    got = _batch.infer_body_maps(clips)
+    for c, g in zip(clips, got, strict=True):
+        assert g == infer_body_map(c)
+
+
+def test_closed_loops_of_a_chunk_are_each_clips_own():
+    # Bandai-1's short gait loops (their last frame repeats the first pose) and longer clips
+    # that are no loops, concatenated: `_batch._closed_loops` is `closed_loop` of each.
+    from fourierjax._motion import _batch
+    from fourierjax._motion._clip import closed_loop
+
+    clips = _bandai_clips(3)
+    clips = [c for c in clips if c.topology == clips[0].topology]
+    clips += [clips[0][:2], clips[1][5:40]]  # under 3 frames: never a loop
+    cat, starts = _batch._concat(clips)
+    want = [closed_loop(c) for c in clips]
+    assert _batch._closed_loops(cat, starts) == want
+    assert any(want) and not all(want)
 
 
 def test_a_clips_fit_does_not_depend_on_the_clips_fitted_with_it(monkeypatch):

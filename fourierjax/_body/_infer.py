@@ -35,10 +35,14 @@ _TRAVELS = 0.5
 _ANKLE_ARC = 0.85
 
 
-def infer(topology, positions, end_site_positions, rotations, moving, *, up=None, overrides=None) -> BodyMap:
+def infer(topology, positions, end_site_positions, rotations, moving, *, up=None, overrides=None,
+          pre=None) -> BodyMap:
     """The map of one clip. `positions` `[F, J, 3]`, `end_site_positions` `[F, E, 3]` and
     `rotations` `[F, J, 4]` (wxyz world quaternions, or None) are NumPy; `moving` lists the joints
-    with moving position channels, in file order (None: judge from `positions`)."""
+    with moving position channels, in file order (None: judge from `positions`). `pre` maps a
+    pelvis joint to this clip's row of `moments_many` about it (the same values, computed with
+    other clips')."""
+    pre = pre or {}
     names, parents, esp = topology.names, topology.parents, topology.end_site_parents
     J = len(names)
     ov = parse_overrides(overrides)
@@ -76,7 +80,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
         pelvis = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
         if pelvis < 0:
             raise BodyMapError(missing_legs_message("the two hips have no common ancestor", names))
-        mean_world = _mean_relative(points, pelvis)
+        mean_world = pre[pelvis][0] if pelvis in pre else _mean_relative(points, pelvis)
         up_axis, up_sign = up_given or _up_from_legs(mean_world, pelvis, legs)
     else:
         pelvis, (up_axis, up_sign) = _pelvis_from_reach(points.mean(axis=0), point_parents, J, up_given)
@@ -89,7 +93,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     u[up_axis] = up_sign
 
     # Mean pose in the pelvis's frame (a clip that turns around keeps its legs apart there).
-    local, u_local = _mean_local(points, rotations, pelvis, u)
+    local, u_local = _mean_local(points, rotations, pelvis, u, pre.get(pelvis))
     if not legs:
         legs = _legs_from_geometry(local, u_local, point_parents, pelvis, J, names)
         sources["legs"] = "geometry"
@@ -97,7 +101,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     trunk = trunk_pelvis(parents, pelvis, (legs["left"]["hip"], legs["right"]["hip"]))
     if trunk != pelvis:
         pelvis = trunk
-        local, u_local = _mean_local(points, rotations, pelvis, u)
+        local, u_local = _mean_local(points, rotations, pelvis, u, pre.get(pelvis))
     for side in ("left", "right"):  # single fields of the override file win
         for k in _LEG_FIELDS:
             if k in legs_ov.get(side, {}):
@@ -116,7 +120,8 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
 
     # -- facing, forward, trajectory -----------------------------------------------------
     facing_local = _facing_local(local, u_local, left_leg, right_leg)
-    facing = _world_facing(rotations, pelvis, facing_local, u)
+    facing = _world_facing(rotations, pelvis, facing_local, u,
+                           pre[pelvis][1] if pelvis in pre else None)
     trajectory, sources["trajectory"] = _trajectory(ov, topology, positions, moving, pelvis)
     seg = np.linalg.norm(positions[:, left_leg.knee] - positions[:, left_leg.hip], axis=-1) + np.linalg.norm(
         positions[:, left_leg.ankle] - positions[:, left_leg.knee], axis=-1)
@@ -276,8 +281,12 @@ def _up_from_legs(mean: np.ndarray, pelvis: int, legs) -> tuple[int, int]:
     return axis, int(np.sign(d[axis]) or 1)
 
 
-def _mean_local(points, rotations, pelvis: int, u: np.ndarray):
-    """Mean pose relative to the pelvis in its own frame, and the up direction in that frame."""
+def _mean_local(points, rotations, pelvis: int, u: np.ndarray, pre=None):
+    """Mean pose relative to the pelvis in its own frame, and the up direction in that frame
+    (``pre``: the clip's `moments_many` row about ``pelvis``)."""
+    if pre is not None and rotations is not None:
+        _, R, local = pre
+        return local, _unit((u @ R).mean(axis=0))
     rel = points - points[:, pelvis : pelvis + 1]
     if rotations is None:
         return rel.mean(axis=0), u
@@ -286,6 +295,34 @@ def _mean_local(points, rotations, pelvis: int, u: np.ndarray):
     # cost a clip 0.5 ms, a third of its map)
     local = np.matmul(rel, R).mean(axis=0)
     return local, _unit((u @ R).mean(axis=0))
+
+
+def named_pelvises(topology) -> tuple[int, ...]:
+    """The joints `infer` poses a clip of `topology` about when joint names decide its legs (and
+    no override file or up axis is given): the hips' common ancestor and the trunk's root; ()
+    when names do not decide the legs."""
+    names, parents = topology.names, topology.parents
+    legs = {s: _match_chain(names, parents, s, "leg") for s in ("left", "right")}
+    if not all(legs.values()) or set(_present(legs["left"])) & set(_present(legs["right"])):
+        return ()
+    pelvis = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
+    if pelvis < 0:
+        return ()
+    return tuple(dict.fromkeys((pelvis, trunk_pelvis(parents, pelvis, (legs["left"]["hip"],
+                                                                        legs["right"]["hip"])))))
+
+
+def moments_many(points: np.ndarray, rotations: np.ndarray, pelvis: int) -> list[tuple]:
+    """`infer`'s arrays about ``pelvis`` of many clips at once, its ``pre`` rows: per clip, the
+    mean of every point relative to the pelvis ``[P, 3]`` (`_mean_relative`), the pelvis's
+    world-from-pelvis matrices ``[F, 3, 3]`` and the mean pose in the pelvis frame ``[P, 3]``
+    (`_mean_local`), with the same values as one clip at a time (the same reductions, each over
+    one clip's frames). ``points [B, F, P, 3]``, ``rotations [B, F, J, 4]``."""
+    rel = points - points[:, :, pelvis : pelvis + 1]
+    mean_world = rel.mean(axis=1)
+    R = _matrices(rotations[:, :, pelvis])
+    local = np.matmul(rel, R).mean(axis=1)
+    return [(mean_world[b], R[b], local[b]) for b in range(len(points))]
 
 
 def _matrices(q: np.ndarray) -> np.ndarray:
@@ -396,12 +433,13 @@ def _facing_local(local, u, left: Leg, right: Leg) -> np.ndarray:
     return _unit(f)
 
 
-def _world_facing(rotations, pelvis: int, facing_local, u) -> np.ndarray:
-    """The pelvis-frame facing in world axes, averaged over frames in the ground plane."""
+def _world_facing(rotations, pelvis: int, facing_local, u, R=None) -> np.ndarray:
+    """The pelvis-frame facing in world axes, averaged over frames in the ground plane (``R``:
+    the pelvis's matrices when known)."""
     if rotations is None:
         f = facing_local
     else:
-        per_frame = _matrices(rotations[:, pelvis]) @ facing_local
+        per_frame = (_matrices(rotations[:, pelvis]) if R is None else R) @ facing_local
         per_frame = per_frame - np.outer(per_frame @ u, u)
         f = per_frame.mean(axis=0)
         if np.linalg.norm(f) < 0.25 * np.linalg.norm(per_frame, axis=-1).mean():

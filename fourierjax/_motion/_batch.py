@@ -95,23 +95,46 @@ def infer_body_maps(clips) -> list:
                           []).append(k)
     for ks in groups.values():
         frames = [_sampled_frames(clips[k].num_frames) for k in ks]
-        rows = np.concatenate([np.asarray(clips[k].channels)[f]
-                               for k, f in zip(ks, frames, strict=True)])
+        # A clip shorter than the posed rows repeats frames (Bandai-1: 38% of the rows): FK of
+        # each clip's distinct frames, then one gather of the rows in order.
+        distinct = [np.unique(f, return_inverse=True) for f in frames]
+        rows = np.concatenate([np.asarray(clips[k].channels)[u]
+                               for k, (u, _) in zip(ks, distinct, strict=True)])
+        first = np.cumsum([0] + [len(u) for u, _ in distinct])
+        order = np.concatenate([first[i] + inv for i, (_, inv) in enumerate(distinct)])
         ch = np.zeros((-(-len(rows) // ROW_BLOCK) * ROW_BLOCK, rows.shape[1]),
                       jax.dtypes.canonicalize_dtype(rows.dtype))  # FK's dtype, as fk_frames
         ch[:len(rows)] = rows
         skeleton = clips[ks[0]].skeleton()
         blocks = [jax.tree.map(np.asarray, _fk_frames_jit(skeleton, ch[s:s + ROW_BLOCK]))
                   for s in range(0, len(ch), ROW_BLOCK)]
-        fk = jax.tree.map(lambda *a: np.concatenate(a), *blocks)
+        # float64 once for the group, as `_infer_from_fk` converts each clip's rows
+        fk = jax.tree.map(lambda *a: np.concatenate(a)[order].astype(np.float64), *blocks)
+        pres = _moments(clips[ks[0]].topology, fk, len(ks), len(frames[0]))
         starts = np.cumsum([0] + [len(f) for f in frames])
         for i, k in enumerate(ks):
             s = slice(starts[i], starts[i + 1])
             try:
-                out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk))
+                out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk),
+                                        pre={p: r[i] for p, r in pres.items()})
             except BodyMapError:
                 out[k] = None  # no legs: joint 0 carries the root, no contacts, no alignment
     return out
+
+
+def _moments(topology, fk, num_clips: int, num_frames: int) -> dict:
+    """`_body._infer.moments_many` of a skeleton's clips (``num_frames`` posed rows each, FK
+    ``fk`` of them in order) about each pelvis that names decide: ``{pelvis: rows}``."""
+    from fourierjax._body._infer import moments_many, named_pelvises
+
+    pelvises = named_pelvises(topology)
+    if not pelvises:
+        return {}
+    B, F = num_clips, num_frames
+    points = np.concatenate([fk.positions, fk.end_site_positions], axis=1)
+    points = points.reshape(B, F, *points.shape[1:])
+    rotations = fk.rotations.reshape(B, F, *fk.rotations.shape[1:])
+    return {p: moments_many(points, rotations, p) for p in pelvises}
 
 
 def _batchable(clip, bm, representation, passes, segment) -> bool:
@@ -166,7 +189,7 @@ def _world_pose(cat, joint):
 
 
 def _prepare_group(items: list[_Item], *, representation, segment, use_contacts, timings) -> list:
-    from fourierjax._motion._clip import _steps, closed_loop
+    from fourierjax._motion._clip import _steps
     from fourierjax._motion._pipeline import _Clip, _Clock
 
     clock = _Clock(timings)
@@ -194,13 +217,40 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     names = channel_names_for(topo, representation)
     clock("features")
     contacts = _contacts(cat, starts, dts, items) if use_contacts else [None] * len(items)
+    loops = _closed_loops(cat, starts) if use_contacts else [False] * len(items)
     out = []
     for k, it in enumerate(items):
-        left, right, om = _steps(contacts[k], dts[k], closed_loop(subs[k]))  # as _prepare
+        left, right, om = _steps(contacts[k], dts[k], loops[k])  # as _prepare
         s = slice(starts[k], starts[k + 1])
         out.append(_Clip(it.index, it.motion, it.a + it.lo, it.b + it.lo, subs[k], x[s],
                          names, mask[s], left, right, om, it.body_map))
     clock("contacts")
+    return out
+
+
+def _closed_loops(cat, starts) -> list[bool]:
+    """`_clip.closed_loop` of every clip of the concatenation ``cat`` (its rotation channels'
+    frame steps from one pass, each clip's median over its own)."""
+    from fourierjax._motion._clip import _LOOP_SEAM
+
+    rot = [k for k, c in enumerate(cat.topology.flat_channel_names) if c.endswith("rotation")]
+    if not rot:
+        return [False] * (len(starts) - 1)
+    a = np.asarray(cat.channels)[:, rot]
+
+    def rms(d):
+        return np.sqrt(np.mean(((d + 180.0) % 360.0 - 180.0) ** 2, axis=-1))
+
+    steps = rms(np.diff(a, axis=0))  # row t: frame t + 1 minus frame t (across clips: unused)
+    first, last = starts[:-1], starts[1:] - 1
+    seams = rms(a[last] - a[first])
+    out = []
+    for k in range(len(first)):
+        if last[k] - first[k] + 1 < 3:
+            out.append(False)
+            continue
+        typical = float(np.median(steps[first[k]:last[k]]))
+        out.append(typical > 0 and float(seams[k]) < _LOOP_SEAM * typical)
     return out
 
 
