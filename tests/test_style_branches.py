@@ -321,3 +321,86 @@ def test_bandai_thighs_near_180_combine_on_one_branch():
     assert abs(char) < 10 and char == pytest.approx(raw - 360 * round(raw / 360), abs=1e-3)
     mid = np.degrees(float(style.interpolate(a, b, 0.5).offset[i]))
     assert abs(mid - np.degrees(float(a.offset[i]))) < 5  # next to both thighs, not swung round to ~0°
+
+
+# ------------------------------------------- superposition onto a base on another branch
+
+
+def _wobbling_pair(amp):
+    """a: π − 0.1 about AXIS, b: π + 0.08 about an axis 0.15 rad from AXIS, stored on the
+    other branch (|r| = π − 0.08 about minus that axis); each wobbles by `amp` in its own
+    direction perpendicular to AXIS, with a second harmonic."""
+    perp1 = np.cross(AXIS, [0.0, 0.0, 1.0])
+    perp1 /= np.linalg.norm(perp1)
+    perp2 = np.cross(AXIS, perp1)
+    axis_b = np.cos(0.15) * AXIS + np.sin(0.15) * perp2
+
+    def model(offset_leg, wobble, phase0, omega, n):
+        amp_ = np.zeros((6, n))
+        ph = np.zeros((6, n))
+        for h in range(n):  # a signed amplitude along `wobble` as per-channel (|A|, φ)
+            amp_[3:6, h] = np.abs(wobble) * amp / (h + 1)
+            ph[3:6, h] = phase0 * (h + 1) + np.where(wobble < 0, np.pi, 0.0)
+        off = np.concatenate([[0.0, 1.0, 0.9], offset_leg])
+        return FourierModel(jnp.asarray(off), jnp.asarray(amp_), jnp.asarray(ph), jnp.asarray(omega),
+                            "expmap", EXPMAP_NAMES)
+
+    a = model(AXIS * (np.pi - 0.1), perp1 + 0.5 * perp2, 0.3, 6.0, 2)
+    b = model(-axis_b * (np.pi - 0.08), perp2, -0.7, 7.0, 2)
+    return a, b
+
+
+def _twin(m):
+    """The same motion with its leg offset on the antipodal branch (harmonics mapped with it)."""
+    far = eqx.tree_at(lambda x: x.offset, m, m.offset.at[LEG].set(-m.offset[LEG]))
+    return style.interpolate(far, m, 1.0)
+
+
+def _scipy_rotations(model, theta):
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_rotvec(np.array(synthesize_phase(model, theta))[:, LEG])
+
+
+def _max_angle(r1, r2):
+    return float(np.max((r1.inv() * r2).magnitude()))
+
+
+@pytest.mark.parametrize("method", ["polar", "phasor"])
+def test_superposing_a_characteristic_reproduces_a_whatever_branch_each_fit_landed_on(x64, method):
+    # issue 22: the characteristic was taken on a's branch and added to b on b's, so near
+    # |r| = π the offset moved by 2π·b̂ and the tangential swing was added with the wrong sign.
+    amp = 0.02
+    a, b = _wobbling_pair(amp)
+    theta = np.linspace(0.0, 2 * np.pi, 33)
+    ra = _scipy_rotations(a, theta)
+    a_twin, b_twin = _twin(a), _twin(b)
+    assert np.abs(np.asarray(a_twin.offset - a.offset)).max() > 3.0
+    assert np.abs(np.asarray(b_twin.offset - b.offset)).max() > 3.0
+    for aa in (a, a_twin):
+        for bb in (b, b_twin):
+            char = style.characteristic(aa, bb)
+            for base in (b, b_twin):
+                out = style.superpose(base, [char], [1.0], method=method)
+                # a's rotations (to first order in the swings, as every branch change)
+                assert _max_angle(_scipy_rotations(out, theta), ra) < 0.1 * amp
+                # w = 0 is the base, on its own branch
+                zero = style.superpose(base, [char], [0.0], method=method)
+                np.testing.assert_allclose(zero.offset, base.offset, atol=1e-12)
+                rb = _scipy_rotations(base, theta)
+                assert _max_angle(_scipy_rotations(zero, theta), rb) < 1e-12
+
+
+def test_superpose_gradients_across_branches_are_finite(x64):
+    a, b = _wobbling_pair(0.02)
+    b_twin = _twin(b)
+    char = style.characteristic(a, b)
+    theta = jnp.linspace(0.0, 2 * np.pi, 9)
+
+    def loss(w, offset):
+        base = eqx.tree_at(lambda m: m.offset, b_twin, offset)
+        return jnp.sum(synthesize_phase(style.superpose(base, [char], w), theta) ** 2)
+
+    gw, goff = jax.grad(loss, argnums=(0, 1))(jnp.asarray([0.4]), b_twin.offset)
+    assert np.all(np.isfinite(np.asarray(gw))) and np.all(np.isfinite(np.asarray(goff)))
+    assert float(jnp.abs(gw[0])) > 0

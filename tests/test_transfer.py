@@ -188,6 +188,46 @@ def test_saturation_keeps_an_extrapolated_transfer_within_the_clips_on_bandai(ba
     assert max_phase_jump(line, skel, body_map=bm) <= 1.01 * ref
 
 
+@pytest.fixture(scope="module")
+def bandai_walk_run_expmap():
+    """The clips of `bandai_walk_run` fitted in exponential-map channels (the thighs' offsets
+    sit at |r| = 3.0-3.1 rad, next to the antipodal branch)."""
+    if not BANDAI.is_dir():
+        pytest.skip("Bandai-1 not found at ../shared/data/mocap/bandai1")
+    from experiments._style_data import fit_clips
+
+    keys = [(c, s) for c in ("walk", "run") for s in ("normal", "sad", "happy", "old")]
+    clips = [{"path": BANDAI / f"dataset-1_{c}_{s}_001.bvh", "content": c, "style": s, "take": "001"}
+             for c, s in keys]
+    fitted, skels, maps, _, failed = fit_clips(clips, 3, "expmap", pathlib.Path("/tmp/fourierjax_style_space_cache"))
+    assert not failed
+    i = keys.index(("run", "normal"))
+    return dict(zip(keys, fitted, strict=True)), skels[i], maps[i]
+
+
+def test_expmap_superposition_keeps_each_clips_branch_on_bandai(bandai_walk_run_expmap):
+    """Issue 22: a characteristic taken on one clip's expmap branch and added to a base on the
+    antipodal one flipped the tangential part of the style near |r| = pi. Now
+    `superpose(b, [characteristic(a, b)], [1])` moves like `a` for every pair of clips (it read
+    up to 1.22x a's largest joint jump per radian), and the content-mean transfer stays within the
+    clips' largest at weights 0 to 1.5 (sad walk -> run read 1.39x at w = 1)."""
+    from experiments._style_transfer import max_phase_jump
+
+    models, skel, bm = bandai_walk_run_expmap
+    jump = {k: max_phase_jump(m, skel, body_map=bm) for k, m in models.items()}
+    ref = max(jump.values())
+    for ka, a in models.items():
+        for kb, b in models.items():
+            out = style.superpose(b, [style.characteristic(a, b)], [1.0])
+            # first order in the swings where a and b sit on different branches
+            assert max_phase_jump(out, skel, body_map=bm) == pytest.approx(jump[ka], rel=0.05), (ka, kb)
+    others = ["normal", "happy", "old"]
+    src, dst = [models[("walk", s)] for s in others], [models[("run", s)] for s in others]
+    for w in (0.0, 0.5, 1.0, 1.5):
+        m = style.transfer(models[("walk", "sad")], src, dst, method="content_mean", weight=w, saturation=0.05)
+        assert max_phase_jump(m, skel, body_map=bm) <= 1.01 * ref, w
+
+
 def _branch_changed(base, channel, turns=1, n=8, k=256):
     """``base`` with one channel 2π higher over a quarter of the cycle (the same rotations
     sampled, another angle branch), fitted back with ``n`` harmonics by least squares: the

@@ -60,6 +60,9 @@ class Characteristic(eqx.Module):
         aligned: `[C, N, 2]` for tangent models, the per-joint polar difference: on each joint's
             three channels `z_A e^{−iD} − z_B`, D the joint's `phase` (see `characteristic`);
             None for Euler and expmap models.
+        reference: `[C]` for exponential-map models, B's offsets: the branch the differences
+            were taken on, which `superpose` brings its base onto before adding them; None for
+            Euler and tangent models (and for characteristic files, which do not store it).
     """
 
     offset: Float[Array, "*k channels"]
@@ -71,6 +74,7 @@ class Characteristic(eqx.Module):
     channel_names: tuple[str, ...] = eqx.field(static=True, default=())
     frames: Float[Array, "*k joints 4"] | None = None
     aligned: Float[Array, "*k channels harmonics 2"] | None = None
+    reference: Float[Array, "*k channels"] | None = None
 
 
 def refuse_tangent(where: str, model) -> None:
@@ -134,8 +138,11 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
 
     Angle offsets are subtracted on one branch: Euler channels as `wrap(A0_A − A0_B)` in
     (−π, π] (a thigh at +179° against −179° differs by −2°, not 358°), exponential-map triples
-    `J.expmap0..2` after b's rotation vector is replaced by the equivalent one nearest a's
-    (its harmonics follow to first order); `root.*` channels subtract plainly.
+    `J.expmap0..2` on b's branch: a's rotation vector is replaced by the equivalent one nearest
+    b's (its harmonics follow to first order), and b's offsets are kept in `reference`, so that
+    `superpose` adds the difference to a base on that same branch (near |r| = π a difference
+    taken on one branch and added on the antipodal one flips the sign of its tangential part);
+    `root.*` channels subtract plainly.
 
     Tangent models (`representation="tangent"`, `R_j(t) = M_j exp(d_j(t))`): the coefficients of
     the tangent coordinates `d` subtract as above but with no branch (they are about each
@@ -165,8 +172,14 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
 @filter_jit
 def _characteristic(a, b):
     tangent = getattr(a, "representation", "") == "tangent"
+    _, triples = channel_kinds(a)
     if not tangent:
-        b = on_branch_of(a, b)
+        # expmap: on b's branch, the one `superpose` adds on; Euler-only models: b onto a's as
+        # before (bit for bit; the difference is the same up to rounding either way)
+        if triples.size:
+            a = on_branch_of(b, a)
+        else:
+            b = on_branch_of(a, b)
     phase = wrap_angle(a.phase - b.phase)
     aligned = None
     if tangent:
@@ -184,6 +197,7 @@ def _characteristic(a, b):
         channel_names=tuple(getattr(a, "channel_names", ())),
         frames=_tangent.frame_difference(a.frames, b.frames) if tangent else None,
         aligned=aligned,
+        reference=b.offset if triples.size and not tangent else None,
     )
 
 
@@ -244,6 +258,9 @@ def stacked_characteristics(characteristics) -> Characteristic:
     for i, c in enumerate(characteristics):
         if not isinstance(c, Characteristic):
             raise UserError(f"characteristics[{i}]: expected a Characteristic, got {type(c)}")
+    if any(c.reference is None for c in characteristics):  # e.g. one read from a file
+        characteristics = [replace(c, reference=None) if c.reference is not None else c
+                           for c in characteristics]
     return stack(characteristics)
 
 
@@ -273,8 +290,30 @@ def saturate_weight(w, saturation):
     return jnp.where(w > 1.0, above, jnp.where(w < 0.0, below, w))
 
 
+def _on_expmap_branch_of(reference, model):
+    """`model` with its exponential-map triples moved onto the branch of the offsets
+    `reference` `[C]` (`on_branch_of`); its other channels exactly as they are."""
+    _, triples = channel_kinds(model)
+    idx = jnp.asarray(triples)
+    ref = replace(model, offset=model.offset.at[idx].set(reference[idx]))
+    return on_branch_of(ref, model)
+
+
 @filter_jit
 def _superpose(base, chars, weights, method: str, include_omega: bool, saturation=None):
+    _, triples = channel_kinds(base)
+    if chars.reference is None or not triples.size or base.representation == "tangent":
+        return _superpose_on_branch(base, chars, weights, method, include_omega, saturation)
+    # Exponential maps: add the differences on the branch they were taken on (the first
+    # characteristic's reference model), then return to the base's branch. Near |r| = π the
+    # tangential part of a difference changes sign between antipodal branches.
+    reference = chars.reference[0]
+    out = _superpose_on_branch(_on_expmap_branch_of(reference, base), chars, weights, method,
+                               include_omega, saturation)
+    return _on_expmap_branch_of(base.offset, out)
+
+
+def _superpose_on_branch(base, chars, weights, method: str, include_omega: bool, saturation=None):
     w = weights
     # the swings (harmonics) and the cadence saturate outside [0, 1]; the posture (offsets,
     # clip means) follows the weight (`superpose`, `saturation`)
@@ -332,7 +371,12 @@ def superpose(
     and polar never shrinks an amplitude through zero when two phases oppose. The offset
     always adds linearly; Euler offset differences are taken in (−π, π] (`characteristic`
     stores them so; older characteristic files are wrapped here), so half of a +179° → −179°
-    characteristic moves a leg by 1°, not 179°.
+    characteristic moves a leg by 1°, not 179°. Exponential-map triples are added on the
+    branch the characteristic was taken on (its `reference`, the first one's when several):
+    the base is moved onto it, the differences added, and the result moved back onto the
+    base's branch (harmonics mapped to first order, `on_branch_of`), so a base whose fit
+    landed on the antipodal branch (|r| near π) gets the same rotations (a characteristic
+    read from a file has no reference and adds on the base's branch as it is).
 
     Arguments:
         base: FourierModel.
