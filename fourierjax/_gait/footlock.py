@@ -50,8 +50,8 @@ TOE_HOLD_FRAMES, TOE_REACH_FADE = 2, 0.03
 #: ankle (at most `TOE_CLEAR_MAX` radians, eased over `TOE_CLEAR_SMOOTH` times the frames) so that
 #: the toe's end point clears `LIFT_BANDS` contact bands (`_toe_clearance`).
 TOE_CLEAR_MAX, TOE_CLEAR_SMOOTH = 0.35, 2
-#: With `TOE_HOLD_FRAMES` or more of easing, each contact's hold starts the easing's frames early
-#: (`_plant`'s `lead`), and the swing's easing towards it is warped by this power.
+#: Each contact's hold starts the easing's frames early (`_plant`'s `lead`), and the swing's
+#: easing towards it is warped by this power.
 LEAD_WARP = 1.6
 
 
@@ -455,13 +455,14 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     hover = (contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True)
     low_in = (rel <= band) | hover
     low = low_in & (still > 0.5)
-    # Landing (120 fps): eased over `smooth_frames` on each side of its first frame, the plant
-    # stopped the foot only `smooth_frames` after it, the heel sliding into the band at up to
-    # the swing's speed (02_03: 21 units/s; 09_01: 34). Each contact's hold is led in by
-    # `smooth_frames` (`_plant`): the foot is stopped when it lands (heel at landing 0.65 ->
-    # 0.24 units/s of the 02_03 skating, 1.08 -> 0.39 on 09_01). Not led out: held on past the
-    # contact's end, the leg stretched and the knee popped (02_03 6.8 deg against 5.3).
-    lead = smooth_frames if smooth_frames >= TOE_HOLD_FRAMES else 0
+    # Landing: eased over `smooth_frames` on each side of its first frame, the plant stopped the
+    # foot only `smooth_frames` after it, the heel sliding into the band at up to the swing's
+    # speed (02_03: 21 units/s; 09_01: 34). Each contact's hold is led in by `smooth_frames`
+    # (`_plant`): the foot is stopped when it lands (heel at landing 0.65 -> 0.24 units/s of the
+    # 02_03 skating, 1.08 -> 0.39 on 09_01; at 30 fps, one frame, Bandai-1 run_normal 0.227x ->
+    # 0.200x, knee 16.2 deg against 16.4). Not led out: held on past the contact's end, the leg
+    # stretched and the knee popped (02_03 6.8 deg against 5.3).
+    lead = smooth_frames
     shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f], lead) for f in range(2)], 1)
     shift = shift * (1.0 - upv)[None, None]
     if 1 <= smooth_frames < TOE_HOLD_FRAMES:
