@@ -50,6 +50,9 @@ TOE_HOLD_FRAMES, TOE_REACH_FADE = 2, 0.03
 #: ankle (at most `TOE_CLEAR_MAX` radians, eased over `TOE_CLEAR_SMOOTH` times the frames) so that
 #: the toe's end point clears `LIFT_BANDS` contact bands (`_toe_clearance`).
 TOE_CLEAR_MAX, TOE_CLEAR_SMOOTH = 0.35, 2
+#: Each contact's hold starts the easing's frames early (`_plant`'s `lead`), and the swing's
+#: easing towards it is warped by this power.
+LEAD_WARP = 1.6
 
 
 def _smoothstep(x):
@@ -240,28 +243,46 @@ def _next(mask, idx, T):
     return jax.lax.cummin(jnp.where(mask, idx, T), axis=0, reverse=True)
 
 
-def _plant(points, lam, low):
+def _plant(points, lam, low, lead=0):
     """Horizontal shift `[T, 3]` holding one foot's points where they land (offline: the
     landing of a contact is known before it happens, so a descending foot is drawn to it).
 
     A contact is a run of frames with a point down (`low`: the points that the skating metric
     counts). Every point is held at its place
     in mid-contact while its weight lasts: the heel while it is down, then the toe (heel-to-toe
-    roll); the shift is the weighted mean of the held points' errors."""
+    roll); the shift is the weighted mean of the held points' errors. With `lead` frames (static),
+    each contact's hold starts that many frames earlier (but for one cut by the last frame), with
+    the weights of its first frame, so that easing the shift over `lead` frames on each side
+    (`_smooth`) has the foot stopped by the contact's first frame."""
     T, P = lam.shape
     idx = jnp.arange(T)
-    on = jnp.any(low, -1)
+    down = jnp.any(low, -1)
+    on = down
+    for k in range(1, lead + 1):  # each contact starts `lead` frames earlier
+        on = on | jnp.concatenate([down[k:], jnp.zeros((k,), bool)])
+    if lead > 0:
+        # A contact cut by the clip's end is not led in: led in, the last landing of a 5 s 02_01
+        # popped the knee (4.4 deg against the capture's 3.5; 3.6 at 5.5 s, again the last
+        # landing; the other landings 2.3 at most). Not led in: 2.6.
+        prev_d = jnp.concatenate([jnp.zeros((1,), bool), on[:-1]])
+        seg_d = jnp.clip(jax.lax.cummax(jnp.where(on & ~prev_d, idx, -1), axis=0), 0, T - 1)
+        cut = jax.ops.segment_max(jnp.where(on, idx, -1), seg_d, num_segments=T)[seg_d] >= T - 1
+        on = jnp.where(cut, down, on)
     prev_on = jnp.concatenate([jnp.zeros((1,), bool), on[:-1]])
     next_on = jnp.concatenate([on[1:], jnp.zeros((1,), bool)])
     seg_start = jax.lax.cummax(jnp.where(on & ~prev_on, idx, -1), axis=0)
     seg_start = jnp.clip(seg_start, 0, T - 1)
     # The planted place: the foot's pose in the middle of the frames of the contact where it
     # is down (mid-stance, the foot flat); segments are numbered by their first frame.
-    down = jnp.any(low, -1) & on
+    down = down & on
     first = jax.ops.segment_min(jnp.where(down, idx, T), seg_start, num_segments=T)[seg_start]
     last = jax.ops.segment_max(jnp.where(down, idx, -1), seg_start, num_segments=T)[seg_start]
     s = jnp.where(first < T, (first + last) // 2, seg_start)  # [T]
     err = points[s] - points
+    if lead > 0:
+        # The lead-in frames hold with the weights of the contact's first frame.
+        ref = jnp.where(first < T, jnp.clip(idx, first, jnp.maximum(first, last)), idx)
+        lam = lam[ref]
     total = jnp.sum(lam, -1, keepdims=True)
     held = jnp.sum(lam[..., None] * err, -2) / jnp.maximum(total, 1e-9)
     # In the air the shift eases from the last contact's to the next one's (smoothstep over the
@@ -272,7 +293,14 @@ def _plant(points, lam, low):
     next_shift = held[jnp.clip(next_start, 0, T - 1)]
     prev_shift = jnp.where((last_end >= 0)[:, None], prev_shift, next_shift)
     next_shift = jnp.where((next_start < T)[:, None], next_shift, prev_shift)
-    u = _smoothstep((idx - last_end) / jnp.maximum(next_start - last_end, 1))
+    x = jnp.clip((idx - last_end) / jnp.maximum(next_start - last_end, 1), 0.0, 1.0)
+    if lead > 0:
+        # The lead-in takes its frames from the swing's end: the easing is warped towards the
+        # end (`x ** LEAD_WARP`) so the early swing keeps its pace. Not warped, the knee's
+        # largest step, early in 02_03's swing, went 5.25 -> 5.33 deg (the capture's 5.28);
+        # warped: 5.21.
+        x = x ** LEAD_WARP
+    u = _smoothstep(x)
     air = prev_shift + u[:, None] * (next_shift - prev_shift)
     return jnp.where(on[:, None], held, air)
 
@@ -427,7 +455,15 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     hover = (contact[..., None] >= 0.5) & (rel <= 2.0 * band) & jnp.any(rel <= band, 0, keepdims=True)
     low_in = (rel <= band) | hover
     low = low_in & (still > 0.5)
-    shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f]) for f in range(2)], 1)
+    # Landing: eased over `smooth_frames` on each side of its first frame, the plant stopped the
+    # foot only `smooth_frames` after it, the heel sliding into the band at up to the swing's
+    # speed (02_03: 21 units/s; 09_01: 34). Each contact's hold is led in by `smooth_frames`
+    # (`_plant`): the foot is stopped when it lands (heel at landing 0.65 -> 0.24 units/s of the
+    # 02_03 skating, 1.08 -> 0.39 on 09_01; at 30 fps, one frame, Bandai-1 run_normal 0.227x ->
+    # 0.200x, knee 16.2 deg against 16.4). Not led out: held on past the contact's end, the leg
+    # stretched and the knee popped (02_03 6.8 deg against 5.3).
+    lead = smooth_frames
+    shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f], lead) for f in range(2)], 1)
     shift = shift * (1.0 - upv)[None, None]
     if 1 <= smooth_frames < TOE_HOLD_FRAMES:
         # With one frame of easing (30 fps) the tip is held horizontally only, and only as far
