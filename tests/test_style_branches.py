@@ -1,6 +1,8 @@
 """Style algebra across clips on different angle branches, the `omega_mode=` rename, and value
 checks that hold under jit."""
 
+import io
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -404,3 +406,38 @@ def test_superpose_gradients_across_branches_are_finite(x64):
     gw, goff = jax.grad(loss, argnums=(0, 1))(jnp.asarray([0.4]), b_twin.offset)
     assert np.all(np.isfinite(np.asarray(gw))) and np.all(np.isfinite(np.asarray(goff)))
     assert float(jnp.abs(gw[0])) > 0
+
+
+@pytest.mark.parametrize("method", ["polar", "phasor"])
+def test_a_characteristic_file_keeps_the_branch_it_was_taken_on(x64, tmp_path, method):
+    # A file without `reference` added on the base's own branch: read back, the characteristic
+    # of a against b's twin put the swing 0.58 rad off a's rotations (see the test above).
+    from fourierjax.io import model_io
+
+    amp = 0.02
+    a, b = _wobbling_pair(amp)
+    b_twin = _twin(b)
+    char = style.characteristic(a, b_twin)
+    assert char.reference is not None
+    model_io.save_characteristic(tmp_path / "c.npz", char, a="A", b="B twin")
+    back, _ = model_io.load_characteristic(tmp_path / "c.npz")
+    np.testing.assert_array_equal(back.reference, np.asarray(char.reference, np.float64))
+    theta = np.linspace(0.0, 2 * np.pi, 33)
+    ra = _scipy_rotations(a, theta)
+    for base in (b, b_twin):
+        out = style.superpose(base, [back], [1.0], method=method)
+        assert _max_angle(_scipy_rotations(out, theta), ra) < 0.1 * amp
+    # A reference of the wrong length is a clear error, not a wrong answer.
+    import zipfile
+
+    bad = tmp_path / "bad.npz"
+    with zipfile.ZipFile(tmp_path / "c.npz") as src, zipfile.ZipFile(bad, "w") as dst:
+        for info in src.infolist():
+            data = src.read(info)
+            if info.filename == "reference.npy":
+                buf = io.BytesIO()
+                np.save(buf, np.zeros(2))
+                data = buf.getvalue()
+            dst.writestr(info, data)
+    with pytest.raises(model_io.ModelFileError, match="reference"):
+        model_io.load_characteristic(bad)

@@ -62,7 +62,7 @@ class Characteristic(eqx.Module):
             None for Euler and expmap models.
         reference: `[C]` for exponential-map models, B's offsets: the branch the differences
             were taken on, which `superpose` brings its base onto before adding them; None for
-            Euler and tangent models (and for characteristic files, which do not store it).
+            Euler and tangent models, and for characteristic files written before it was stored.
     """
 
     offset: Float[Array, "*k channels"]

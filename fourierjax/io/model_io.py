@@ -43,6 +43,8 @@ _CHARACTERISTIC_ARRAYS = ("offset", "amplitude", "phase", "phasor", "log_omega")
 #: Written only for tangent characteristics (`style.characteristic`): ``frames [K, 4]`` (wxyz
 #: clip-mean differences M_B^-1 M_A) and ``aligned [C, N, 2]`` (per-joint polar differences).
 _TANGENT_CHARACTERISTIC_ARRAYS = ("frames", "aligned")
+# Exponential-map characteristics: B's offsets, the branch the differences were taken on.
+_REFERENCE_CHARACTERISTIC_ARRAYS = ("reference",)
 
 
 class ModelFileError(UserError):
@@ -562,7 +564,9 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
     (A_A - A_B, may be negative), ``phase [C, N]`` (phi_A - phi_B wrapped to (-pi, pi]),
     ``phasor [C, N, 2]`` (c_A - c_B with c = (A cos phi, A sin phi)), ``log_omega []``
     (log omega_A / omega_B); tangent characteristics also ``frames [K, 4]`` (wxyz, M_B^-1 M_A)
-    and ``aligned [C, N, 2]`` (per-joint polar differences, `style.characteristic`). Apply one
+    and ``aligned [C, N, 2]`` (per-joint polar differences, `style.characteristic`);
+    exponential-map characteristics also ``reference [C]`` (B's offsets: the branch
+    `style.superpose` adds them on; files without it add on the base's own branch). Apply one
     with ``style.superpose(base, [char], [weight])``.
 
     Arguments:
@@ -575,7 +579,7 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
     header = _header(CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION, char,
                      "characteristic", a=a, b=b, alignment=alignment)
     arrays = {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS}
-    for k in _TANGENT_CHARACTERISTIC_ARRAYS:  # tangent characteristics only
+    for k in _TANGENT_CHARACTERISTIC_ARRAYS + _REFERENCE_CHARACTERISTIC_ARRAYS:  # when present
         if getattr(char, k, None) is not None:
             arrays[k] = getattr(char, k)
     _refuse_non_finite("save_characteristic", "char", arrays, path)
@@ -601,7 +605,11 @@ def load_characteristic(path):
     names = _check_arrays(path, header, data, {"offset": ("C",), "amplitude": ("C", "N"),
                                                 "phase": ("C", "N"), "phasor": ("C", "N", 2),
                                                 "log_omega": ()})
-    extra = {k: data[k] for k in _TANGENT_CHARACTERISTIC_ARRAYS if k in data}
+    extra = {k: data[k] for k in _TANGENT_CHARACTERISTIC_ARRAYS + _REFERENCE_CHARACTERISTIC_ARRAYS
+             if k in data}
+    if "reference" in extra and extra["reference"].shape != data["offset"].shape:
+        raise ModelFileError(path, f"inconsistent shapes: reference {extra['reference'].shape}, "
+                                   f"offset {data['offset'].shape}")
     char = Characteristic(**{k: data[k] for k in _CHARACTERISTIC_ARRAYS}, **extra,
                           representation=str(header.get("representation", "")),
                           channel_names=names)
