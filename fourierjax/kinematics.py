@@ -277,6 +277,25 @@ def _chunk_frames(num_joints: int, backend: str | None = None) -> int:
     return max(_FK_CHUNK, _ACCELERATOR_JOINT_FRAMES // max(1, num_joints))
 
 
+def _in_chunks(fn, x, size: int, in_axis: int, out_axis: int):
+    """``fn`` over chunks of ``size`` frames of ``x`` (frames along ``in_axis``) in one loop, its
+    outputs (a pytree, None leaves allowed) written along ``out_axis``. The last chunk is clamped
+    to end at the last frame (it recomputes a few frames), so nothing is padded and nothing is
+    copied afterwards."""
+    m = x.shape[in_axis]
+    shapes = jax.eval_shape(fn, jax.lax.slice_in_dim(x, 0, size, axis=in_axis))
+    init = jax.tree.map(
+        lambda s: jnp.zeros((*s.shape[:out_axis], m, *s.shape[out_axis + 1:]), s.dtype), shapes)
+
+    def body(i, acc):
+        start = jnp.minimum(i * size, m - size)
+        res = fn(jax.lax.dynamic_slice_in_dim(x, start, size, in_axis))
+        return jax.tree.map(
+            lambda a, r: jax.lax.dynamic_update_slice_in_dim(a, r, start, out_axis), acc, res)
+
+    return jax.lax.fori_loop(0, -(-m // size), body, init)
+
+
 def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
     """`_fk_chunk` of `[..., C]` channels, in chunks of frames when there are many."""
     topology = skeleton.topology
@@ -288,19 +307,8 @@ def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
         out = _fk_chunk(skeleton, flat, all_rotations)
     else:
         # Chunks of frames keep the working set in cache (one pass over [J, 7, M] per level is
-        # memory-bound once M is large). The last chunk is clamped to end at M (it recomputes
-        # a few frames), so nothing is padded and nothing is copied afterwards.
-        n = -(-m // size)
-        shapes = jax.eval_shape(lambda f: _fk_chunk(skeleton, f, all_rotations), flat[:size])
-        init = jax.tree.map(lambda s: jnp.zeros((m, *s.shape[1:]), s.dtype), shapes)
-
-        def body(i, acc):
-            start = jnp.minimum(i * size, m - size)
-            chunk = jax.lax.dynamic_slice_in_dim(flat, start, size)
-            res = _fk_chunk(skeleton, chunk, all_rotations)
-            return jax.tree.map(lambda a, r: jax.lax.dynamic_update_slice_in_dim(a, r, start, 0), acc, res)
-
-        out = jax.lax.fori_loop(0, n, body, init)
+        # memory-bound once M is large).
+        out = _in_chunks(lambda f: _fk_chunk(skeleton, f, all_rotations), flat, size, 0, 0)
 
     def back(a):  # [M, K, D] -> [..., K, D]
         return None if a is None else a.reshape(*batch, *a.shape[1:])
@@ -425,24 +433,16 @@ def _frames_last_chunk(num_joints: int, backend: str | None = None) -> int:
 def _positions_frames_last(skeleton: Skeleton, channels):
     """`[J, 3, M]` positions of `[C, M]` channels: FK's own layout, no transposes.
 
-    Large batches in chunks of frames (`_frames_last_chunk`) in one loop; the last chunk is
-    clamped to end at M, as in `_fk_batch`.
+    Large batches in chunks of frames (`_frames_last_chunk`, `_in_chunks`).
     """
     the_plan = _fk.plan(skeleton.topology, all_rotations=False)
     rows = np.asarray(the_plan.rows, np.int32)
     m = channels.shape[1]
     size = _frames_last_chunk(skeleton.topology.num_joints)
-    if m <= 2 * size:
-        return _fk.positions(the_plan, channels[rows], skeleton.offsets)
-    init = jnp.zeros((skeleton.topology.num_joints, 3, m), channels.dtype)
+    def fk(chunk):
+        return _fk.positions(the_plan, chunk[rows], skeleton.offsets)
 
-    def body(i, acc):
-        start = jnp.minimum(i * size, m - size)
-        chunk = jax.lax.dynamic_slice_in_dim(channels, start, size, 1)
-        res = _fk.positions(the_plan, chunk[rows], skeleton.offsets)
-        return jax.lax.dynamic_update_slice_in_dim(acc, res, start, 2)
-
-    return jax.lax.fori_loop(0, -(-m // size), body, init)
+    return fk(channels) if m <= 2 * size else _in_chunks(fk, channels, size, 1, 2)
 
 
 _joint_positions_frames_last_jit = _jit.jit(_positions_frames_last)
