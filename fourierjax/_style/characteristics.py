@@ -258,7 +258,7 @@ def stacked_characteristics(characteristics) -> Characteristic:
     for i, c in enumerate(characteristics):
         if not isinstance(c, Characteristic):
             raise UserError(f"characteristics[{i}]: expected a Characteristic, got {type(c)}")
-    if any(c.reference is None for c in characteristics):  # e.g. one read from a file
+    if any(c.reference is None for c in characteristics):  # e.g. one read from an older file
         characteristics = [replace(c, reference=None) if c.reference is not None else c
                            for c in characteristics]
     return stack(characteristics)
@@ -376,7 +376,7 @@ def superpose(
     the base is moved onto it, the differences added, and the result moved back onto the
     base's branch (harmonics mapped to first order, `on_branch_of`), so a base whose fit
     landed on the antipodal branch (|r| near π) gets the same rotations (a characteristic
-    read from a file has no reference and adds on the base's branch as it is).
+    from a file written before `reference` was stored has none: it adds on the base's branch).
 
     Arguments:
         base: FourierModel.
