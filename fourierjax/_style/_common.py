@@ -255,9 +255,11 @@ def on_branch_of(a, b):
     """`b` with its angle offsets moved onto `a`'s branch (same rotations, same motion).
 
     Euler channels: `b.offset − 2πk` within π of a's offset (`a + wrap(b − a)`), which
-    shifts b's whole signal by whole turns. Exponential-map triples: the equivalent rotation vector
-    nearest a's (`nearest_rotation_vector`), and b's harmonics mapped through the Jacobian of
-    that change, so that b's rotations stay the same to first order in the amplitudes. Root
+    shifts b's whole signal by whole turns. Exponential-map triples: the turn `k` of the
+    equivalent rotation vector nearest a's offset (`nearest_rotation_vector`), applied to b's
+    synthesized cycle sample by sample (`r − 2πk r/|r|`, 32 phases or 8 per harmonic) and
+    projected back onto b's harmonics: the rotations stay the same up to the harmonics above
+    b's that the change creates (a change of branch is not band-limited). Root
     channels and tangent models are left alone. Works for a stacked `b` against one `a` by broadcasting.
     """
     if getattr(a, "representation", "") == "tangent":
@@ -273,16 +275,35 @@ def on_branch_of(a, b):
         return replace(b, offset=offset)
     idx = jnp.asarray(triples)
     v = offset[..., idx]  # [..., K, 3]
-    moved, g = nearest_rotation_vector(jnp.broadcast_to(a.offset[..., idx], v.shape), v)
-    offset = offset.at[..., idx].set(moved)
-    n2 = jnp.sum(v * v, axis=-1, keepdims=True)
-    unit = v / jnp.sqrt(jnp.where(n2 < _TINY, 1.0, n2))
+    _, g = nearest_rotation_vector(jnp.broadcast_to(a.offset[..., idx], v.shape), v)
+    # The branch change r -> r - 2πk r/|r| is applied to the synthesized cycle, sample by
+    # sample, and the result projected back onto the model's harmonics (a DFT of the samples).
+    # Mapping the harmonics through the Jacobian at the offset alone (first order) is not
+    # enough near |r| = π, where Bandai's thighs sit: the factor 1 - 2πk/|r| changes by
+    # 2πk δ/|r|² along a swing δ, and a transfer rebuilt on the other branch moved its toes 5 %
+    # faster than the transfer itself (`docs/findings.md`, section 3b).
     c = phasor(b)[..., idx, :, :]  # [..., K, 3, N, 2]
-    radial = jnp.sum(unit[..., :, None, None] * c, axis=-3, keepdims=True) * unit[..., :, None, None]
-    gk = g[..., None, None, None]
-    c_moved = c - gk * (c - radial)
+    n_h = c.shape[-2]
+    num = max(32, 8 * n_h)
+    theta = jnp.arange(num, dtype=v.dtype) * (2 * jnp.pi / num)
+    nt = jnp.arange(1, n_h + 1, dtype=v.dtype)[:, None] * theta[None, :]  # [N, M]
+    # leading axes made explicit (strict rank promotion): [..., K, 3, N, M]
+    sin, cos = (t.reshape((1,) * (c.ndim - 2) + t.shape) for t in (jnp.sin(nt), jnp.cos(nt)))
+    # broadcast sums, not einsum (nested-vmap XLA CPU trap, STYLE.md)
+    x = v[..., None] + jnp.sum(c[..., 0, None] * sin + c[..., 1, None] * cos, axis=-2)  # [..., K, 3, M]
+    x2 = jnp.sum(x * x, axis=-2, keepdims=True)  # [..., K, 1, M]
+    # Shim to avoid NaNs in jnp.where branches (x/|x| at 0), which cause failures for AD.
+    small = x2 < _TINY
+    turns_k = jax.lax.stop_gradient(jnp.round(g * jnp.sqrt(jnp.sum(v * v, axis=-1)) / (2 * jnp.pi)))
+    scale = jnp.where(small, 0.0, 2 * jnp.pi * turns_k[..., None, None] / jnp.sqrt(jnp.where(small, 1.0, x2)))
+    y = x - scale * x  # [..., K, 3, M]
+    projected = jnp.mean(y, axis=-1)
+    y = y[..., None, :]  # [..., K, 3, 1, M]
+    c_moved = jnp.stack([jnp.sum(y * sin, axis=-1), jnp.sum(y * cos, axis=-1)], axis=-1) * (2.0 / num)
+    keep_offset = (g == 0)[..., None]
+    offset = offset.at[..., idx].set(jnp.where(keep_offset, v, projected))
     amplitude_new, phase_new = polar_from_phasor(c_moved)
-    keep = (gk[..., 0] == 0) & jnp.ones_like(amplitude_new, dtype=bool)
+    keep = (g[..., None, None] == 0) & jnp.ones_like(amplitude_new, dtype=bool)
     amplitude = b.amplitude.at[..., idx, :].set(jnp.where(keep, b.amplitude[..., idx, :], amplitude_new))
     phase = b.phase.at[..., idx, :].set(jnp.where(keep, b.phase[..., idx, :], phase_new))
     return replace(b, offset=offset, amplitude=amplitude, phase=phase)

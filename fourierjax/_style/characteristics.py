@@ -139,7 +139,8 @@ def characteristic(a: FourierModel, b: FourierModel) -> Characteristic:
     Angle offsets are subtracted on one branch: Euler channels as `wrap(A0_A − A0_B)` in
     (−π, π] (a thigh at +179° against −179° differs by −2°, not 358°), exponential-map triples
     `J.expmap0..2` on b's branch: a's rotation vector is replaced by the equivalent one nearest
-    b's (its harmonics follow to first order), and b's offsets are kept in `reference`, so that
+    b's (its cycle mapped sample by sample and projected back onto its harmonics,
+    `on_branch_of`), and b's offsets are kept in `reference`, so that
     `superpose` adds the difference to a base on that same branch (near |r| = π a difference
     taken on one branch and added on the antipodal one flips the sign of its tangential part);
     `root.*` channels subtract plainly.
@@ -308,9 +309,18 @@ def _superpose(base, chars, weights, method: str, include_omega: bool, saturatio
     # characteristic's reference model), then return to the base's branch. Near |r| = π the
     # tangential part of a difference changes sign between antipodal branches.
     reference = chars.reference[0]
-    out = _superpose_on_branch(_on_expmap_branch_of(reference, base), chars, weights, method,
-                               include_omega, saturation)
-    return _on_expmap_branch_of(base.offset, out)
+    moved = _on_expmap_branch_of(reference, base)
+    out = _on_expmap_branch_of(base.offset, _superpose_on_branch(moved, chars, weights, method,
+                                                                 include_omega, saturation))
+    # A change of branch is not band-limited (`on_branch_of`): the base's own round trip is
+    # off by its truncation. Adding the difference to the exact base cancels it, so w = 0 is
+    # the base and the increment alone carries the branch changes.
+    back = _on_expmap_branch_of(base.offset, moved)
+    _, triples = channel_kinds(base)
+    idx = jnp.asarray(triples).reshape(-1)
+    amplitude, phase = polar_from_phasor(phasor(out)[idx] + phasor(base)[idx] - phasor(back)[idx])
+    return replace(out, offset=out.offset.at[idx].add(base.offset[idx] - back.offset[idx]),
+                   amplitude=out.amplitude.at[idx].set(amplitude), phase=out.phase.at[idx].set(phase))
 
 
 def _superpose_on_branch(base, chars, weights, method: str, include_omega: bool, saturation=None):
@@ -374,8 +384,9 @@ def superpose(
     characteristic moves a leg by 1°, not 179°. Exponential-map triples are added on the
     branch the characteristic was taken on (its `reference`, the first one's when several):
     the base is moved onto it, the differences added, and the result moved back onto the
-    base's branch (harmonics mapped to first order, `on_branch_of`), so a base whose fit
-    landed on the antipodal branch (|r| near π) gets the same rotations (a characteristic
+    base's branch (`on_branch_of`; the base's own round trip is cancelled, so `w = 0` is the
+    base exactly), so a base whose fit landed on the antipodal branch (|r| near π) gets the
+    same rotations up to the harmonics above N that a change of branch creates (a characteristic
     from a file written before `reference` was stored has none: it adds on the base's branch).
 
     Arguments:

@@ -154,7 +154,8 @@ def interpolate(
     Angle offsets are interpolated on one branch: an Euler channel as `a + s·wrap(b − a)`
     (thighs at +179° and −179° meet at ±180°, not 0°), an exponential-map triple `J.expmap0..2`
     after b's rotation vector is replaced by the equivalent one nearest a's (`v − 2πk·v/|v|`,
-    its harmonics mapped to first order); `root.*` channels interpolate plainly. So `s = 1`
+    its cycle mapped sample by sample and projected back onto its harmonics, `on_branch_of`);
+    `root.*` channels interpolate plainly. So `s = 1`
     gives b's motion on a's branch. Tangent models (`representation="tangent"`) interpolate
     their coefficients (the tangent coordinates) by eq. 3 and slerp the joints' clip means
     (`frames`), so `s = 0` and `s = 1` give exactly `a` and `b`. Their polar form turns the
