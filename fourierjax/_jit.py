@@ -8,6 +8,7 @@ import logging
 from collections.abc import Callable
 
 import jax
+from jax._src import core as _core  # `_trace_state_clean`, on every call: imported once
 
 _log = logging.getLogger(__name__)
 
@@ -165,7 +166,9 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict, cpu_options: d
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        return get()(*args, **kwargs)
+        # `get`'s lookup inline: a per-frame or single-character call pays ~0.3 us less Python.
+        f = jitted.get((jax.default_backend(), _core.trace_state_clean()))
+        return (get() if f is None else f)(*args, **kwargs)
 
     wrapper.lower = lambda *args, **kwargs: get().lower(*args, **kwargs)  # type: ignore[attr-defined]
     wrapper.num_traces = lambda: traces[0]  # type: ignore[attr-defined]
@@ -175,6 +178,4 @@ def _per_backend(make: Callable, fun: Callable, jit_kwargs: dict, cpu_options: d
 
 def _trace_state_clean() -> bool:
     """True outside any JAX transformation (jax has no public API for this)."""
-    from jax._src import core
-
-    return core.trace_state_clean()
+    return _core.trace_state_clean()

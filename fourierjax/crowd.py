@@ -174,7 +174,9 @@ def _pose(crowd: Crowd, t: Float[Array, ""]) -> Float[Array, "J 3 B"]:
     dtype = crowd.coefficients.dtype
     t = jnp.asarray(t, dtype)
     the_plan = _fk.plan(topology, all_rotations=False)
-    return _fk.positions(the_plan, _channels(crowd, t, _fk.store), crowd.bone_offsets)
+    # The channels stored once: fused into the sin/cos block, each of its two halves would
+    # synthesize them again (a second read of every coefficient).
+    return _fk.positions(the_plan, _fk.store(_channels(crowd, t, _fk.store)), crowd.bone_offsets)
 
 
 def crowd_positions(

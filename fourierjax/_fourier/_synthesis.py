@@ -132,42 +132,82 @@ def synthesize(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T 
 #: so the straight product (`_synthesize_one_product`) is handed off. Measured on 2 loaded
 #: cores: dispatch 6 us + the program 9 us + the hand-off 6-23 us (bimodal with the load) =
 #: 20-45 us, against NumPy's 22 us. In loops over frames (`_synthesize_one_loop`) it is counted
-#: as one frame (~880 flops at C = 57, N = 3) and runs inline: 25-27 us, steady under load (the
-#: loops' own cost is ~14 us of it; benchmark synthesis_1 0.47-0.57x NumPy -> 0.88x; one loop
-#: instead of two, 0.92-1.02x). The loops
-#: are used while their count fits the budget (`_inline_flops`, checked against XLA's count in
-#: tests/test_fourier.py); larger models take the product.
+#: as one step and runs inline. The loops are used while their count fits the budget
+#: (`_inline_flops`, checked against XLA's count in tests/test_fourier.py); larger models take
+#: the product.
 _INLINE_FLOPS = 1000
+
+#: XLA:CPU compiles a while loop into one kernel (`SmallWhileLoopHoistingPass`, a call tagged
+#: `xla_cpu_small_call`) when HloCostAnalysis counts fewer than 1024 bytes accessed in it
+#: (`xla_cpu_small_while_loop_byte_threshold`, jax 0.10.2); otherwise each iteration runs its
+#: thunks one by one (~50 ns an iteration here). A frame's row of 57 channels reads a
+#: `[2N + 1, 57]` coefficient table (1.6 kB at N = 3), so the channels are taken in chunks whose
+#: table slice, basis rows and output rows fit `_LOOP_BYTES` per step (checked in
+#: tests/test_synthesis_one.py).
+_LOOP_BYTES = 896
+
+
+def _chunk_channels(num_channels: int, num_harmonics: int, frames_per_step: int = 1) -> tuple[int, int]:
+    """`(chunks, width)`: channel chunks of equal width (the last padded) whose step in
+    `_synthesize_one_loop` (`frames_per_step` frames of one chunk) reads and writes under
+    `_LOOP_BYTES`: `2N + 1` coefficients and `frames_per_step` outputs a channel, `2N` basis
+    values a frame."""
+    n, f = num_harmonics, frames_per_step
+    cap = max(1, (_LOOP_BYTES - 8 * f * n) // (4 * (2 * n + 1 + f)))
+    chunks = -(-num_channels // cap)
+    return chunks, -(-num_channels // chunks)
+
+
+def _loop_plan(num_channels: int, num_harmonics: int) -> tuple[int, int, int, int]:
+    """`(frames_per_step, chunks, width, flops)` of `_synthesize_one_loop`: two frames a step
+    when XLA's count stays under `_INLINE_FLOPS` (half the steps: 57 x 240, N = 3, 14.9 against
+    16.1 us, NumPy 17.3 us, interleaved at load 6.6), else one. `flops` is an upper estimate of
+    XLA's count: the coefficient table's 2 products per channel and harmonic, one step's 2N
+    multiply-adds per channel and frame, and the scalar basis work of one frame."""
+    n = num_harmonics
+    # The scalar work, measured with jax 0.10.2: 68-79 flops for N <= 4, then 520, 656, 975 and
+    # 1735 for N = 5, 6, 8, 12 (XLA's count of the basis step grows about as N^2 from N = 5).
+    scalar = 100 if n <= 4 else 12 * n * n + 5 * n + 210
+    for frames in (2, 1):
+        chunks, width = _chunk_channels(num_channels, n, frames)
+        flops = 2 * num_channels * n + 4 * n * frames * width + scalar
+        if flops < _INLINE_FLOPS:
+            break
+    return frames, chunks, width, flops
 
 
 def _inline_flops(num_channels: int, num_harmonics: int) -> int:
-    """An upper estimate of the flops HloCostAnalysis counts in `_synthesize_one_loop`: the
-    frame body's 2N multiply-adds per channel, the coefficient body's 2 products per channel,
-    and the scalar basis work."""
-    # The scalar work, measured with jax 0.10.2: 52-85 flops for N <= 4, 526-1733 for N = 5-12.
-    scalar = 100 if num_harmonics <= 4 else 150 * num_harmonics
-    return num_channels * (4 * num_harmonics + 2) + scalar
+    """An upper estimate of the flops HloCostAnalysis counts in `_synthesize_one_loop` (any
+    number of frames; see `_loop_plan`)."""
+    return _loop_plan(num_channels, num_harmonics)[3]
 
 
 def _synthesize_one_loop(model: FourierModel, t_s: Float[Array, " T"]) -> Float[Array, "T C"]:
-    """One character on CPU in loops (see `_INLINE_FLOPS`): the same sums as
+    """One character on CPU in loops (see `_INLINE_FLOPS`, `_LOOP_BYTES`): the same sums as
     `_synthesize_one_product` (one shared-reduction sincos per frame, the angle-addition
-    recurrence, `2N + 1` terms per channel), counted by XLA as one harmonic and one frame, so
-    that the program stays under XLA:CPU's inline-execution count.
+    recurrence, `2N + 1` terms per channel).
+
+    Two loops, each compiled by XLA:CPU into one kernel: the `[T, 2N]` basis, one frame a step;
+    then the rows, one or two frames of one channel chunk a step (`_loop_plan`). Counted by XLA
+    as one step each, the program stays under XLA:CPU's inline-execution count. (One loop over
+    frames with every channel in its step ran each step's thunks one by one: 57 x 240, N = 3,
+    20.4 us against 16.5-16.7 us with one frame of a chunk a step, NumPy 17.4-17.8 us;
+    interleaved, load 5.7.)
     """
     num_channels, num_harmonics = model.amplitude.shape
     dtype = t_s.dtype
+    rows = 2 * num_harmonics + 1
+    num_frames = t_s.shape[0]
+    frames, chunks, width, _ = _loop_plan(num_channels, num_harmonics)
+    if num_frames % frames:
+        frames = 1
+        chunks, width = _chunk_channels(num_channels, num_harmonics)
+    a, b = model.sin_cos()  # [C, N]
+    table = jnp.concatenate([model.offset[None, :], a.T, b.T], axis=0)  # [2N + 1, C]: `sin_cos`
+    if chunks * width > num_channels:
+        table = jnp.pad(table, ((0, 0), (0, chunks * width - num_channels)))
 
-    def coefficients(n, table):  # rows 1 + n (sine) and 1 + N + n (cosine): `FourierModel.sin_cos`
-        amp = jax.lax.dynamic_index_in_dim(model.amplitude, n, 1, keepdims=False)
-        ph = jax.lax.dynamic_index_in_dim(model.phase, n, 1, keepdims=False)
-        table = jax.lax.dynamic_update_index_in_dim(table, amp * jnp.cos(ph), 1 + n, 0)
-        return jax.lax.dynamic_update_index_in_dim(table, amp * jnp.sin(ph), 1 + num_harmonics + n, 0)
-
-    table = jnp.zeros((2 * num_harmonics + 1, num_channels), dtype).at[0].set(model.offset)
-    table = jax.lax.fori_loop(0, num_harmonics, coefficients, table)
-
-    def frame(i, out):  # sin(n theta), cos(n theta) of frame i (theta = omega t), then its row
+    def basis_row(i, basis):  # sin(n theta), cos(n theta) of frame i (theta = omega t)
         th = model.omega * jax.lax.dynamic_index_in_dim(t_s, i, 0, keepdims=False)
         s1, c1 = _sincos(th)
         sines, cosines = [s1], [c1]
@@ -175,16 +215,23 @@ def _synthesize_one_loop(model: FourierModel, t_s: Float[Array, " T"]) -> Float[
             s, c = sines[-1], cosines[-1]
             sines.append(s * c1 + c * s1)
             cosines.append(c * c1 - s * s1)
-        x = table[0]
-        for k, v in enumerate(sines + cosines):
-            x = x + v * table[1 + k]
-        return jax.lax.dynamic_update_index_in_dim(out, x, i, 0)
+        return jax.lax.dynamic_update_index_in_dim(basis, jnp.stack(sines + cosines), i, 0)
 
-    # One loop over frames: a basis loop before it (so that no sincos sits in the channel loop)
-    # measured 8-10% slower at 57 x 240, N = 3 (the second loop's iterations cost more than
-    # the scalar basis work).
-    num_frames = t_s.shape[0]
-    return jax.lax.fori_loop(0, num_frames, frame, jnp.zeros((num_frames, num_channels), dtype))
+    basis = jax.lax.fori_loop(0, num_frames, basis_row, jnp.zeros((num_frames, rows - 1), dtype))
+    groups = num_frames // frames
+
+    def step(k, out):  # frames [i, i + frames) of chunk j
+        j = k // groups
+        i = (k - j * groups) * frames
+        coef = jax.lax.dynamic_slice_in_dim(table, j * width, width, 1)  # [2N + 1, width]
+        v = jax.lax.dynamic_slice_in_dim(basis, i, frames, 0)  # [frames, 2N]
+        x = jnp.broadcast_to(coef[0], (frames, width))
+        for m in range(rows - 1):
+            x = x + v[:, m:m + 1] * coef[1 + m][None, :]
+        return jax.lax.dynamic_update_slice(out, x, (i, j * width))
+
+    out = jax.lax.fori_loop(0, chunks * groups, step, jnp.zeros((num_frames, chunks * width), dtype))
+    return out[:, :num_channels] if chunks * width > num_channels else out
 
 
 def _synthesize_one_product(model: FourierModel, theta: Float[Array, " T"]) -> Float[Array, "T C"]:
@@ -277,5 +324,8 @@ def synthesize_batch(models: FourierModel, t_s: Float[Array, "*B T"]) -> Float[A
         t_s = np.asarray(t_s)
         if t_s.dtype.kind not in "biuf":
             raise UserError(f"synthesize_batch: `t_s` must be real times in seconds, got dtype {t_s.dtype}")
-    out = _synthesize_batch_jit(models.offset, models.amplitude, models.phase, models.omega, t_s)
-    return _tangent_features(models, out)
+    # The fields read from the instance's dict: equinox's `Module.__getattribute__` cost ~0.26 us
+    # a field, a tenth of a single character's whole synthesis over NumPy's time.
+    fields = object.__getattribute__(models, "__dict__")
+    out = _synthesize_batch_jit(fields["offset"], fields["amplitude"], fields["phase"], fields["omega"], t_s)
+    return out if fields["representation"] != "tangent" else _tangent_features(models, out)
