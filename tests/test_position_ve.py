@@ -5,7 +5,7 @@ import jax
 import numpy as np
 import pytest
 
-from fourierjax import data
+from fourierjax import data, fourier
 from fourierjax import motion as M
 from fourierjax._motion import _pipeline
 from fourierjax._motion._poses import _position_ve_impl
@@ -35,8 +35,6 @@ def test_fit_motions_position_ve_equals_the_per_clip_formula(clips, representati
     for args, kw, (res, pve, _) in calls:
         skeleton, feats, mask, dts = args[:4]
         t = np.arange(feats.shape[1])[None, :] * np.asarray(dts)[:, None]
-        from fourierjax import fourier
-
         xhat = fourier.synthesize_batch(res.model, jax.numpy.asarray(t, feats.dtype))
         frames = mask.any(axis=2) if mask.ndim == 3 else mask
         old = jax.vmap(lambda s, a, b, m, kw=kw: _position_ve_impl(
