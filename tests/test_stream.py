@@ -329,3 +329,23 @@ def test_fit_motions_equals_the_per_clip_path(chunk, representation, monkeypatch
                                    atol=1e-4)
         np.testing.assert_allclose(a.amplitude * np.sin(a.phase), b.amplitude * np.sin(b.phase),
                                    atol=1e-4)
+
+
+def test_sorted_within_equals_a_lexsort_per_column():
+    from fourierjax import contacts as C
+
+    rng = np.random.default_rng(1)
+    n = np.array([1, 4, 60, 3, 129])
+    seg = np.repeat(np.arange(len(n)), n)
+    x = rng.normal(size=(len(seg), 2, 3))
+    x[10:14] = x[9]  # ties
+    x[20, 0, 1], x[21, 1, 2] = np.inf, -np.inf
+
+    def lexsorted(x):
+        flat = x.reshape(len(x), -1)
+        return np.stack([flat[np.lexsort((flat[:, c], seg)), c] for c in range(flat.shape[1])],
+                        axis=1).reshape(x.shape)
+
+    assert np.array_equal(C._sorted_within(x, seg), lexsorted(x))
+    x[30, 1, 0] = np.nan  # NaNs sort last within their clip, as the lexsort puts them
+    assert np.array_equal(C._sorted_within(x, seg), lexsorted(x), equal_nan=True)

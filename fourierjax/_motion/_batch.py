@@ -239,7 +239,14 @@ def _closed_loops(cat, starts) -> list[bool]:
     a = np.asarray(cat.channels)[:, rot]
 
     def rms(d):
-        return np.sqrt(np.mean(((d + 180.0) % 360.0 - 180.0) ** 2, axis=-1))
+        # `(d + 180) % 360` is `d + 180` itself where that lies in [0, 360) (nearly every
+        # step): the float remainder only where it does not, the same values (a quarter of
+        # the contacts stage went to `%` over every rotation channel of the chunk).
+        r = d + 180.0
+        out = (r < 0.0) | (r >= 360.0)
+        if out.any():
+            r[out] %= 360.0
+        return np.sqrt(np.mean((r - 180.0) ** 2, axis=-1))
 
     steps = rms(np.diff(a, axis=0))  # row t: frame t + 1 minus frame t (across clips: unused)
     first, last = starts[:-1], starts[1:] - 1

@@ -26,7 +26,7 @@ from fourierjax._motion._clip import (
     closed_loop,
     winding_joints,
 )
-from fourierjax._motion._poses import _position_ve, _position_ve_impl, foot_contacts_of
+from fourierjax._motion._poses import _position_ve, foot_contacts_of, position_ve_batch
 from fourierjax._motion._segment import feature_mask, glitch_joints, steady_segment
 from fourierjax.errors import UserError
 from fourierjax.features import features_from_motion
@@ -258,8 +258,9 @@ def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_ha
     t = jnp.arange(feats.shape[1], dtype=feats.dtype)[None, :] * dts[:, None]
     xhat = fr.synthesize_batch(res.model, t)
     frames = jnp.any(mask, axis=2) if mask.ndim == 3 else mask
-    pve = jax.vmap(lambda s, a, b, m: _position_ve_impl(s, a, b, m, representation, pelvis))(
-        skeleton, feats, xhat, frames)
+    # The same metric as `_position_ve_impl` per clip (to float32 round-off), FK with the batch
+    # axes minor: 3.5x less CPU (500 Bandai clips: 0.4 of the fit's 1.07 CPU-s before).
+    pve = position_ve_batch(skeleton, feats, xhat, frames, representation, pelvis)
     return res, pve, (delta, shifted)
 
 

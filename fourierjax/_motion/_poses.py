@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike, Bool, Float, Int
 
-from fourierjax import _jit
+from fourierjax import _fk, _jit
 from fourierjax._fourier._buckets import length_bucket as _bucket
 from fourierjax._fourier._model import FourierModel
 from fourierjax.features import ROOT_CHANNELS, root_relative_positions
@@ -131,3 +131,99 @@ def _position_ve_impl(skeleton, x, xhat, mask, representation, pelvis):
 
 
 _position_ve_jit = _jit.filter_jit(_position_ve_impl)
+
+
+def _feature_quats(topology, x, representation, pelvis):
+    """Local rotations of every joint from feature rows ``x`` ``[C, *S]``, as
+    `features.local_pose_from_features` makes them (the same formulas, batch axes minor): 4
+    components ``[J, *S]``, identity for joints without rotation features and at and above
+    the pelvis's ancestors (the pelvis keeps its own)."""
+    from fourierjax._fourier._layout import ancestors
+    from fourierjax._sincos import sincos
+    from fourierjax.features import _layout_tables
+
+    shape, dtype = x.shape[1:], x.dtype
+    parts, rows = [], {}
+    at = 0
+    for key, (js, cols) in _layout_tables(topology, representation).items():
+        a = [x[np.asarray(cols[:, k])] for k in range(3)]  # [n, *S] each
+        if key == "expmap":  # rotations.quat_from_expmap, Taylor branch near zero
+            theta_sq = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
+            tiny = theta_sq < _taylor_threshold(dtype)
+            theta = jnp.sqrt(jnp.where(tiny, 1.0, theta_sq))
+            half = 0.5 * theta
+            sin, cos = sincos(half)
+            w = jnp.where(tiny, 1.0 - theta_sq / 8.0 + theta_sq * theta_sq / 384.0, cos)
+            s = jnp.where(tiny, 0.5 - theta_sq / 48.0 + theta_sq * theta_sq / 3840.0,
+                          sin / theta)
+            q = [w, s * a[0], s * a[1], s * a[2]]
+        else:  # rotations.quat_from_euler: the product of the three axis quaternions
+            q = [1, 0, 0, 0]
+            for ax, ang in zip(key, a, strict=True):
+                sin, cos = sincos(0.5 * ang)
+                e = [cos, 0, 0, 0]
+                e[1 + "XYZ".index(ax)] = sin
+                q = _fk.qmul(q, e)
+        parts.append((len(js), q))
+        for i, j in enumerate(js):
+            rows[int(j)] = at + i
+        at += len(js)
+    ident = at  # one identity row after the groups' rows
+    for j in ancestors(topology, pelvis):
+        rows.pop(j, None)
+    src = np.asarray([rows.get(j, ident) for j in range(topology.num_joints)])
+    one = jnp.ones((1, *shape), dtype)
+    zero = jnp.zeros((1, *shape), dtype)
+    comps = []
+    for k in range(4):
+        col = [jnp.broadcast_to(jnp.asarray(q[k], dtype), (n, *shape)) for n, q in parts]
+        comps.append(jnp.concatenate([*col, one if k == 0 else zero], axis=0)[src])
+    return comps
+
+
+def _taylor_threshold(dtype):
+    from fourierjax._rotations._quat import _taylor_threshold as threshold
+
+    return threshold(dtype)
+
+
+def root_relative_positions_frames_last(topology, offsets, x, representation, pelvis):
+    """`features.root_relative_positions` of feature rows ``x`` ``[C, *S]`` (batch axes minor,
+    as `_fk`: one elementwise loop over the batch per depth level); ``offsets`` ``[J, 3, ...]``
+    broadcastable against ``[J, 3, *S]`` (per-clip bones: a clip axis of size B, 1 elsewhere).
+
+    Returns ``[J, 3, *S]`` file units (the pelvis at the origin of the heading frame)."""
+    from fourierjax._fourier._layout import ancestors
+
+    shape, dtype = x.shape[1:], x.dtype
+    plan = _fk.plan(topology, all_rotations=False)
+    q_all = _feature_quats(topology, x, representation, pelvis)
+    zeroed = np.ones(topology.num_joints, bool)
+    zeroed[[pelvis, *ancestors(topology, pelvis)]] = False
+    offsets = jnp.where(jnp.asarray(zeroed).reshape(-1, *(1,) * (offsets.ndim - 1)),
+                        offsets.astype(dtype), 0.0)
+    lq, lt = [], []
+    for lv in plan.levels:
+        idx = np.asarray(lv.joints)
+        lq.append([c[idx[:lv.num_rotated]] for c in q_all] if lv.num_rotated else [1, 0, 0, 0])
+        lt.append([offsets[idx, k] for k in range(3)])
+    _, p = _fk.world(plan, lq, lt, keep=_fk.store)
+    return _fk.gather_levels(plan, p, 3, False, shape, dtype)
+
+
+def position_ve_batch(skeleton, x, xhat, frames, representation, pelvis):
+    """The position variance explained (`_position_ve_impl`) of a batch of clips that share a
+    topology and pelvis: ``skeleton`` with offsets ``[B, J, 3]``, ``x``, ``xhat`` ``[B, T, C]``,
+    ``frames`` ``bool [B, T]``: ``[B]``. One FK of data and model together, batch axes minor
+    (`root_relative_positions_frames_last`), then the masked sums of `variance_explained`."""
+    both = jnp.moveaxis(jnp.stack([x, xhat]), -1, 0)  # [C, 2, B, T]
+    offsets = jnp.moveaxis(skeleton.offsets, 0, -1)[:, :, None, :, None]  # [J, 3, 1, B, 1]
+    p = root_relative_positions_frames_last(skeleton.topology, offsets, both, representation,
+                                            pelvis)  # [J, 3, 2, B, T]
+    target, approx = p[:, :, 0], p[:, :, 1]
+    w = frames.astype(x.dtype)[None, None]  # [1, 1, B, T]
+    mean = jnp.sum(w * target, axis=-1, keepdims=True) / jnp.maximum(
+        jnp.sum(w, axis=-1, keepdims=True), 1.0)
+    sse = jnp.sum(w * (target - approx) ** 2, axis=(0, 1, 3))
+    sst = jnp.sum(w * (target - mean) ** 2, axis=(0, 1, 3))
+    return 1.0 - sse / jnp.maximum(sst, 1e-30)
