@@ -33,9 +33,7 @@ def continuous(flat: np.ndarray, twins: np.ndarray, ok: np.ndarray) -> np.ndarra
     blocks = ([slice(b, b + _BLOCK) for b in range(0, K, _BLOCK)] if cols.size == K
               else [cols[b:b + _BLOCK] for b in range(0, cols.size, _BLOCK)])
     for c in blocks:
-        f, w = flat[:, c], twins[:, c]
-        state, shift = _transitions(f, w, f[:-1], w[:-1])
-        out[:, c] = _apply(f, w, *_along_chain(state, shift))
+        out[:, c] = _chained(flat[:, c], twins[:, c])
     cols = np.flatnonzero(~chain)
     if cols.size:
         f, w, o = flat[:, cols], twins[:, cols], ok[:, cols]
@@ -96,10 +94,31 @@ def _apply(flat, twins, s, k):
     return np.where(s[..., None] == 1, twins, flat) + _TWO_PI * k.astype(np.float64)
 
 
-def _along_chain(state, shift):
-    """States and accumulated shifts where each frame's reference is the frame before: a map
-    of two states is constant, the identity or a flip, so the state is the last constant's
-    value flipped by the parity of the flips since; the shifts are a cumulative sum."""
+def _chained(flat, twins):
+    """`continuous` of columns where each frame's reference is the frame before: the states
+    first (`_states`), then each frame's 2 pi shifts from the triples taken at it and at the
+    frame before (the shift `_transitions` gives for that pair), summed along the frames
+    (whole turns as float64: exact); no shift per state to store and select."""
+    F, K, _ = flat.shape
+    state = np.zeros((2, F, K), np.int8)
+    cur, alt = flat[1:], twins[1:]
+    for s, prev in ((0, flat[:-1]), (1, twins[:-1])):
+        k0, k1 = _turns(prev, cur), _turns(prev, alt)
+        state[s, 1:] = _distance(alt, k1, prev) < _distance(cur, k0, prev) - 1e-12
+    state[1, 0] = 1
+    taken = np.where((_states(state) == 1)[..., None], twins, flat)
+    k = np.zeros_like(taken)
+    k[1:] = _turns(taken[:-1], taken[1:])
+    np.cumsum(k, axis=0, out=k)
+    k *= _TWO_PI
+    taken += k
+    return taken
+
+
+def _states(state):
+    """The state taken at each frame, where each frame's reference is the frame before
+    (``state``: `_transitions`'): a map of two states is constant, the identity or a flip, so
+    the state is the last constant's value flipped by the parity of the flips since."""
     F = state.shape[1]
     t = np.arange(F)[:, None]
     const = state[0] == state[1]
@@ -108,10 +127,7 @@ def _along_chain(state, shift):
     last = np.maximum.accumulate(np.where(const, t, 0), axis=0)
     value = np.take_along_axis(state[0], last, axis=0)
     flips = np.cumsum(flip, axis=0)
-    s = value ^ ((flips - np.take_along_axis(flips, last, axis=0)) & 1).astype(np.int8)
-    prev = np.concatenate([np.zeros_like(s[:1]), s[:-1]])  # the parent's state
-    step = np.where((prev == 1)[..., None], shift[1], shift[0])
-    return s, np.cumsum(step, axis=0)
+    return value ^ ((flips - np.take_along_axis(flips, last, axis=0)) & 1).astype(np.int8)
 
 
 def _jumping(state, shift, parent):

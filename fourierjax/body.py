@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -64,20 +65,33 @@ def _sampled_frames(num_frames: int, max_frames: int = MAX_FRAMES) -> np.ndarray
     return np.linspace(0, num_frames - 1, max_frames).round().astype(int)
 
 
+@functools.lru_cache(maxsize=64)
+def _position_channels(topo: Topology) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The flat indices of ``topo``'s position channels (joint by joint, in file order), where
+    each joint's run of them starts in that list, and those joints."""
+    offsets = topo.channel_offsets
+    idx, firsts, joints = [], [], []
+    for j, chans in enumerate(topo.channels):
+        mine = [offsets[j] + k for k, c in enumerate(chans) if c.endswith("position")]
+        if mine:
+            firsts.append(len(idx))
+            joints.append(j)
+            idx += mine
+    return np.array(idx, np.intp), np.array(firsts, np.intp), np.array(joints, np.intp)
+
+
 def _infer_from_fk(motion, fk, *, up=None, overrides=None, pre=None) -> BodyMap:
     """`infer_body_map` of `motion` given `fk`, the FK of its `_sampled_frames` (anything with
     `positions`, `end_site_positions` and `rotations`): for a caller that poses many clips at
     once (`fourierjax._motion._batch`; ``pre``: `_body._infer.infer`'s, from `moments_many`)."""
     channels = np.asarray(motion.channels)
     topo = motion.topology
-    offsets = topo.channel_offsets
     scale = 1e-6 * (1.0 + float(np.abs(channels).max(initial=0.0)))
     span = np.ptp(channels, axis=0) if len(channels) else np.zeros(channels.shape[1:])
     moving = []
-    for j, chans in enumerate(topo.channels):
-        idx = [offsets[j] + k for k, c in enumerate(chans) if c.endswith("position")]
-        if idx and float(span[idx].max()) > scale:
-            moving.append(j)
+    idx, firsts, joints = _position_channels(topo)
+    if len(idx):  # the joints whose position channels' largest span passes `scale`
+        moving = joints[np.maximum.reduceat(span[idx], firsts) > scale].tolist()
     return _infer(topo, np.asarray(fk.positions, np.float64), np.asarray(fk.end_site_positions, np.float64),
                   np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides, pre=pre)
 
