@@ -280,6 +280,12 @@ def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
                                                      contact_intervals=ivs).features)(dt)
 
 
+# Bandai-1 walk_normal <-> run_normal (N = 5, 30 fps), measured 2026-12-04: the run part flies
+# 40.0% walk -> run and 39.3% run -> walk against the captured 16.7%, as before the landing fix
+# above (the same figures; its own 31.1%, was 31.7%). Unlocked it flies 0%: the low-harmonic
+# landing foot sweeps in 0.4-0.9 contact bands over the floor at 137-449 units/s (1.4-4.5 m/s)
+# for 5 frames a landing, so it is in the band but far from still, and the lock lifts it out.
+# The issue's +-10 points on Bandai are not met; this test asserts the rest of `_assert_grounded`.
 @pytest.mark.slow
 def test_bandai_walk_run_transitions_are_grounded():
     if not BANDAI.is_dir():
