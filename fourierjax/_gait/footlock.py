@@ -34,6 +34,8 @@ BLEND_RAD = 0.06 * TWO_PI
 #: A foot point is still (planted) below this fraction of the mean root move per frame (easing
 #: out at twice it), and a sliding point is lifted to `LIFT_BANDS` contact bands over its floor.
 STILL_FRACTION, LIFT_BANDS = 0.15, 1.2
+#: A landing point (before any point of its foot is still) is planted below this fraction instead.
+PLANT_STILL_FRACTION = 2 * STILL_FRACTION
 #: A stance (the phase's) in which a low foot point is still on less than half this share of
 #: the frames slides (planted, not lifted), easing to a normal stance at this share.
 SLIDING_SHARE = 0.4
@@ -219,10 +221,12 @@ def init_hold_state(points: Float[Array, "*B 2 P 3"]) -> tuple[Float[Array, "*B 
 
 
 def stillness(
-    points: Float[Array, "T 2 P 3"], root_position: Float[Array, "T 3"], *, horizontal: Float[Array, " 3"]
+    points: Float[Array, "T 2 P 3"], root_position: Float[Array, "T 3"], *, horizontal: Float[Array, " 3"],
+    fraction: float = STILL_FRACTION,
 ) -> Float[Array, "T 2 P"]:
-    """How still each foot point is in the world: 1 below `STILL_FRACTION` of the mean root move
-    per frame, easing to 0 at twice that (horizontal moves, central differences).
+    """How still each foot point is in the world: 1 below `fraction` (default `STILL_FRACTION`)
+    of the mean root move per frame, easing to 0 at twice that (horizontal moves, central
+    differences).
 
     Arguments:
         points: `[T, 2, P, 3]` world foot points; root_position: `[T, 3]` the root path.
@@ -234,7 +238,7 @@ def stillness(
     d = (points[1:] - points[:-1]) * jnp.reshape(horizontal, (1, 1, 1, 3))
     move = safe_norm(d)  # [T-1, 2, P]
     move = jnp.concatenate([move[:1], 0.5 * (move[1:] + move[:-1]), move[-1:]], axis=0)
-    ref = STILL_FRACTION * jnp.mean(safe_norm((root_position[1:] - root_position[:-1]) * horizontal[None]))
+    ref = fraction * jnp.mean(safe_norm((root_position[1:] - root_position[:-1]) * horizontal[None]))
     ref = jnp.maximum(ref, 1e-6)
     return _smoothstep((2.0 * ref - move) / ref)
 
@@ -390,6 +394,15 @@ def _dilate(x, half):
     return out
 
 
+def _before_still(down_loose, down_strict):
+    """`[T, 2]`: the frames of each run of `down_loose` before its first `down_strict` frame."""
+    idx = jnp.arange(down_loose.shape[0])[:, None]
+    prev = jnp.concatenate([jnp.zeros_like(down_loose[:1]), down_loose[:-1]], 0)
+    start = jax.lax.cummax(jnp.where(down_loose & ~prev, idx, -1), axis=0)
+    seen = jax.lax.cummax(jnp.where(down_strict, idx, -1), axis=0) >= start
+    return down_loose & ~seen
+
+
 def _lock(features, skeleton, contact, root_position, clearance, ground, band, *, representation,
           body_map, legs, smooth_frames=0):
     from fourierjax.features import local_pose_from_features
@@ -463,7 +476,27 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # 0.200x, knee 16.2 deg against 16.4). Not led out: held on past the contact's end, the leg
     # stretched and the knee popped (02_03 6.8 deg against 5.3).
     lead = smooth_frames
-    shift = jnp.stack([_plant(feet_pts[:, f], lam[:, f], low[:, f], lead) for f in range(2)], 1)
+    # The landing (issue 21's run flight): a low-harmonic heel decelerates into the band over 6-12
+    # frames (02_03 at N = 5: 38 units/s one band over the floor, 6 units/s at 0.1 band), so
+    # by `stillness` it slid, was not planted and was lifted to `LIFT_BANDS` bands: frames with no
+    # foot in contact, the run part of 02_01 -> 02_03 flying 29-31% against the captured 16%.
+    # Until a point of the foot is still, a landing point is taken by the plant under twice
+    # the stillness threshold (`PLANT_STILL_FRACTION`), so its hold is led in and the slide ends
+    # sooner; the release keeps the strict threshold (loose there too, the ball and tip slid in
+    # mid-stance: 02_03 0.306x -> 0.313x skating, against 0.298x landing only). With the lift
+    # judged after the hold (below), the run part flies 23.7% / 24.5% (walk -> run / run -> walk);
+    # the earlier plant alone left it at 29.3% / 31.1%, the lift after the hold alone gave 27.3% /
+    # 29.1%, and 2.5 times the threshold (22.3% / 22.0%) stepped 02_03's knee 5.29 deg (the
+    # capture's 5.28).
+    still_land = jnp.maximum(stillness(feet_pts, root_position, horizontal=1.0 - upv, fraction=PLANT_STILL_FRACTION),
+                             slide_w[..., None])
+    if smooth_frames >= 1:
+        still_land = still_land.at[..., -1].set(jnp.maximum(still_land[..., -1], off_late))
+    low_land = low_in & (still_land > 0.5)
+    landing = _before_still(jnp.any(low_land, -1), jnp.any(low, -1))[..., None]  # [T, 2, 1]
+    lam_p = jnp.where(landing, hold * still_land, lam)
+    low_p = jnp.where(landing, low_land, low)
+    shift = jnp.stack([_plant(feet_pts[:, f], lam_p[:, f], low_p[:, f], lead) for f in range(2)], 1)
     shift = shift * (1.0 - upv)[None, None]
     if 1 <= smooth_frames < TOE_HOLD_FRAMES:
         # With one frame of easing (30 fps) the tip is held horizontally only, and only as far
@@ -483,7 +516,11 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     W = jnp.max(hold * still_v, axis=-1)
     dy = -gap * jnp.where(gap > 0, W, 1.0)
     # A sliding point is lifted to LIFT_BANDS bands over its floor, as far as the foot is not held.
-    need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still_v), axis=-1)  # [T, 2]
+    # A point is lifted only if it still slides once the feet are held (the eased horizontal
+    # shift applied): a landing heel that the plant stops stays in contact.
+    held_h = _smooth(shift, smooth_frames) if smooth_frames > 0 else shift
+    still_lift = jnp.maximum(still_v, stillness(feet_pts + held_h[:, :, None], root_position, horizontal=1.0 - upv))
+    need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still_lift), axis=-1)  # [T, 2]
     dy = jnp.maximum(dy, need * (1.0 - W))
     shift = shift + (sign * dy)[..., None] * upv[None, None]
     if smooth_frames > 0:
