@@ -141,22 +141,15 @@ def _feature_quats(topology, x, representation, pelvis):
     from fourierjax._fourier._layout import ancestors
     from fourierjax._sincos import sincos
     from fourierjax.features import _layout_tables
+    from fourierjax.rotations import quat_from_expmap
 
     shape, dtype = x.shape[1:], x.dtype
     parts, rows = [], {}
     at = 0
     for key, (js, cols) in _layout_tables(topology, representation).items():
         a = [x[np.asarray(cols[:, k])] for k in range(3)]  # [n, *S] each
-        if key == "expmap":  # rotations.quat_from_expmap, Taylor branch near zero
-            theta_sq = a[0] * a[0] + a[1] * a[1] + a[2] * a[2]
-            tiny = theta_sq < _taylor_threshold(dtype)
-            theta = jnp.sqrt(jnp.where(tiny, 1.0, theta_sq))
-            half = 0.5 * theta
-            sin, cos = sincos(half)
-            w = jnp.where(tiny, 1.0 - theta_sq / 8.0 + theta_sq * theta_sq / 384.0, cos)
-            s = jnp.where(tiny, 0.5 - theta_sq / 48.0 + theta_sq * theta_sq / 3840.0,
-                          sin / theta)
-            q = [w, s * a[0], s * a[1], s * a[2]]
+        if key == "expmap":  # the library's exponential map (Taylor branch near zero)
+            q = jnp.moveaxis(quat_from_expmap(jnp.stack(a, axis=-1)), -1, 0)  # [4, n, *S]
         else:  # rotations.quat_from_euler: the product of the three axis quaternions
             q = [1, 0, 0, 0]
             for ax, ang in zip(key, a, strict=True):
@@ -179,12 +172,6 @@ def _feature_quats(topology, x, representation, pelvis):
         col = [jnp.broadcast_to(jnp.asarray(q[k], dtype), (n, *shape)) for n, q in parts]
         comps.append(jnp.concatenate([*col, one if k == 0 else zero], axis=0)[src])
     return comps
-
-
-def _taylor_threshold(dtype):
-    from fourierjax._rotations._quat import _taylor_threshold as threshold
-
-    return threshold(dtype)
 
 
 def root_relative_positions_frames_last(topology, offsets, x, representation, pelvis):
