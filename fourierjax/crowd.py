@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -220,7 +221,11 @@ def crowd_positions(
     """
     if not isinstance(crowd, Crowd):
         raise UserError(f"crowd_positions: `crowd` must be a Crowd (make_crowd), got {type(crowd).__name__}")
-    t = jnp.asarray(t, crowd.coefficients.dtype)
+    dtype = crowd.coefficients.dtype
+    # Called once per frame: `jnp.asarray` of an array already of the dtype cost ~10 us, and
+    # of a NumPy scalar ~35 us (jit's own dispatch takes a NumPy scalar for less).
+    if not (isinstance(t, (jax.Array, np.ndarray, np.generic)) and t.dtype == dtype):
+        t = jnp.asarray(t, dtype)
     if t.shape != ():
         raise UserError(f"crowd_positions: `t` must be a scalar time in seconds, got shape {t.shape}")
     if not foot_lock:
