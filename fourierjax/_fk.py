@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
-from fourierjax._sincos import sincos_degrees
+from fourierjax._sincos import half_angle_sincos_degrees, sincos_degrees
 from fourierjax.skeleton import Topology
 
 # Arrays here are "components": one array per quaternion or vector component, joints first and
@@ -385,7 +385,7 @@ def world(the_plan: Plan, local_q, local_t, *, keep=None):
     return out_q, out_p
 
 
-def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None):
+def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None, signed=True):
     """World pose of input rows `x` `[R, *S]` (rows as `the_plan.rows`, rotations in degrees).
 
     Arguments:
@@ -394,13 +394,17 @@ def pose_rows(the_plan: Plan, x, bone_offsets, *, keep=None, sincos=None):
         bone_offsets: `[J, 3]` OFFSETs.
         keep: see `world`.
         sincos: `(sin, cos)` of the half-angles of the rotation rows; default from `x`.
+        signed: with False, the default `sincos` may be both negated per angle
+            (`half_angle_sincos_degrees`: no quadrant fix-up): each world rotation is then
+            `q` or `-q`, the same rotation, and the positions are unchanged.
 
     Returns:
         `(q, p)` per level, as `world`.
     """
     shape, dtype = x.shape[1:], x.dtype
     if sincos is None:
-        sincos = sincos_degrees(0.5 * _rows(x, 0, the_plan.num_rot))
+        rows = _rows(x, 0, the_plan.num_rot)
+        sincos = sincos_degrees(0.5 * rows) if signed else half_angle_sincos_degrees(rows)
     sin, cos = sincos
     if keep is not None:
         # One stored block: both come from one range reduction. Behind an optimization
@@ -437,7 +441,8 @@ def positions(the_plan: Plan, x, bone_offsets, *, sincos=None):
     Returns:
         `[J, 3, *S]` positions in file units, joints in file order.
     """
-    _, p = pose_rows(the_plan, x, bone_offsets, keep=store, sincos=sincos)
+    # Positions need each rotation only up to the sign of its quaternion.
+    _, p = pose_rows(the_plan, x, bone_offsets, keep=store, sincos=sincos, signed=False)
     return gather_levels(the_plan, p, 3, False, x.shape[1:], x.dtype)
 
 

@@ -38,7 +38,8 @@ def _known_options(options: dict) -> dict:
 #: (option, jaxlib version) pairs known to be accepted: no probe compile for them. The probe
 #: is one more program (trace, lowering, compile or cache read) in every process, which a
 #: command line call pays before its first entry point.
-_ACCEPTED: frozenset[tuple[str, str]] = frozenset({("xla_cpu_use_fusion_emitters", "0.10.2")})
+_ACCEPTED: frozenset[tuple[str, str]] = frozenset({("xla_cpu_use_fusion_emitters", "0.10.2"),
+                                                   ("xla_cpu_prefer_vector_width", "0.10.2")})
 
 
 @functools.cache

@@ -64,3 +64,42 @@ def sincos_degrees(x: Array) -> tuple[Array, Array]:
         return jnp.sin(r), jnp.cos(r)
     n = jnp.floor(x * np.float32(1 / 90) + 0.5)
     return _from_reduced((x - n * 90.0) * np.float32(np.pi / 180), n)
+
+
+# Near-minimax (least squares on Chebyshev nodes, float64) on [-pi/2, pi/2]: sin and cos to
+# ~1.3e-7 in float32 arithmetic (measured on 2e5 points), the float32 rounding level.
+_SIN_HALF = (-0.16666657317261288, 0.008333021848736692, -0.00019806899913215898, 2.600609800457697e-06)
+_COS_HALF = (0.041666666603122904, -0.0013888886261050407, 2.4801193907268004e-05, -2.752996344489731e-07,
+             1.9976362434885597e-09)
+
+
+def _horner(coefficients: tuple[float, ...], x: Array) -> Array:
+    acc = coefficients[-1]
+    for k in reversed(coefficients[:-1]):
+        acc = k + x * acc
+    return acc
+
+
+def half_angle_sincos_degrees(x: Array) -> tuple[Array, Array]:
+    """`s (sin(x / 2), cos(x / 2))` of angles `x` in degrees, with one sign `s = +-1` per angle.
+
+    For rotations only: a quaternion's halves `cos(x / 2) + sin(x / 2) u` and their negation are
+    the same rotation, and the positions FK derives from them are equal. The reduction
+    `x - 360 n` (exact in float32) leaves `x / 2` in [-90, 90] degrees, where two longer
+    polynomials need no quadrant fix-up: in float32, 0.25 against 0.48 ms for `sincos_degrees`
+    of 72 x 10,000 half-angles (2 cores, one pinned; the fix-up's compares and selects cost as
+    much as the polynomials).
+
+    Arguments:
+        x: angles in degrees, any shape.
+
+    Returns:
+        `(s sin(x / 2), s cos(x / 2))`, each of `x`'s shape and dtype (`s` = 1 outside float32).
+    """
+    if x.dtype != jnp.float32:
+        r = jnp.deg2rad(0.5 * x)
+        return jnp.sin(r), jnp.cos(r)
+    n = jnp.floor(x * np.float32(1 / 360) + 0.5)
+    r = (x - n * 360.0) * np.float32(np.pi / 360)
+    r2 = r * r
+    return r + r * r2 * _horner(_SIN_HALF, r2), 1.0 - 0.5 * r2 + (r2 * r2) * _horner(_COS_HALF, r2)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fourierjax import kinematics
+from fourierjax._sincos import half_angle_sincos_degrees, sincos_degrees
 from fourierjax._sincos import sincos as _sincos
-from fourierjax._sincos import sincos_degrees
 from fourierjax.skeleton import Skeleton
 from tests.helpers import random_topology
 
@@ -32,6 +32,27 @@ def test_sincos_degrees_float32_matches_float64_reference():
     assert np.abs(np.asarray(s, np.float64) - np.sin(ref)).max() < 2e-7
     assert np.abs(np.asarray(c, np.float64) - np.cos(ref)).max() < 2e-7
     assert float(s[np.flatnonzero(x == 90.0)[0]]) == 1.0  # exact reduction: no rounding at 90
+
+
+def test_half_angle_sincos_degrees_is_the_half_angle_up_to_one_sign():
+    x = np.concatenate([np.linspace(-7200, 7200, 200_001), np.arange(-40, 41) * 90.0,
+                        [0.0, -0.0, 1e-30]]).astype(np.float32)
+    s, c = (np.asarray(v, np.float64) for v in jax.jit(half_angle_sincos_degrees)(jnp.asarray(x)))
+    ref = np.deg2rad(0.5 * x.astype(np.float64))
+    sign = np.where(s * np.sin(ref) + c * np.cos(ref) < 0, -1.0, 1.0)  # one sign for both
+    assert np.abs(s - sign * np.sin(ref)).max() < 2e-7
+    assert np.abs(c - sign * np.cos(ref)).max() < 2e-7
+    np.testing.assert_allclose(s * s + c * c, 1.0, atol=5e-7)
+    # Gradients: d/dx of (s, c) is (c, -s) / 2 in radians, with the same sign.
+    xs = jnp.asarray(x[::997])
+    ds = jax.vmap(jax.grad(lambda v: half_angle_sincos_degrees(v)[0]))(xs)
+    np.testing.assert_allclose(ds, c[::997] * np.pi / 360, atol=1e-7)
+    # Other dtypes: the signed functions themselves.
+    x64 = jnp.asarray(x[:1000], jnp.float64) if jax.config.jax_enable_x64 else None
+    if x64 is not None:
+        s64, c64 = half_angle_sincos_degrees(x64)
+        np.testing.assert_allclose(s64, np.sin(ref[:1000]), atol=1e-12)
+        np.testing.assert_allclose(c64, np.cos(ref[:1000]), atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(3))
