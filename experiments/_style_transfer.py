@@ -160,9 +160,7 @@ def max_phase_jump(model, skeleton, num_samples: int = 256, *, body_map=None) ->
     """
     from fourierjax import style
 
-    p = np.asarray(style.cycle_positions(model, skeleton, num_samples=num_samples, body_map=body_map))
-    per_sample = float(np.linalg.norm(np.diff(np.concatenate([p, p[:1]]), axis=0), axis=-1).max())
-    return per_sample * num_samples / (2 * np.pi)
+    return float(style.peak_joint_speed(model, skeleton, per="radian", num_samples=num_samples, body_map=body_map))
 
 
 def max_jump(model, skeleton, frame_time_s, num_samples: int = 256, *, body_map=None) -> float:

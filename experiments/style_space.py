@@ -438,6 +438,14 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 jump[i] = (max_phase_jump(models[i], skel, body_map=bm), max_jump(models[i], skel, fts, body_map=bm))
             ref_eq8 = [max(jump[i][k] for i in (i_b, g[(src, s)], g[(src, normal)])) for k in (0, 1)]
             ref_all = [max(jump[g[(c, x)]][k] for c in (src, dst) for x in sty if (c, x) != (dst, s)) for k in (0, 1)]
+            # the joint-speed limit of `style.superpose` (`style.joint_speed_limit`), from the same
+            # clips as each reference: a method with it never outruns the clips it reads
+            limits = {}
+            if cfg.get("speed_limit", True):
+                limits = {"eq8": style.joint_speed_limit([models[i] for i in (i_b, g[(src, s)], g[(src, normal)])],
+                                                         skel, body_map=bm),
+                          "all": style.joint_speed_limit([models[g[(c, x)]] for c in (src, dst) for x in sty
+                                                          if (c, x) != (dst, s)], skel, body_map=bm)}
             for mth in names:
                 if mth == "baseline" or mth in ORACLES:
                     continue
@@ -454,12 +462,23 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                 worst, fworst = max(jumps.values()), max(fjumps.values())
                 upto1 = max((v for w, v in jumps.items() if w <= 1.0), default=float("nan"))
                 fupto1 = max((v for w, v in fjumps.items() if w <= 1.0), default=float("nan"))
+                limited = {}
+                if limits:  # the same line with the speed limit; its w = 1 is the limited transfer
+                    lim = limits["eq8" if ref_jump is ref_eq8 else "all"]
+                    held = {w: style.superpose(base, [char], [w], method="phasor", saturation=sat, speed_limit=lim)
+                            for w in {*cfg["weights"], 1.0}}
+                    d1 = float(style.cycle_distance(held[1.0], target, skel, num_samples=ns, body_map=bm))
+                    limited = {"limited_ratio": max(max_phase_jump(m, skel, body_map=bm) for m in held.values())
+                               / ref_jump[0],
+                               "limited_frame_ratio": max(max_jump(m, skel, fts, body_map=bm) for m in held.values())
+                               / ref_jump[1],
+                               "limited_distance_ratio": d1 / d0}
                 flips.append({"representation": representation, "transfer": f"{src}->{dst}", "style": s,
                               "method": mth, "max_jump": worst, "max_jump_w_le_1": upto1,
                               "source_max_jump": ref_jump[0], "ratio": worst / ref_jump[0],
                               "ratio_w_le_1": upto1 / ref_jump[0], "ok": worst <= ref_jump[0] * 1.01,
                               "frame_ratio": fworst / ref_jump[1], "frame_ratio_w_le_1": fupto1 / ref_jump[1],
-                              "frame_ok": fworst <= ref_jump[1] * 1.01})
+                              "frame_ok": fworst <= ref_jump[1] * 1.01, **limited})
         print(f"{representation} transfer {src}->{dst}: {len(sty) - 1} styles", flush=True)
     srows = []
     for tname in dict.fromkeys(r["transfer"] for r in trows):
@@ -485,6 +504,14 @@ def transfer(cfg, out, clips, models, skels, maps, motions, summary, representat
                           "max_jump_ratio_w_le_1": max((f["ratio_w_le_1"] for f in fl), default=None),
                           "frame_flip_free": all(f["frame_ok"] for f in fl) if fl else None,
                           "max_frame_jump_ratio": max((f["frame_ratio"] for f in fl), default=None),
+                          # with `superpose(speed_limit=)` from the clips the method reads (strict: <= 1)
+                          "limited_max_jump_ratio": max((f["limited_ratio"] for f in fl if "limited_ratio" in f),
+                                                        default=None),
+                          "limited_max_frame_jump_ratio": max((f["limited_frame_ratio"] for f in fl
+                                                               if "limited_ratio" in f), default=None),
+                          "limited_median_ratio": float(np.median([f["limited_distance_ratio"] for f in fl
+                                                                   if "limited_ratio" in f]))
+                          if any("limited_ratio" in f for f in fl) else None,
                           "n": len(rs), "note": ""})
     wsum = []
     for tname in dict.fromkeys(r["transfer"] for r in wrows):

@@ -138,6 +138,13 @@ def test_style_space_runs_small(tmp_path):
     assert 0 <= span["span_energy_share"] <= 1 and span["recognised_out_of_span"] >= span["recognised_in_span"]
     assert rows["oracle"]["scorer_to_target"] == pytest.approx(0.0, abs=1e-6)
     assert {r["map"] for r in s["feature_targets"]} >= {"identity", "spread", "slope"}
+    # every method with the speed limit (`style.superpose(speed_limit=)`) stays strictly within
+    # the clips it reads, per frame and per radian; eq. 8 plain does not without it
+    limited = [r for r in s["transfer"] if r.get("limited_max_jump_ratio") is not None]
+    assert {r["method"] for r in limited} >= {"eq8", "content_mean_cadence_cv", "content_mean_cadence_cv_sat"}
+    assert all(r["limited_max_jump_ratio"] <= 1 + 1e-5 and r["limited_max_frame_jump_ratio"] <= 1 + 1e-5
+               for r in limited)
+    assert rows["eq8"]["max_frame_jump_ratio"] > 1.0
     sweep = {(r["method"], r["weight"]) for r in s["transfer_weights"]}
     assert sweep == {(m, w) for m in ("content_mean", "content_mean_gains") for w in (1.5, 2.0)}
     reps = {r["features"] for r in s["recognition_representations"]}

@@ -35,6 +35,7 @@ from fourierjax._style.space import (
     style_pca,
     style_vector,
 )
+from fourierjax._style.speed import SpeedLimit, joint_speed_limit, peak_joint_speed
 from fourierjax._style.transitions import ease, transition, transition_schedule
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "Ease",
     "Method",
     "OmegaMode",
+    "SpeedLimit",
     "StylePCA",
     "TransferMethod",
     "TransferWeight",
@@ -60,9 +62,11 @@ __all__ = [
     "fit_transfer_gains",
     "fit_transfer_weight",
     "interpolate",
+    "joint_speed_limit",
     "interpolate_omega",
     "model_from_style_vector",
     "pad_harmonics",
+    "peak_joint_speed",
     "pca_project",
     "pca_reconstruct",
     "phasor",

@@ -35,6 +35,8 @@ from fourierjax._style._common import (
     replace,
     turns,
 )
+from fourierjax._style.distance import _pelvis
+from fourierjax._style.speed import SpeedLimit, limited_scale
 from fourierjax.errors import UserError
 from fourierjax.fourier import FourierModel
 
@@ -365,6 +367,7 @@ def superpose(
     method: Method = "polar",
     include_omega: bool = True,
     saturation: Float[ArrayLike, ""] | None = None,
+    speed_limit: SpeedLimit | None = None,
 ) -> FourierModel:
     """Superposition of weighted Fourier characteristics onto a base motion (Unuma 1995, §3.2),
     e.g. a brisk run = `superpose(run, [characteristic(brisk_walk, walk)], [1.37])`.
@@ -405,6 +408,15 @@ def superpose(
             faster per radian of phase than any clip it was built from; with `s = 0.05` every
             weight in [0, 1.5] stays within 1 % of them (worst 1.008x; `s = 0.02`: 0.995x;
             `docs/findings.md`, section 3b).
+        speed_limit: `None` (default), or a `style.SpeedLimit` (usually
+            `style.joint_speed_limit([base, a, b], skeleton)`, the clips the characteristics
+            were taken from): every weight is scaled by the largest `a` in [0, 1] whose result
+            moves no joint faster (per second and/or per radian of phase, pelvis-relative,
+            through FK) than the limit; weights already within it are unchanged. A limb flip
+            (a channel on another branch, a swing extrapolated past a body's) is a joint faster
+            than any clip, so the result never flips. Found by bisection under `jit` and `vmap`
+            (`SpeedLimit.iterations` halvings); no gradient flows through `a`. A base already
+            faster than the limit is returned as it is (`a = 0`).
 
     Returns:
         A FourierModel with the static fields of `base`. Raises `UserError` for non-finite
@@ -420,7 +432,28 @@ def superpose(
                         "style.characteristic(a, b)")
     chars = check_log_omega("superpose", chars)
     saturation, weights = check_saturation("superpose", saturation, weights)
-    return _superpose(base, chars, weights, method, bool(include_omega), saturation)
+    if speed_limit is None:
+        return _superpose(base, chars, weights, method, bool(include_omega), saturation)
+    if not isinstance(speed_limit, SpeedLimit):
+        raise UserError("superpose: `speed_limit` must be a style.SpeedLimit or None, got "
+                        f"{type(speed_limit).__name__}")
+    pelvis = speed_limit.pelvis
+    if pelvis is None:
+        pelvis = _pelvis("superpose", None, speed_limit.skeleton, base)
+    bounds = [b for b in (speed_limit.max_speed, speed_limit.max_phase_speed) if b is not None]
+    bad = jnp.any(jnp.stack([~(jnp.isfinite(b) & (b > 0)) for b in bounds]))
+    weights = eqx.error_if(weights, bad, "superpose: the speed limit's bounds must be finite and > 0")
+    return _superpose_limited(base, chars, weights, method, bool(include_omega), saturation, speed_limit, pelvis)
+
+
+@filter_jit
+def _superpose_limited(base, chars, weights, method: str, include_omega: bool, saturation, limit, pelvis: int):
+    def at(a, inputs):
+        b, c, w, s = inputs
+        return _superpose(b, c, a * w, method, include_omega, s)
+
+    a = limited_scale(at, (base, chars, weights, saturation), limit, pelvis)
+    return _superpose(base, chars, a * weights, method, include_omega, saturation)
 
 
 def check_saturation(where: str, saturation, weights):
