@@ -234,8 +234,8 @@ def test_body_maps_of_a_chunk_are_each_clips_own(chunk, monkeypatch):
 
     clips = [chunk[0], data.load("07_01")[150:300], *chunk[1:]]
     moments = []
-    many = _infer.moments_many
-    monkeypatch.setattr(_infer, "moments_many", lambda *a: moments.append(a[2]) or many(*a))
+    many = _infer.moments_arrays
+    monkeypatch.setattr(_infer, "moments_arrays", lambda *a: moments.append(a[2]) or many(*a))
     got = _batch.infer_body_maps(clips)
     assert moments  # the pelvis-frame means of each skeleton's clips, computed together
     assert len({(c.topology, c.offsets.tobytes()) for c in clips}) >= 3
@@ -257,14 +257,35 @@ def _bandai_clips(step):
     return [read_bvh(p) for p in files]
 
 
-def test_body_maps_of_many_bandai_clips_are_each_clips_own():
-    # The pelvis-frame means of a skeleton's clips computed together (`moments_many`) give
-    # each clip the map it gets alone, on Bandai-1's gaits (several actors, one skeleton each).
+def test_body_maps_of_many_bandai_clips_are_each_clips_own(monkeypatch):
+    # The pelvis-frame means of a skeleton's clips computed together (`moments_arrays`) and
+    # the maps of the clips whose names decide legs and head inferred together
+    # (`_infer.infer_named_many`) give each clip the map it gets alone, bit for bit (BodyMap's
+    # == compares its floats exactly), on every Bandai-1 clip (several actors, one skeleton
+    # each) and every bundled CMU clip, whole and cut.
+    from fourierjax._body import _infer
     from fourierjax._motion import _batch
 
-    clips = _bandai_clips(4)
+    clips = _bandai_clips(1) + [data.load(n) for n in data.list()] + [
+        data.load("07_01")[150:300], data.load("02_01")[:40], data.load("142_08")[:3]]
+    named = []
+    many = _infer.infer_named_many
+    monkeypatch.setattr(_infer, "infer_named_many", lambda *a: named.extend(many(*a)) or named[-len(a[1]):])
     got = _batch.infer_body_maps(clips)
+    assert sum(m is not None for m in named) == len(clips)  # all through the batched path
     for c, g in zip(clips, got, strict=True):
+        assert g == infer_body_map(c)
+
+
+def test_body_maps_inferred_together_fall_back_per_clip(monkeypatch):
+    # A skeleton whose names do not decide its legs and head takes `infer` per clip.
+    from fourierjax._body import _infer
+    from fourierjax._motion import _batch
+
+    clips = [data.load("07_01")[:60], data.load("142_08")[20:90]]
+    monkeypatch.setattr(_infer, "_named_plan", lambda topology: None)
+    assert _infer.infer_named_many(clips[0].topology, np.zeros((1, 2, 1, 3)), None, [[]], {}) == [None]
+    for c, g in zip(clips, _batch.infer_body_maps(clips), strict=True):
         assert g == infer_body_map(c)
 
 
