@@ -206,11 +206,17 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     pelvis = items[0].body_map.pelvis
     dts = np.array([it.clip.frame_time_s for it in items])
     # -- steady segment: the pelvis's world track of every clip from one pass
+    pose = None
     if segment:
         cat, starts = _concat([it.clip for it in items])
-        pos, _ = _world_pose(cat, pelvis)
+        pos, q = _world_pose(cat, pelvis)
         for k, it in enumerate(items):
             it.a, it.b = steady_from_positions(pos[starts[k]:starts[k + 1]][:, [0, 2]], dts[k])
+        # The segments' rows of it, for the features (each frame's pose is its own: the
+        # same values as the pose of the segments' concatenation, one FK pass fewer)
+        rows = np.concatenate([np.arange(starts[k] + it.a, starts[k] + it.b)
+                               for k, it in enumerate(items)])
+        pose = pos[rows], q[rows]
     else:
         for it in items:
             it.a, it.b = 0, it.clip.num_frames
@@ -221,7 +227,7 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     dt_f = np.repeat(dts, n)  # per frame
     glitch = _glitch_joints(cat, starts, dt_f, dts)
     clock("glitch")
-    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation)
+    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation, pose)
     mask = feature_mask(glitch, topo, pelvis)
     names = channel_names_for(topo, representation)
     clock("features")
@@ -340,12 +346,14 @@ def _gradient(v, starts, dt_f):
     return g
 
 
-def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation) -> np.ndarray:
+def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation,
+              pose=None) -> np.ndarray:
     """`features_from_motion(sub, representation, valid=~glitch, body_map=bm)` of every clip,
-    rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does)."""
+    rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does);
+    ``pose``: the pelvis's world pose of ``cat``'s frames when known."""
     topo = cat.topology
     B = len(items)
-    pos, q_root = _world_pose(cat, pelvis)
+    pos, q_root = _world_pose(cat, pelvis) if pose is None else pose
     facing = _facing_locals(cat, starts, q_root, items)
     for it, sub in zip(items, subs, strict=True):
         check_static_above(sub, _RJ(it.body_map.trajectory))
