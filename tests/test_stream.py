@@ -370,3 +370,33 @@ def test_sorted_within_equals_a_lexsort_per_column():
     assert np.array_equal(C._sorted_within(x, seg), lexsorted(x))
     x[30, 1, 0] = np.nan  # NaNs sort last within their clip, as the lexsort puts them
     assert np.array_equal(C._sorted_within(x, seg), lexsorted(x), equal_nan=True)
+
+
+def test_clip_models_are_the_chunk_models_rows_bit_for_bit(clips, monkeypatch):
+    # Each ClipFit's raw and aligned model are rows of its chunk program's stacked models,
+    # sliced by the program (`_pipeline._chunk_impl`'s ``rows``): the same values, bit for bit,
+    # as the host rows of the stacked models that were put back on the device before.
+    import jax
+
+    ms, bm = clips
+    seen = []
+    program = _pipeline._chunk_program
+
+    def spy(*args, **kwargs):
+        out = program(*args, **kwargs)
+        seen.append(out)
+        return out
+
+    monkeypatch.setattr(_pipeline, "_chunk_program", spy)
+    fits = M.fit_motions(ms, 2, body_map=bm, segment=False)
+    assert len(seen) == 1
+    res, _, (_, shifted), _ = seen[0]
+    assert any(f.alignment == "left_heel_strike" for f in fits)
+    for k, f in enumerate(fits):
+        pairs = [(f.raw_model, res.model)]
+        if f.alignment == "left_heel_strike":  # (the other alignments shift on the host)
+            pairs.append((f.model, shifted))
+        for got, stacked in pairs:
+            for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(stacked), strict=True):
+                assert isinstance(a, jax.Array)
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[k])

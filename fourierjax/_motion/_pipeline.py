@@ -154,7 +154,7 @@ def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
     return [out[c.index] for c in clips]
 
 
-def _hold_back(held, new, fit_kwargs, final) -> tuple[list[_Clip], list[_Clip], dict]:
+def _hold_back(held, new, fit_kwargs, final, known=None) -> tuple[list[_Clip], list[_Clip], dict]:
     """What the stream fits now and what it holds back for the next chunk: ``(now, keep,
     keys)``. Clips are grouped as the fit groups them (`_group_key`), oldest first; of each
     group, whole batches of `SMALL_BATCH` clips are fitted now (so the fit of chunk k runs
@@ -163,10 +163,12 @@ def _hold_back(held, new, fit_kwargs, final) -> tuple[list[_Clip], list[_Clip], 
     held back before (``held``), and every group at the end of the stream (``final``), is
     fitted whole: a clip waits at most one chunk (the held clips of a group, fewer than a
     batch, are its oldest and go with its first batch), so the stream holds at most one
-    chunk's clips back."""
+    chunk's clips back. ``known``: the keys of the clips held back, from the call before (a
+    key's search weights cost about 0.2 ms a clip)."""
     from fourierjax._fourier._buckets import SMALL_BATCH
 
-    keys = {c.index: _group_key(c, fit_kwargs) for c in (*held, *new)}
+    known = known or {}
+    keys = {c.index: known.get(c.index) or _group_key(c, fit_kwargs) for c in (*held, *new)}
     groups: dict[tuple, list[_Clip]] = {}
     for c in (*held, *new):
         groups.setdefault(keys[c.index], []).append(c)
@@ -457,6 +459,7 @@ def iter_fit_motions(
                leave=False) as bar):
         ahead = pool.submit(read_chunk)
         held: list[_Clip] = []
+        keys: dict[int, tuple] = {}
         done: dict[int, ClipFit] = {}
         while True:
             clock = _Clock(timings)
@@ -464,7 +467,7 @@ def iter_fit_motions(
             clock("wait")  # the fit waiting for the reader: preparation on the critical path
             if chunk:
                 ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
-            now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk)
+            now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk, known=keys)
             fits = _fit_clips(now, num_harmonics, representation, dtype, fit_kwargs, timings,
                               keys) if now else []
             done.update(zip((c.index for c in now), fits))
