@@ -84,16 +84,22 @@ def _infer_from_fk(motion, fk, *, up=None, overrides=None, pre=None) -> BodyMap:
     """`infer_body_map` of `motion` given `fk`, the FK of its `_sampled_frames` (anything with
     `positions`, `end_site_positions` and `rotations`): for a caller that poses many clips at
     once (`fourierjax._motion._batch`; ``pre``: `_body._infer.infer`'s, from `moments_many`)."""
+    return _infer(motion.topology, np.asarray(fk.positions, np.float64),
+                  np.asarray(fk.end_site_positions, np.float64), np.asarray(fk.rotations, np.float64),
+                  _moving(motion), up=up, overrides=overrides, pre=pre)
+
+
+def _moving(motion) -> list[int]:
+    """The joints of ``motion`` whose position channels move (`infer`'s ``moving``): their
+    largest span over the clip passes a millionth of its largest channel value."""
     channels = np.asarray(motion.channels)
-    topo = motion.topology
     scale = 1e-6 * (1.0 + float(np.abs(channels).max(initial=0.0)))
-    span = np.ptp(channels, axis=0) if len(channels) else np.zeros(channels.shape[1:])
-    moving = []
-    idx, firsts, joints = _position_channels(topo)
-    if len(idx):  # the joints whose position channels' largest span passes `scale`
-        moving = joints[np.maximum.reduceat(span[idx], firsts) > scale].tolist()
-    return _infer(topo, np.asarray(fk.positions, np.float64), np.asarray(fk.end_site_positions, np.float64),
-                  np.asarray(fk.rotations, np.float64), moving, up=up, overrides=overrides, pre=pre)
+    idx, firsts, joints = _position_channels(motion.topology)
+    if not len(idx):
+        return []
+    # The span of the position channels only: the same values as of every channel, picked
+    span = np.ptp(channels[:, idx], axis=0) if len(channels) else np.zeros(len(idx))
+    return joints[np.maximum.reduceat(span, firsts) > scale].tolist()
 
 
 def infer_body_map_from_positions(

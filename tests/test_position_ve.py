@@ -32,7 +32,7 @@ def test_fit_motions_position_ve_equals_the_per_clip_formula(clips, representati
     monkeypatch.setattr(_pipeline, "_chunk_program", recorded)
     fits = M.fit_motions(clips, 3, representation)
     assert {kw["pelvis"] for _, kw, _ in calls} == {0, 1}
-    for args, kw, (res, pve, _) in calls:
+    for args, kw, (res, pve, *_) in calls:
         skeleton, feats, mask, dts = args[:4]
         t = np.arange(feats.shape[1])[None, :] * np.asarray(dts)[:, None]
         xhat = fourier.synthesize_batch(res.model, jax.numpy.asarray(t, feats.dtype))

@@ -234,8 +234,8 @@ def test_body_maps_of_a_chunk_are_each_clips_own(chunk, monkeypatch):
 
     clips = [chunk[0], data.load("07_01")[150:300], *chunk[1:]]
     moments = []
-    many = _infer.moments_many
-    monkeypatch.setattr(_infer, "moments_many", lambda *a: moments.append(a[2]) or many(*a))
+    many = _infer.moments_arrays
+    monkeypatch.setattr(_infer, "moments_arrays", lambda *a: moments.append(a[2]) or many(*a))
     got = _batch.infer_body_maps(clips)
     assert moments  # the pelvis-frame means of each skeleton's clips, computed together
     assert len({(c.topology, c.offsets.tobytes()) for c in clips}) >= 3
@@ -257,14 +257,35 @@ def _bandai_clips(step):
     return [read_bvh(p) for p in files]
 
 
-def test_body_maps_of_many_bandai_clips_are_each_clips_own():
-    # The pelvis-frame means of a skeleton's clips computed together (`moments_many`) give
-    # each clip the map it gets alone, on Bandai-1's gaits (several actors, one skeleton each).
+def test_body_maps_of_many_bandai_clips_are_each_clips_own(monkeypatch):
+    # The pelvis-frame means of a skeleton's clips computed together (`moments_arrays`) and
+    # the maps of the clips whose names decide legs and head inferred together
+    # (`_infer.infer_named_many`) give each clip the map it gets alone, bit for bit (BodyMap's
+    # == compares its floats exactly), on every Bandai-1 clip (several actors, one skeleton
+    # each) and every bundled CMU clip, whole and cut.
+    from fourierjax._body import _infer
     from fourierjax._motion import _batch
 
-    clips = _bandai_clips(4)
+    clips = _bandai_clips(1) + [data.load(n) for n in data.list()] + [
+        data.load("07_01")[150:300], data.load("02_01")[:40], data.load("142_08")[:3]]
+    named = []
+    many = _infer.infer_named_many
+    monkeypatch.setattr(_infer, "infer_named_many", lambda *a: named.extend(many(*a)) or named[-len(a[1]):])
     got = _batch.infer_body_maps(clips)
+    assert sum(m is not None for m in named) == len(clips)  # all through the batched path
     for c, g in zip(clips, got, strict=True):
+        assert g == infer_body_map(c)
+
+
+def test_body_maps_inferred_together_fall_back_per_clip(monkeypatch):
+    # A skeleton whose names do not decide its legs and head takes `infer` per clip.
+    from fourierjax._body import _infer
+    from fourierjax._motion import _batch
+
+    clips = [data.load("07_01")[:60], data.load("142_08")[20:90]]
+    monkeypatch.setattr(_infer, "_named_plan", lambda topology: None)
+    assert _infer.infer_named_many(clips[0].topology, np.zeros((1, 2, 1, 3)), None, [[]], {}) == [None]
+    for c, g in zip(clips, _batch.infer_body_maps(clips), strict=True):
         assert g == infer_body_map(c)
 
 
@@ -349,3 +370,33 @@ def test_sorted_within_equals_a_lexsort_per_column():
     assert np.array_equal(C._sorted_within(x, seg), lexsorted(x))
     x[30, 1, 0] = np.nan  # NaNs sort last within their clip, as the lexsort puts them
     assert np.array_equal(C._sorted_within(x, seg), lexsorted(x), equal_nan=True)
+
+
+def test_clip_models_are_the_chunk_models_rows_bit_for_bit(clips, monkeypatch):
+    # Each ClipFit's raw and aligned model are rows of its chunk program's stacked models,
+    # sliced by the program (`_pipeline._chunk_impl`'s ``rows``): the same values, bit for bit,
+    # as the host rows of the stacked models that were put back on the device before.
+    import jax
+
+    ms, bm = clips
+    seen = []
+    program = _pipeline._chunk_program
+
+    def spy(*args, **kwargs):
+        out = program(*args, **kwargs)
+        seen.append(out)
+        return out
+
+    monkeypatch.setattr(_pipeline, "_chunk_program", spy)
+    fits = M.fit_motions(ms, 2, body_map=bm, segment=False)
+    assert len(seen) == 1
+    res, _, (_, shifted), _ = seen[0]
+    assert any(f.alignment == "left_heel_strike" for f in fits)
+    for k, f in enumerate(fits):
+        pairs = [(f.raw_model, res.model)]
+        if f.alignment == "left_heel_strike":  # (the other alignments shift on the host)
+            pairs.append((f.model, shifted))
+        for got, stacked in pairs:
+            for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(stacked), strict=True):
+                assert isinstance(a, jax.Array)
+                np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[k])

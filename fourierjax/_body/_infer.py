@@ -318,11 +318,17 @@ def moments_many(points: np.ndarray, rotations: np.ndarray, pelvis: int) -> list
     world-from-pelvis matrices ``[F, 3, 3]`` and the mean pose in the pelvis frame ``[P, 3]``
     (`_mean_local`), with the same values as one clip at a time (the same reductions, each over
     one clip's frames). ``points [B, F, P, 3]``, ``rotations [B, F, J, 4]``."""
+    mean_world, R, local = moments_arrays(points, rotations, pelvis)
+    return [(mean_world[b], R[b], local[b]) for b in range(len(points))]
+
+
+def moments_arrays(points: np.ndarray, rotations: np.ndarray, pelvis: int) -> tuple:
+    """`moments_many` as arrays: ``(mean_world [B, P, 3], R [B, F, 3, 3], local [B, P, 3])``."""
     rel = points - points[:, :, pelvis : pelvis + 1]
     mean_world = rel.mean(axis=1)
     R = _matrices(rotations[:, :, pelvis])
     local = np.matmul(rel, R).mean(axis=1)
-    return [(mean_world[b], R[b], local[b]) for b in range(len(points))]
+    return mean_world, R, local
 
 
 def _matrices(q: np.ndarray) -> np.ndarray:
@@ -612,3 +618,128 @@ def from_names(topology, up=None) -> BodyMap:
         forward=_tuple3(facing), facing=_tuple3(facing), leg_length=0.0, height=0.0, units="custom",
         metres_per_unit=1.0, sources=tuple(sorted(sources.items())),
     )
+
+
+# ------------------------------------------------------------------------------ many clips
+
+
+def infer_named_many(topology, positions, rotations, moving, pre) -> list:
+    """`infer` of many clips of one skeleton whose joint names decide the legs and the head (no
+    override file, no up axis given), with the same maps bit for bit: the name-decided parts
+    once, the geometry as array ops over the clips (each the same elementwise operations and
+    reductions over one clip's frames as `infer`'s; a 3-vector's dot product and norm as
+    ``(a * b).sum(-1)``, which is NumPy's own for one vector). ``positions [B, F, J, 3]`` and
+    ``rotations [B, F, J, 4]`` (FK of each clip's posed frames), ``moving``: each clip's list
+    (`infer`'s), ``pre``: ``{pelvis: (mean_world [B, P, 3], R [B, F, 3, 3], local [B, P, 3])}``
+    (`moments_arrays` about `named_pelvises`). Returns a map per clip, None where `infer` itself
+    must decide (a direction it cannot normalise: it raises); all None when names do not decide
+    this skeleton's legs and head."""
+    B = len(positions)
+    plan = _named_plan(topology)
+    if plan is None or any(p not in pre for p in (plan["pelvis0"], plan["pelvis"])):
+        return [None] * B
+    la, ra, pelvis = plan["left"]["ankle"], plan["right"]["ankle"], plan["pelvis"]
+    # -- up (`_up_from_legs` of the hips' common ancestor's mean pose)
+    d = -0.5 * (pre[plan["pelvis0"]][0][:, la] + pre[plan["pelvis0"]][0][:, ra])
+    axis = np.argmax(np.abs(d), axis=1)
+    ok = np.isfinite(d).all(axis=1)  # else `infer` decides (NaN poses)
+    sign = np.sign(d[np.arange(B), axis])
+    sign = np.where(sign == 0, 1, np.where(ok, sign, 1)).astype(int)
+    u = np.zeros((B, 3))
+    u[np.arange(B), axis] = sign
+    # -- mean pose in the pelvis frame (`_mean_local` with `pre`)
+    _, R, local = pre[pelvis]
+    u_local = np.matmul(u[:, None, None, :], R)[:, :, 0].mean(axis=1)
+    u_local, good = _units(u_local)
+    ok &= good
+    left, right = plan["left_leg"], plan["right_leg"]
+    # -- facing (`_facing_local`, `_world_facing`)
+    lat = local[:, left.hip] - local[:, right.hip]
+    f = np.cross(lat, u_local)
+    f = f - u_local * _dot(u_local, f)[:, None]
+    facing_local, good = _units(f)
+    ok &= good
+    per_frame = np.matmul(R, facing_local[:, None, :, None])[..., 0]  # [B, F, 3]
+    per_frame = per_frame - np.matmul(per_frame, u[:, :, None])[..., 0][..., None] * u[:, None, :]
+    f = per_frame.mean(axis=1)
+    turned = _norms(f) < 0.25 * np.linalg.norm(per_frame, axis=-1).mean(axis=1)
+    f = np.where(turned[:, None], per_frame[:, 0], f)
+    facing, good = _units(f - u * _dot(u, f)[:, None])
+    ok &= good
+    # -- trajectory, leg length, forward
+    traj = [_trajectory({}, topology, None, moving[b], pelvis) for b in range(B)]
+    seg = np.linalg.norm(positions[:, :, left.knee] - positions[:, :, left.hip], axis=-1) + np.linalg.norm(
+        positions[:, :, left.ankle] - positions[:, :, left.knee], axis=-1)
+    leg_length = np.median(seg, axis=1)
+    tj = np.array([t for t, _ in traj])
+    travel = positions[np.arange(B), -1, tj] - positions[np.arange(B), 0, tj]
+    travel = travel - u * _dot(u, travel)[:, None]
+    moves = _norms(travel) > _TRAVELS * leg_length
+    along, good = _units(travel)
+    ok &= good | ~moves
+    forward = np.where(moves[:, None], along, facing)
+    # -- height
+    heights = np.matmul(local, u_local[:, :, None])[..., 0]
+    height = heights.max(axis=1) - heights.min(axis=1)
+    out: list = []
+    for b in range(B):
+        if not ok[b]:
+            out.append(None)
+            continue
+        ll = float(leg_length[b])
+        units = min(UNITS, key=lambda k, ll=ll: abs(np.log(ll * UNITS[k] / _LEG_LENGTH_M)))
+        sources = dict(plan["sources"], trajectory=traj[b][1],
+                       forward="geometry")
+        sources["units"] = "geometry"
+        out.append(BodyMap(
+            joint_names=topology.names, left=left, right=right, trajectory=traj[b][0],
+            pelvis=pelvis, spine=plan["spine"], neck=plan["neck"], head=plan["head"],
+            left_arm=plan["arms"][0], right_arm=plan["arms"][1], up_axis=int(axis[b]),
+            up_sign=int(sign[b]), forward=_tuple3(forward[b]), facing=_tuple3(facing[b]),
+            leg_length=ll, height=float(height[b]), units=units, metres_per_unit=UNITS[units],
+            sources=tuple(sorted(sources.items()))))
+    return out
+
+
+def _dot(a, b):
+    return (a * b).sum(-1)
+
+
+def _norms(v):
+    return np.sqrt(_dot(v, v))
+
+
+def _units(v) -> tuple[np.ndarray, np.ndarray]:
+    """`_unit` of each row of ``v [B, 3]`` and whether it could normalise it."""
+    n = _norms(v)
+    good = np.isfinite(n) & (n != 0.0)
+    return v / np.where(good, n, 1.0)[:, None], good
+
+
+@functools.lru_cache(maxsize=64)
+def _named_plan(topology):
+    """The parts of `infer`'s map that names decide for ``topology`` (legs, pelvis, head, neck,
+    spine, arms and their sources), or None when names do not decide the legs or the head."""
+    names, parents, esp = topology.names, topology.parents, topology.end_site_parents
+    legs = {s: _match_chain(names, parents, s, "leg") for s in ("left", "right")}
+    if not all(legs.values()) or set(_present(legs["left"])) & set(_present(legs["right"])):
+        return None
+    pelvis0 = common_ancestor(parents, legs["left"]["hip"], legs["right"]["hip"])
+    if pelvis0 < 0:
+        return None
+    pelvis = trunk_pelvis(parents, pelvis0, (legs["left"]["hip"], legs["right"]["hip"]))
+    sources = {"legs": "names", "up": "geometry",
+               "pelvis": "names" if pelvis in _match_centre(names, "pelvis") else "geometry"}
+    leg_joints = set(_present(legs["left"])) | set(_present(legs["right"]))
+    below = [j for j in range(len(names)) if j != pelvis and _path(parents, pelvis, j) and j not in leg_joints]
+    if not [j for j in _match_centre(names, "head") if j in below]:
+        return None  # the head from geometry: `infer` per clip
+    head, neck = _head_and_neck({}, names, parents, esp, None, None, pelvis, leg_joints, sources)
+    stop = neck if neck >= 0 else head
+    spine = tuple(_path(parents, pelvis, stop)[1:-1]) if stop >= 0 else ()
+    arms = _arms({}, names, parents, sources)
+    return {"left": legs["left"], "right": legs["right"], "pelvis0": pelvis0, "pelvis": pelvis,
+            "left_leg": _leg(legs["left"], names, esp, {}, "left"),
+            "right_leg": _leg(legs["right"], names, esp, {}, "right"),
+            "head": head, "neck": neck, "spine": spine, "arms": arms, "sources": sources}
+

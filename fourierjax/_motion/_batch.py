@@ -85,7 +85,8 @@ def infer_body_maps(clips) -> list:
     its outputs than in the FK); each clip's map is then inferred from its own poses."""
     import jax
 
-    from fourierjax.body import BodyMapError, _infer_from_fk, _sampled_frames
+    from fourierjax._body._infer import infer_named_many
+    from fourierjax.body import BodyMapError, _infer_from_fk, _moving, _sampled_frames
     from fourierjax.kinematics import _fk_frames_jit
 
     out: list = [None] * len(clips)
@@ -110,22 +111,30 @@ def infer_body_maps(clips) -> list:
                   for s in range(0, len(ch), ROW_BLOCK)]
         # float64 once for the group, as `_infer_from_fk` converts each clip's rows
         fk = jax.tree.map(lambda *a: np.concatenate(a)[order].astype(np.float64), *blocks)
-        pres = _moments(clips[ks[0]].topology, fk, len(ks), len(frames[0]))
-        starts = np.cumsum([0] + [len(f) for f in frames])
+        topo, B, F = clips[ks[0]].topology, len(ks), len(frames[0])
+        pres = _moments(topo, fk, B, F)
+        # The maps of clips whose names decide the legs and head, all at once; the others (and
+        # a clip whose geometry `infer` refuses) one by one, with the same `pre` rows.
+        maps = infer_named_many(topo, fk.positions.reshape(B, F, *fk.positions.shape[1:]),
+                                fk.rotations.reshape(B, F, *fk.rotations.shape[1:]),
+                                [_moving(clips[k]) for k in ks], pres)
         for i, k in enumerate(ks):
-            s = slice(starts[i], starts[i + 1])
+            if maps[i] is not None:
+                out[k] = maps[i]
+                continue
+            s = slice(i * F, (i + 1) * F)
             try:
                 out[k] = _infer_from_fk(clips[k], jax.tree.map(lambda a, s=s: a[s], fk),
-                                        pre={p: r[i] for p, r in pres.items()})
+                                        pre={p: tuple(v[i] for v in r) for p, r in pres.items()})
             except BodyMapError:
                 out[k] = None  # no legs: joint 0 carries the root, no contacts, no alignment
     return out
 
 
 def _moments(topology, fk, num_clips: int, num_frames: int) -> dict:
-    """`_body._infer.moments_many` of a skeleton's clips (``num_frames`` posed rows each, FK
-    ``fk`` of them in order) about each pelvis that names decide: ``{pelvis: rows}``."""
-    from fourierjax._body._infer import moments_many, named_pelvises
+    """`_body._infer.moments_arrays` of a skeleton's clips (``num_frames`` posed rows each, FK
+    ``fk`` of them in order) about each pelvis that names decide: ``{pelvis: arrays}``."""
+    from fourierjax._body._infer import moments_arrays, named_pelvises
 
     pelvises = named_pelvises(topology)
     if not pelvises:
@@ -134,7 +143,7 @@ def _moments(topology, fk, num_clips: int, num_frames: int) -> dict:
     points = np.concatenate([fk.positions, fk.end_site_positions], axis=1)
     points = points.reshape(B, F, *points.shape[1:])
     rotations = fk.rotations.reshape(B, F, *fk.rotations.shape[1:])
-    return {p: moments_many(points, rotations, p) for p in pelvises}
+    return {p: moments_arrays(points, rotations, p) for p in pelvises}
 
 
 def _batchable(clip, bm, representation, passes, segment) -> bool:
@@ -197,11 +206,17 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     pelvis = items[0].body_map.pelvis
     dts = np.array([it.clip.frame_time_s for it in items])
     # -- steady segment: the pelvis's world track of every clip from one pass
+    pose = None
     if segment:
         cat, starts = _concat([it.clip for it in items])
-        pos, _ = _world_pose(cat, pelvis)
+        pos, q = _world_pose(cat, pelvis)
         for k, it in enumerate(items):
             it.a, it.b = steady_from_positions(pos[starts[k]:starts[k + 1]][:, [0, 2]], dts[k])
+        # The segments' rows of it, for the features (each frame's pose is its own: the
+        # same values as the pose of the segments' concatenation, one FK pass fewer)
+        rows = np.concatenate([np.arange(starts[k] + it.a, starts[k] + it.b)
+                               for k, it in enumerate(items)])
+        pose = pos[rows], q[rows]
     else:
         for it in items:
             it.a, it.b = 0, it.clip.num_frames
@@ -212,7 +227,7 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     dt_f = np.repeat(dts, n)  # per frame
     glitch = _glitch_joints(cat, starts, dt_f, dts)
     clock("glitch")
-    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation)
+    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation, pose)
     mask = feature_mask(glitch, topo, pelvis)
     names = channel_names_for(topo, representation)
     clock("features")
@@ -331,12 +346,14 @@ def _gradient(v, starts, dt_f):
     return g
 
 
-def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation) -> np.ndarray:
+def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation,
+              pose=None) -> np.ndarray:
     """`features_from_motion(sub, representation, valid=~glitch, body_map=bm)` of every clip,
-    rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does)."""
+    rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does);
+    ``pose``: the pelvis's world pose of ``cat``'s frames when known."""
     topo = cat.topology
     B = len(items)
-    pos, q_root = _world_pose(cat, pelvis)
+    pos, q_root = _world_pose(cat, pelvis) if pose is None else pose
     facing = _facing_locals(cat, starts, q_root, items)
     for it, sub in zip(items, subs, strict=True):
         check_static_above(sub, _RJ(it.body_map.trajectory))

@@ -154,7 +154,7 @@ def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
     return [out[c.index] for c in clips]
 
 
-def _hold_back(held, new, fit_kwargs, final) -> tuple[list[_Clip], list[_Clip], dict]:
+def _hold_back(held, new, fit_kwargs, final, known=None) -> tuple[list[_Clip], list[_Clip], dict]:
     """What the stream fits now and what it holds back for the next chunk: ``(now, keep,
     keys)``. Clips are grouped as the fit groups them (`_group_key`), oldest first; of each
     group, whole batches of `SMALL_BATCH` clips are fitted now (so the fit of chunk k runs
@@ -163,10 +163,12 @@ def _hold_back(held, new, fit_kwargs, final) -> tuple[list[_Clip], list[_Clip], 
     held back before (``held``), and every group at the end of the stream (``final``), is
     fitted whole: a clip waits at most one chunk (the held clips of a group, fewer than a
     batch, are its oldest and go with its first batch), so the stream holds at most one
-    chunk's clips back."""
+    chunk's clips back. ``known``: the keys of the clips held back, from the call before (a
+    key's search weights cost about 0.2 ms a clip)."""
     from fourierjax._fourier._buckets import SMALL_BATCH
 
-    keys = {c.index: _group_key(c, fit_kwargs) for c in (*held, *new)}
+    known = known or {}
+    keys = {c.index: known.get(c.index) or _group_key(c, fit_kwargs) for c in (*held, *new)}
     groups: dict[tuple, list[_Clip]] = {}
     for c in (*held, *new):
         groups.setdefault(keys[c.index], []).append(c)
@@ -219,7 +221,7 @@ def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, tim
     frames = mask.any(axis=2)
     if not (frames[..., None] & ~mask).any():
         mask = frames
-    res, pve, shifted = _chunk_program(
+    res, pve, shifted, rows = _chunk_program(
         skel, put(feats), put(mask, bool), put(dts), put(om_steps), put(strikes),
         put(counts, np.int32),
         num_harmonics=num_harmonics, representation=representation, names=names,
@@ -229,8 +231,8 @@ def _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw, tim
     clock("fit")
     if not shared:
         pve = _position_ves(chunk, representation, feats, res, dts, dtype)
-    raw, models = _rows(res.model, len(chunk)), _rows(shifted[1], len(chunk))
-    out = [(c.index, _clip_fit(c, k, res, raw[k], (shifted[0], models[k]), names, pve[k], fr))
+    out = [(c.index, _clip_fit(c, k, res, rows[k][0], (shifted[0], rows[k][1]), names, pve[k],
+                               fr))
            for k, c in enumerate(chunk)]
     clock("align_metrics")
     return out
@@ -242,7 +244,9 @@ def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_ha
     the first ``counts`` of each row; fourier.align_to_events: their circular mean), the models'
     synthesis and (with a stacked ``skeleton``) the position variance explained, in one
     compiled program per shape bucket. Returns ``(FitResult, pve [B] or None, (delta [B],
-    shifted model))``."""
+    shifted model), rows)``, ``rows``: each clip's ``(model, shifted model)``, sliced here (a
+    device_put of 500 clips' rows of host arrays, 4,000 of them, cost 0.05-0.1 CPU-s; the
+    program's outputs cost about a tenth)."""
     from fourierjax import fourier as fr
 
     res = fr.fit_batch(feats, dts, num_harmonics, mask=mask, omega_steps=om_steps,
@@ -253,15 +257,17 @@ def _chunk_impl(skeleton, feats, mask, dts, om_steps, strikes, counts, *, num_ha
     delta = jnp.arctan2(jnp.sum(jnp.where(used, jnp.sin(th), 0.0), axis=1),
                         jnp.sum(jnp.where(used, jnp.cos(th), 0.0), axis=1))
     shifted = jax.vmap(fr.shift_phase)(res.model, delta)
+    rows = tuple(jax.tree.map(lambda v, k=k: v[k], (res.model, shifted))
+                 for k in range(feats.shape[0]))
     if skeleton is None:
-        return res, None, (delta, shifted)
+        return res, None, (delta, shifted), rows
     t = jnp.arange(feats.shape[1], dtype=feats.dtype)[None, :] * dts[:, None]
     xhat = fr.synthesize_batch(res.model, t)
     frames = jnp.any(mask, axis=2) if mask.ndim == 3 else mask
     # The same metric as `_position_ve_impl` per clip (to float32 round-off), FK with the batch
     # axes minor: 3.5x less CPU (500 Bandai clips: 0.4 of the fit's 1.07 CPU-s before).
     pve = position_ve_batch(skeleton, feats, xhat, frames, representation, pelvis)
-    return res, pve, (delta, shifted)
+    return res, pve, (delta, shifted), rows
 
 
 _chunk_program = _saved.saved(_jit.filter_jit(_chunk_impl))
@@ -282,16 +288,6 @@ def _position_ves(chunk, representation, feats, res, dts, dtype) -> np.ndarray:
                                                   + [False] * (feats.shape[1] - len(c.mask))),
                                       0 if c.body_map is None else c.body_map.pelvis)))
     return np.array(out)
-
-
-def _rows(tree, n) -> list:
-    """Rows ``0..n-1`` of the host-side pytree ``tree`` (leaves with a leading clip axis), each
-    a pytree of device arrays: one batched transfer, not an eager conversion per leaf and row
-    (500 clips: 4,000 of them cost about 0.4 s)."""
-    leaves, treedef = jax.tree.flatten(tree)
-    put = jax.device_put([np.asarray(v[k]) for k in range(n) for v in leaves])
-    L = len(leaves)
-    return [jax.tree.unflatten(treedef, put[k * L:(k + 1) * L]) for k in range(n)]
 
 
 def _clip_fit(c: _Clip, k, res, raw, shifted, names, pve, fr) -> ClipFit:
@@ -463,6 +459,7 @@ def iter_fit_motions(
                leave=False) as bar):
         ahead = pool.submit(read_chunk)
         held: list[_Clip] = []
+        keys: dict[int, tuple] = {}
         done: dict[int, ClipFit] = {}
         while True:
             clock = _Clock(timings)
@@ -470,7 +467,7 @@ def iter_fit_motions(
             clock("wait")  # the fit waiting for the reader: preparation on the critical path
             if chunk:
                 ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
-            now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk)
+            now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk, known=keys)
             fits = _fit_clips(now, num_harmonics, representation, dtype, fit_kwargs, timings,
                               keys) if now else []
             done.update(zip((c.index for c in now), fits))
