@@ -184,6 +184,10 @@ BANDAI_NOT_MET = {
     "run_masculinity": "skating 19.10 vs 69.18 units/s (0.276x; was 0.532x)",
 }
 
+# Within 0.5% of the bound (run_feminine 0.2508x): not strict, since another machine's float32
+# rounding could tip it either way; the printed ratio says where it stands.
+BANDAI_AT_THE_EDGE = {"run_feminine"}
+
 
 @functools.cache
 def _bandai_fits():
@@ -196,7 +200,8 @@ def _bandai_fits():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", [
-    pytest.param(n, marks=pytest.mark.xfail(strict=True, reason=f"issue 21 bounds not met: {BANDAI_NOT_MET[n]}"))
+    pytest.param(n, marks=pytest.mark.xfail(strict=n not in BANDAI_AT_THE_EDGE,
+                                            reason=f"issue 21 bounds not met: {BANDAI_NOT_MET[n]}"))
     if n in BANDAI_NOT_MET else n for n in BANDAI_CLIPS])
 def test_locked_synthesis_meets_the_issue_bounds_on_bandai_clips(name):
     if not BANDAI.is_dir():
