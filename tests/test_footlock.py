@@ -145,7 +145,7 @@ def test_the_toe_hold_at_30_fps_keeps_the_knee_within_the_capture():
     knee stepped 20.1 deg (the capture's largest 16.4; 16.2 without the hold) as the knee, frozen
     straight, caught up with the swing. Measured with the fade: knee 16.1 deg, skating 0.227x
     the capture's (0.231x without the hold); with each contact's hold led in by a frame, knee
-    16.2 deg, skating 0.200x."""
+    16.2 deg, skating 0.200x; with the band lift (`footlock._band_lift`), 16.2 deg and 0.147x."""
     if not BANDAI.is_dir():
         pytest.skip(f"Bandai-Namco data set not present at {BANDAI}")
     from fourierjax import motion as M
@@ -159,6 +159,60 @@ def test_the_toe_hold_at_30_fps_keeps_the_knee_within_the_capture():
           f"{np.degrees(k_cap):.1f} deg")
     assert k_syn <= k_cap
     assert s_syn <= 0.25 * s_cap and depth_m <= 0.005
+
+
+BANDAI_CLIPS = tuple(f"{kind}_{style}" for kind in ("walk", "run") for style in (
+    "active", "angry", "childish", "chimpira", "feminine", "giant", "happy", "masculinity", "musical", "normal",
+    "not-confident", "old", "proud", "sad", "tired"))
+# Bandai-1 walks and runs not met yet (measured 2026-12-05, session ground6, with the 30 fps band
+# lift; `python -m experiments.footlock_bounds --bandai`; skating synthesized vs captured, knee
+# step synthesized vs captured): 21/30 met, 18/30 before the band lift. What is left on the runs is
+# mostly the ankle point (Bandai's first foot point is the ankle joint, 7-8 cm up) at heel-off and
+# landing: it rolls about the planted ball, so it moves forward as it rises through the band.
+# walk_not-confident meets the knee bound with no margin (12.3 vs 12.3 deg; 8.8 before the band
+# lift, 15.4 with it not slope-limited).
+# Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
+BANDAI_NOT_MET = {
+    "walk_childish": "skating 3.92 vs 15.45 units/s (0.254x; was 0.317x)",
+    "walk_happy": "skating 8.16 vs 24.12 units/s (0.338x; was 0.386x)",
+    "run_active": "skating 14.85 vs 34.69 units/s (0.428x; was 0.531x)",
+    "run_angry": "skating 15.33 vs 47.94 units/s (0.320x; was 0.386x)",
+    "run_childish": "skating 11.69 vs 45.37 units/s (0.258x; was 0.287x); knee step 19.7 vs 19.4 deg (as before)",
+    "run_chimpira": "skating 17.27 vs 30.92 units/s (0.559x; was 0.965x)",
+    "run_feminine": "skating 9.72 vs 38.75 units/s (0.251x; was 0.352x)",
+    "run_happy": "skating 11.50 vs 39.97 units/s (0.288x; was 0.421x)",
+    "run_masculinity": "skating 19.10 vs 69.18 units/s (0.276x; was 0.532x)",
+}
+
+# Within 0.5% of the bound (run_feminine 0.2508x): not strict, since another machine's float32
+# rounding could tip it either way; the printed ratio says where it stands.
+BANDAI_AT_THE_EDGE = {"run_feminine"}
+
+
+@functools.cache
+def _bandai_fits():
+    from fourierjax import motion as M
+    from fourierjax.io.bvh import read_bvh
+
+    motions = [read_bvh(BANDAI / f"dataset-1_{n}_001.bvh") for n in BANDAI_CLIPS]
+    return dict(zip(BANDAI_CLIPS, zip(motions, M.fit_motions(motions, 4), strict=True), strict=True))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [
+    pytest.param(n, marks=pytest.mark.xfail(strict=n not in BANDAI_AT_THE_EDGE,
+                                            reason=f"issue 21 bounds not met: {BANDAI_NOT_MET[n]}"))
+    if n in BANDAI_NOT_MET else n for n in BANDAI_CLIPS])
+def test_locked_synthesis_meets_the_issue_bounds_on_bandai_clips(name):
+    if not BANDAI.is_dir():
+        pytest.skip(f"Bandai-Namco data set not present at {BANDAI}")
+    mot, fit = _bandai_fits()[name]
+    s_syn, s_cap, depth_m, k_syn, k_cap, _ = measure(mot, fit)
+    print(f"\n{name}: skating {s_syn / s_cap:.3f}x, {100 * depth_m:.3f} cm below the floor, knee step "
+          f"{np.degrees(k_syn):.1f} vs {np.degrees(k_cap):.1f} deg")
+    assert s_syn <= 0.25 * s_cap
+    assert depth_m <= 0.005
+    assert k_syn <= k_cap
 
 
 def test_foot_lock_off_is_the_step_constraints_alone():
@@ -194,6 +248,9 @@ def test_lock_feet_vmaps_over_characters_and_is_differentiable():
     g = jax.grad(lambda f: jnp.sum(one(f, roots[0])[:, 3:] ** 2))(feats[0])
     assert np.all(np.isfinite(np.asarray(g)))
     g = jax.grad(lambda root: jnp.sum(one(feats[0], root, 3)[:, 3:] ** 2))(roots[0])
+    assert np.all(np.isfinite(np.asarray(g))) and np.abs(np.asarray(g)).max() > 0
+    # One frame of easing (30 fps): the band lift (`footlock._band_lift`) is on the path.
+    g = jax.grad(lambda f: jnp.sum(one(f, roots[0], 1)[:, 3:] ** 2))(feats[0])
     assert np.all(np.isfinite(np.asarray(g))) and np.abs(np.asarray(g)).max() > 0
 
 
