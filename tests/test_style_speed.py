@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import pathlib
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,10 +12,7 @@ from fourierjax.body import infer_body_map
 from fourierjax.errors import UserError
 from fourierjax.features import channel_names_for
 
-from .test_transfer import _branch_changed, model
-
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-BANDAI = ROOT / ".." / "shared" / "data" / "mocap" / "bandai1" / "data"
+from .test_transfer import _branch_changed, fit_bandai_walk_run, model
 
 
 @pytest.fixture(scope="module")
@@ -146,18 +141,7 @@ def test_speed_limit_errors(cmu):
 
 @pytest.fixture(scope="module")
 def bandai():
-    if not BANDAI.is_dir():
-        pytest.skip("Bandai-1 not found at ../shared/data/mocap/bandai1")
-    from experiments._style_data import fit_clips
-
-    keys = [(c, s) for c in ("walk", "run") for s in ("normal", "happy", "angry", "old")]
-    clips = [{"path": BANDAI / f"dataset-1_{c}_{s}_001.bvh", "content": c, "style": s, "take": "001"}
-             for c, s in keys]
-    fitted, skels, maps, motions, failed = fit_clips(clips, 3, "euler",
-                                                     pathlib.Path("/tmp/fourierjax_style_space_cache"))
-    assert not failed
-    i = keys.index(("run", "normal"))
-    return dict(zip(keys, fitted, strict=True)), skels[i], maps[i], motions[i].frame_time_s
+    return fit_bandai_walk_run(("normal", "happy", "angry", "old"))
 
 
 def test_eq8_with_the_speed_limit_never_outruns_its_clips_on_bandai(bandai):

@@ -123,22 +123,29 @@ def test_transfer_errors(cmu):
         style.content_mean([a, other])
 
 
-@pytest.fixture(scope="module")
-def bandai_walk_run():
-    """Walk and run of four Bandai-1 styles, fitted once for the module (8 clips)."""
+def fit_bandai_walk_run(styles, representation="euler"):
+    """Take 001 of the walk and run of each of ``styles`` on Bandai-1 (skips without the data),
+    fitted with N = 3: ``({(content, style): model}, skeleton, body map, frame time)`` of
+    run_normal's clip."""
     if not BANDAI.is_dir():
         pytest.skip("Bandai-1 not found at ../shared/data/mocap/bandai1")
     from experiments._style_data import fit_clips
 
-    keys = [(c, s) for c in ("walk", "run") for s in ("normal", "sad", "happy", "old")]
+    keys = [(c, s) for c in ("walk", "run") for s in styles]
     clips = [{"path": BANDAI / f"dataset-1_{c}_{s}_001.bvh", "content": c, "style": s, "take": "001"}
              for c, s in keys]
     # the experiment's on-disk cache (outside the repository; keyed by the clips and settings)
-    fitted, skels, maps, motions, failed = fit_clips(clips, 3, "euler",
+    fitted, skels, maps, motions, failed = fit_clips(clips, 3, representation,
                                                      pathlib.Path("/tmp/fourierjax_style_space_cache"))
     assert not failed
     i = keys.index(("run", "normal"))
     return dict(zip(keys, fitted, strict=True)), skels[i], maps[i], motions[i].frame_time_s
+
+
+@pytest.fixture(scope="module")
+def bandai_walk_run():
+    """Walk and run of four Bandai-1 styles, fitted once for the module (8 clips)."""
+    return fit_bandai_walk_run(("normal", "sad", "happy", "old"))
 
 
 def test_no_limb_flip_at_any_weight_on_bandai(bandai_walk_run):
@@ -192,17 +199,7 @@ def test_saturation_keeps_an_extrapolated_transfer_within_the_clips_on_bandai(ba
 def bandai_walk_run_expmap():
     """The clips of `bandai_walk_run` fitted in exponential-map channels (the thighs' offsets
     sit at |r| = 3.0-3.1 rad, next to the antipodal branch)."""
-    if not BANDAI.is_dir():
-        pytest.skip("Bandai-1 not found at ../shared/data/mocap/bandai1")
-    from experiments._style_data import fit_clips
-
-    keys = [(c, s) for c in ("walk", "run") for s in ("normal", "sad", "happy", "old")]
-    clips = [{"path": BANDAI / f"dataset-1_{c}_{s}_001.bvh", "content": c, "style": s, "take": "001"}
-             for c, s in keys]
-    fitted, skels, maps, _, failed = fit_clips(clips, 3, "expmap", pathlib.Path("/tmp/fourierjax_style_space_cache"))
-    assert not failed
-    i = keys.index(("run", "normal"))
-    return dict(zip(keys, fitted, strict=True)), skels[i], maps[i]
+    return fit_bandai_walk_run(("normal", "sad", "happy", "old"), "expmap")[:3]
 
 
 def test_expmap_superposition_keeps_each_clips_branch_on_bandai(bandai_walk_run_expmap):

@@ -415,8 +415,9 @@ def superpose(
             through FK) than the limit; weights already within it are unchanged. A limb flip
             (a channel on another branch, a swing extrapolated past a body's) is a joint faster
             than any clip, so the result never flips. Found by bisection under `jit` and `vmap`
-            (`SpeedLimit.iterations` halvings); no gradient flows through `a`. A base already
-            faster than the limit is returned as it is (`a = 0`).
+            (`SpeedLimit.iterations` halvings); where the limit binds, `a` carries its implicit
+            derivative (`speed.limited_scale`). A base already faster than the limit is
+            returned as it is (`a = 0`).
 
     Returns:
         A FourierModel with the static fields of `base`. Raises `UserError` for non-finite
@@ -440,14 +441,16 @@ def superpose(
     pelvis = speed_limit.pelvis
     if pelvis is None:
         pelvis = _pelvis("superpose", None, speed_limit.skeleton, base)
-    bounds = [b for b in (speed_limit.max_speed, speed_limit.max_phase_speed) if b is not None]
-    bad = jnp.any(jnp.stack([~(jnp.isfinite(b) & (b > 0)) for b in bounds]))
-    weights = eqx.error_if(weights, bad, "superpose: the speed limit's bounds must be finite and > 0")
     return _superpose_limited(base, chars, weights, method, bool(include_omega), saturation, speed_limit, pelvis)
 
 
 @filter_jit
 def _superpose_limited(base, chars, weights, method: str, include_omega: bool, saturation, limit, pelvis: int):
+    # `SpeedLimit` checks concrete bounds; traced ones (a bound under jit or grad) here
+    bounds = [b for b in (limit.max_speed, limit.max_phase_speed) if b is not None]
+    bad = jnp.any(jnp.stack([~(jnp.isfinite(b) & (b > 0)) for b in bounds]))
+    weights = eqx.error_if(weights, bad, "superpose: the speed limit's bounds must be finite and > 0")
+
     def at(a, inputs):
         b, c, w, s = inputs
         return _superpose(b, c, a * w, method, include_omega, s)

@@ -176,11 +176,11 @@ def joint_speed_limit(
         if c is not None and not (np.isfinite(c) and c > 0):
             raise UserError(f"{where}: the models' largest joint speed {name} is {float(c)!r}; "
                             "a limit needs a moving, finite cycle")
-    limit = SpeedLimit(skeleton, max_speed=second if per in ("second", "both") else None,
-                       max_phase_speed=phase if per in ("radian", "both") else None,
-                       num_samples=n, iterations=iterations)
-    object.__setattr__(limit, "pelvis", int(pelvis))  # our own new record: inferred once, above
-    return limit
+    # Without a body map the pelvis inferred above is kept per topology (`style.cycle_positions`):
+    # `superpose` finds the same one for the base.
+    return SpeedLimit(skeleton, max_speed=second if per in ("second", "both") else None,
+                      max_phase_speed=phase if per in ("radian", "both") else None,
+                      body_map=body_map, num_samples=n, iterations=iterations)
 
 
 def excess(model: FourierModel, limit: SpeedLimit, pelvis: int) -> Float[Array, ""]:
