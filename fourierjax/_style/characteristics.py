@@ -441,16 +441,18 @@ def superpose(
     pelvis = speed_limit.pelvis
     if pelvis is None:
         pelvis = _pelvis("superpose", None, speed_limit.skeleton, base)
+    # `SpeedLimit` checks concrete bounds; traced ones (a bound under the caller's jit or grad)
+    # are checked in the caller's program, not in `_superpose_limited`: a host callback there
+    # would keep that program (12-20 s to compile on 2 cores) out of the persistent cache.
+    bounds = [b for b in (speed_limit.max_speed, speed_limit.max_phase_speed) if b is not None]
+    if any(isinstance(b, jax.core.Tracer) for b in bounds):
+        bad = jnp.any(jnp.stack([~(jnp.isfinite(b) & (b > 0)) for b in bounds]))
+        weights = eqx.error_if(weights, bad, "superpose: the speed limit's bounds must be finite and > 0")
     return _superpose_limited(base, chars, weights, method, bool(include_omega), saturation, speed_limit, pelvis)
 
 
 @filter_jit
 def _superpose_limited(base, chars, weights, method: str, include_omega: bool, saturation, limit, pelvis: int):
-    # `SpeedLimit` checks concrete bounds; traced ones (a bound under jit or grad) here
-    bounds = [b for b in (limit.max_speed, limit.max_phase_speed) if b is not None]
-    bad = jnp.any(jnp.stack([~(jnp.isfinite(b) & (b > 0)) for b in bounds]))
-    weights = eqx.error_if(weights, bad, "superpose: the speed limit's bounds must be finite and > 0")
-
     def at(a, inputs):
         b, c, w, s = inputs
         return _superpose(b, c, a * w, method, include_omega, s)

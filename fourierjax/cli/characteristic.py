@@ -45,8 +45,11 @@ def run(args: argparse.Namespace) -> int:
 
     out = check_out(args.out, (".npz",))
     a, b = load_gait_pair(args)
+    from fourierjax.cli._speed_limit import characteristic_speeds
+
     char = style.characteristic(a.model, b.model)
-    save_characteristic(out, char, a=a.source, b=b.source, alignment=a.alignment)
+    save_characteristic(out, char, a=a.source, b=b.source, alignment=a.alignment,
+                        joint_speed=characteristic_speeds(a, b))
     ratio = float(np.exp(np.asarray(char.log_omega)))
     print(
         f"wrote {out}: {len(char.channel_names) or char.offset.shape[0]} channels, "

@@ -19,6 +19,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--add", action="append", default=[], metavar="CHARACTERISTIC=WEIGHT",
                         help="superpose a characteristic file (from `fourierjax characteristic`) "
                         "with a weight, e.g. brisk.npz=1.37; repeatable")
+    parser.add_argument("--no-speed-limit", action="store_true",
+                        help="keep --add weights as given; by default they are scaled down where a joint "
+                        "would move faster than in the base or the characteristics' clips (a limb flip)")
     parser.add_argument("--noise", type=float, default=0.0, metavar="X",
                         help="amplitude in degrees of random higher harmonics on every rotation "
                         "channel (Unuma's shivering; default 0)")
@@ -86,15 +89,20 @@ def run(args: argparse.Namespace) -> int:
         from fourierjax import style
         from fourierjax.cli.characteristic import load_characteristic
 
-        chars = [load_characteristic(p)[0] for p, _ in adds]
+        read = [load_characteristic(p) for p, _ in adds]
+        chars = [c for c, _ in read]
         for (p, _), c in zip(adds, chars, strict=True):
             # Names the representation or the first channel that differs (an expmap model with
             # an Euler characteristic said "96 vs 96 channels").
             style.check_compatible(model, c, names=(f"the model {args.model}", f"--add {p}"))
+        weights = jnp.asarray([w for _, w in adds])
         try:
-            model = style.superpose(model, chars, jnp.asarray([w for _, w in adds]))
+            superposed = style.superpose(model, chars, weights)
         except ValueError as err:
             raise UserError(f"--add: {err}") from None
+        if not args.no_speed_limit:
+            superposed = _limited(model, superposed, chars, weights, [h for _, h in read], mf, template)
+        model = superposed
     if args.noise > 0:
         from fourierjax import style
 
@@ -122,6 +130,28 @@ def run(args: argparse.Namespace) -> int:
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
     print(gait_summary)
     return 0
+
+
+def _limited(base, superposed, chars, weights, headers, mf, template):
+    """`superposed`, or the superposition with its weights scaled down along their line where a
+    joint of it moves faster than in the base and the characteristics' clips (one line said)."""
+    import sys
+
+    from fourierjax import style
+    from fourierjax.cli._speed_limit import excess, synth_limit
+
+    skeleton, body_map = template.skeleton(), getattr(mf, "body_map", None)
+    limit, why = synth_limit(base, skeleton, body_map, headers)
+    if limit is None:
+        print(f"fourierjax: note: --add without a speed limit: {why}", file=sys.stderr)
+        return superposed
+    over = excess(superposed, skeleton, body_map, limit)
+    if over <= 1.0:
+        return superposed
+    limited = style.superpose(base, chars, weights, speed_limit=limit)
+    print(f"speed limit: a joint would move {over:.2f}x faster than in the base or the characteristics' "
+          "clips; the weights were scaled down to stay within them (--no-speed-limit keeps them)")
+    return limited
 
 
 def _foot_lock_inputs(mf):

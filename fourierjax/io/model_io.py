@@ -555,7 +555,8 @@ def _refuse_non_finite(fn: str, what: str, arrays: dict, path) -> None:
                         f"to {os.fspath(path)}")
 
 
-def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str = "none") -> None:
+def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str = "none",
+                        joint_speed: dict | None = None) -> None:
     """Write one (unstacked) `fourierjax.style.Characteristic` to ``path``.
 
     Format ``fourierjax.fourier_characteristic``, version 1: the archive layout of `save_model`,
@@ -575,9 +576,13 @@ def save_characteristic(path, char, *, a: str = "", b: str = "", alignment: str 
         a: where A came from (free text).
         b: where B came from (free text).
         alignment: the phase-alignment event of the models.
+        joint_speed: optional header entry ``{"per_second", "per_radian", "unit"}``: the
+            fastest joint of A and B (`style.peak_joint_speed`) in body heights, which
+            ``fourierjax synth --add`` limits the superposition to (files without it: no limit).
     """
+    extra = {} if joint_speed is None else {"joint_speed": dict(joint_speed)}
     header = _header(CHARACTERISTIC_FORMAT_NAME, CHARACTERISTIC_FORMAT_VERSION, char,
-                     "characteristic", a=a, b=b, alignment=alignment)
+                     "characteristic", a=a, b=b, alignment=alignment, **extra)
     arrays = {k: getattr(char, k) for k in _CHARACTERISTIC_ARRAYS}
     for k in _TANGENT_CHARACTERISTIC_ARRAYS + _REFERENCE_CHARACTERISTIC_ARRAYS:  # when present
         if getattr(char, k, None) is not None:
