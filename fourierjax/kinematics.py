@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fourierjax import _fk, _jit, rotations
+from fourierjax import _fk, _jit, _saved, rotations
 from fourierjax._fourier._buckets import length_bucket as _bucket
 from fourierjax._pytree import Record
 from fourierjax.errors import UserError
@@ -420,11 +420,14 @@ def _bucketed(jitted, skeleton: Skeleton, channels):
 # emitters (`_jit.CPU_COMPILER_OPTIONS`) compile the unrolled levels 2-2.5x faster than the new
 # fusion emitters (3.2 vs 6.9 s under a load of 12 on 2 cores) at a run time equal within the
 # noise of the shared machine.
+# A fresh process with the compile cache on loads both as saved executables (`_saved`).
+@_saved.saved_executable
 @_jit.jit
 def _joint_positions_jit(skeleton: Skeleton, channels):
     return _fk_batch(skeleton, channels, False)[1]
 
 
+@_saved.saved_executable
 @_jit.jit
 def _fk_frames_jit(skeleton: Skeleton, channels):
     rot, pos, ends = _fk_batch(skeleton, channels, True)
