@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from fourierjax import _fk, _jit, rotations
+from fourierjax import _fk, _jit, _saved, rotations
 from fourierjax._fourier._buckets import length_bucket as _bucket
 from fourierjax._pytree import Record
 from fourierjax.errors import UserError
@@ -339,39 +340,76 @@ def _fk_batch(skeleton: Skeleton, channels, all_rotations: bool):
 PAD_LIMIT = 1 << 16
 
 
+def _padded_frames(m: int) -> int:
+    """Frames of the compiled FK program that serves a concrete batch of `m` frames: the length
+    bucket, with `_unaliased_frames`' padding, so the program pads nothing inside and cuts
+    nothing before its outputs (one program per bucket, as before)."""
+    return _unaliased_frames(_bucket(m))
+
+
+def _to_device(x: np.ndarray, sharding, committed: bool):
+    """NumPy `x` as a JAX array on the one device of `sharding`, as `jax.device_put` makes it
+    (on CPU an aligned `x` is aliased, not copied), for less Python.
+
+    `jax.device_put` costs 17-25 us of Python per array (2 cores, jax 0.10.2); its last step,
+    jaxlib's `batched_device_put`, 4-9 us. `fk_frames` cuts three outputs per call, against
+    ~310 us of FK for 1,000 frames: with this and `_padded_frames`, `fk_frames` of 1 x 1,000
+    frames took 600 against 780 us a call (`joint_positions` 453 against 527; medians of 3,000
+    calls alternated with the previous entry point, load 7.7). Falls back to `jax.device_put`
+    where that private function is missing or refuses the call (another jaxlib).
+    """
+    if _batched_device_put is not None:
+        try:
+            device = next(iter(sharding.device_set))
+            return _batched_device_put(_ShapedArray(x.shape, x.dtype), sharding, [x], [device], committed)
+        except (TypeError, AttributeError, ValueError):
+            pass
+    return jax.device_put(x, sharding) if committed else jax.device_put(x)
+
+
+try:  # private: `_to_device`'s fast path (jax 0.10.2), looked up once here
+    from jax._src.core import ShapedArray as _ShapedArray
+    from jax._src.lib import xla_client as _xla_client
+
+    _batched_device_put = _xla_client.batched_device_put
+except (ImportError, AttributeError):  # pragma: no cover - another jax
+    _batched_device_put = None
+
+
 def _bucketed(jitted, skeleton: Skeleton, channels):
     """`jitted(skeleton, channels)` with the frames of a concrete `[..., C]` batch flattened and
-    padded to their length bucket, and the outputs cut back to `[..., ...]`.
+    padded to `_padded_frames`, and the outputs cut back to `[..., ...]`.
 
-    Frames are independent, so padding is exact. On CPU the padding and the cut are NumPy
-    copies, not XLA programs, so a new length compiles nothing at all; elsewhere they are two
-    small eager ops. Traced channels or skeletons (inside jit, vmap or grad) are passed through:
-    the caller's program has one shape anyway.
+    Frames are independent, so padding is exact. On CPU the padding and the cut are a NumPy
+    copy and views (`_to_device`), not XLA programs, so a new length compiles nothing at all;
+    elsewhere they are two small eager ops. Traced channels or skeletons (inside jit, vmap or
+    grad) are passed through: the caller's program has one shape anyway.
     """
     batch = channels.shape[:-1]
-    m = int(np.prod(batch))
-    rows = _bucket(m)
+    m = math.prod(batch)
+    rows = _padded_frames(m)
     # A traced skeleton (FK vmapped over skeletons with concrete channels) is traced too: the
     # outputs are tracers, which the host-side cut below cannot read.
-    traced = any(isinstance(a, jax.core.Tracer) for a in (channels, *jax.tree.leaves(skeleton)))
+    traced = isinstance(channels, jax.core.Tracer) or any(
+        isinstance(a, jax.core.Tracer) for a in jax.tree.leaves(skeleton))
     if traced or m > PAD_LIMIT or (rows == m and len(batch) == 1):
         return jitted(skeleton, channels)
-    cpu = isinstance(channels, np.ndarray) or jax.default_backend() == "cpu"
     width = channels.shape[-1]
-    if cpu:
-        flat = np.asarray(channels).reshape(m, width)
-        padded = np.zeros((rows, width), flat.dtype)
-        padded[:m] = flat
-    else:
-        padded = jnp.pad(channels.reshape(m, width), ((0, rows - m), (0, 0)))
-    out = jitted(skeleton, padded)
+    if isinstance(channels, np.ndarray) or jax.default_backend() == "cpu":
+        padded = np.zeros((rows, width), channels.dtype)
+        padded[:m] = np.asarray(channels).reshape(m, width)
+        out = jitted(skeleton, padded)  # the jitted call copies it to the device
 
-    def cut(a):
-        if a is None:
-            return None
-        if cpu:  # device_put, not jnp.asarray: no `stage` program per shape
-            return jax.device_put(np.asarray(a)[:m].reshape(*batch, *a.shape[1:]))
-        return a[:m].reshape(*batch, *a.shape[1:])
+        def cut(a):
+            if a is None:
+                return None
+            # A view of the padded output, put back on its device without a copy (as before).
+            return _to_device(np.asarray(a)[:m].reshape(*batch, *a.shape[1:]), a.sharding, a.committed)
+    else:
+        out = jitted(skeleton, jnp.pad(channels.reshape(m, width), ((0, rows - m), (0, 0))))
+
+        def cut(a):
+            return None if a is None else a[:m].reshape(*batch, *a.shape[1:])
 
     return jax.tree.map(cut, out, is_leaf=lambda a: a is None)
 
@@ -382,11 +420,14 @@ def _bucketed(jitted, skeleton: Skeleton, channels):
 # emitters (`_jit.CPU_COMPILER_OPTIONS`) compile the unrolled levels 2-2.5x faster than the new
 # fusion emitters (3.2 vs 6.9 s under a load of 12 on 2 cores) at a run time equal within the
 # noise of the shared machine.
+# A fresh process with the compile cache on loads both as saved executables (`_saved`).
+@_saved.saved_executable
 @_jit.jit
 def _joint_positions_jit(skeleton: Skeleton, channels):
     return _fk_batch(skeleton, channels, False)[1]
 
 
+@_saved.saved_executable
 @_jit.jit
 def _fk_frames_jit(skeleton: Skeleton, channels):
     rot, pos, ends = _fk_batch(skeleton, channels, True)
@@ -476,7 +517,8 @@ def _bucketed_frames_last(skeleton: Skeleton, channels):
     if isinstance(channels, np.ndarray) or jax.default_backend() == "cpu":
         padded = np.zeros((width, rows), channels.dtype)
         padded[:, :m] = np.asarray(channels)
-        return jax.device_put(np.ascontiguousarray(np.asarray(jitted(skeleton, padded))[..., :m]))
+        out = jitted(skeleton, padded)
+        return _to_device(np.ascontiguousarray(np.asarray(out)[..., :m]), out.sharding, out.committed)
     return jitted(skeleton, jnp.pad(channels, ((0, 0), (0, rows - m))))[..., :m]
 
 

@@ -104,7 +104,7 @@ def test_batches_above_the_limit_keep_their_shape(walk, monkeypatch):
 
     def spy(skeleton, channels):
         seen.append(channels.shape)
-        return np.zeros((*channels.shape[:-1], 31, 3), np.float32)
+        return jax.device_put(np.zeros((*channels.shape[:-1], 31, 3), np.float32))
 
     monkeypatch.setattr(kinematics, "_joint_positions_jit", spy)
     ch = np.asarray(m.channels[:37], np.float32)
@@ -124,3 +124,28 @@ def test_frames_last_lengths_in_one_bucket_compile_once(walk):
         np.testing.assert_allclose(np.moveaxis(np.asarray(got), -1, 0), kinematics.joint_positions(skel, ch),
                                    atol=1e-4)
     assert kinematics.joint_positions_frames_last.num_traces() - before <= 1
+
+
+def test_the_cut_puts_arrays_as_device_put_does(walk, monkeypatch):
+    # `_to_device` (jaxlib's `batched_device_put`, less Python than `jax.device_put`) makes the
+    # same arrays: uncommitted, on the default device, equal values; and without that private
+    # function (another jaxlib) the cut falls back to `jax.device_put`.
+    m, skel = walk
+    ch = np.asarray(m.channels[:90], np.float32)
+    fast = kinematics.fk_frames(skel, ch)
+    ref = jax.device_put(np.zeros(3))
+    for a in jax.tree.leaves(fast):
+        assert isinstance(a, jax.Array) and a.shape[0] == 90
+        assert a.committed == ref.committed and a.sharding == ref.sharding
+    monkeypatch.setattr(kinematics, "_batched_device_put", None)
+    slow = kinematics.fk_frames(skel, ch)
+
+    def refuses(*args, **kwargs):
+        raise TypeError("batched_device_put(): incompatible function arguments")
+
+    monkeypatch.setattr(kinematics, "_batched_device_put", refuses)
+    refused = kinematics.fk_frames(skel, ch)
+    for a, b, c in zip(jax.tree.leaves(fast), jax.tree.leaves(slow), jax.tree.leaves(refused)):
+        np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(a, c)
+        assert b.committed == c.committed == a.committed

@@ -145,6 +145,14 @@ def run(size: str) -> list[Record]:
             return jnp.broadcast_to(v[..., :1, None], (*v.shape[:-1], J, 3)) * 1.0
 
         ours = timeit(lambda: kinematics.fk_frames(skel, x), repeats=repeats)
+        # The compiled program alone on the padded frames it runs (`kinematics._bucketed`): what
+        # the entry point's padding, cut and dispatch add (rate per frame of the clip).
+        bare = None
+        if clips * frames <= kinematics.PAD_LIMIT:
+            rows = kinematics._padded_frames(clips * frames)
+            padded = jax.device_put(np.zeros((rows, ch.shape[-1]), np.float32))
+            program = getattr(kinematics._fk_frames_jit, "__wrapped__", kinematics._fk_frames_jit)
+            bare = timeit(lambda: program(skel, padded), repeats=max(repeats, 20))
         jp = timeit(lambda: kinematics.joint_positions(skel, x), repeats=repeats)
         jp_last = timeit(lambda: kinematics.joint_positions_frames_last(skel, x_last), repeats=repeats)
         wr = timeit(lambda: write(x), repeats=repeats)
@@ -180,6 +188,8 @@ def run(size: str) -> list[Record]:
                 "positions_write_bound_rate": n_ours / wr3["median"],
                 "joint_positions_fraction_of_write_bound": wr3["median"] / jp["median"],
                 "peak_gflops_measured": peak,
+                **({} if bare is None else {"program_only_rate": n_ours / bare["median"],
+                                            "entry_overhead_s": ours["median"] - bare["median"]}),
                 **compute_limit(), **fractions(rate, limit),
                 **{f"joint_positions_{k}": v for k, v in fractions(n_ours / jp["median"], limit).items()},
                 **{f"joint_positions_frames_last_{k}": v

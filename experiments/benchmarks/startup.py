@@ -25,7 +25,9 @@ CLIP = "07_01"
 
 #: Parse a bundled clip and run FK, in a fresh process with the compile cache on; prints the
 #: phases (seconds) as JSON: JAX's own for the FK call too (`ProgramCount`: trace, lowering,
-#: compile or cache load, of which the cache read).
+#: compile or cache load, of which the cache read). The first run saves FK's executable
+#: (`fourierjax._saved.saved_executable`); the timed runs load it, with no trace, lowering or
+#: compile event (their `fk_s` is the load and the run).
 FK_SCRIPT = """
 import json, sys, time
 t0 = time.perf_counter()
