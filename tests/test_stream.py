@@ -400,3 +400,57 @@ def test_clip_models_are_the_chunk_models_rows_bit_for_bit(clips, monkeypatch):
             for a, b in zip(jax.tree.leaves(got), jax.tree.leaves(stacked), strict=True):
                 assert isinstance(a, jax.Array)
                 np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[k])
+
+
+def _fields(fit):
+    """Every field of a ClipFit, arrays and models as bytes (a BodyMap's == is exact)."""
+    import dataclasses
+
+    import jax
+
+    out = []
+    for f in dataclasses.fields(fit):
+        v = getattr(fit, f.name)
+        if f.name in ("model", "raw_model", "rms"):
+            v = [(np.asarray(a).dtype.str, np.asarray(a).tobytes()) for a in jax.tree.leaves(v)]
+        out.append((f.name, v))
+    return out
+
+
+def test_a_chunk_prepared_in_two_halves_at_once_fits_the_same(chunk, monkeypatch):
+    # `_pipeline._prepare_split`: a chunk's preparation in two threads gives every ClipFit field
+    # bit for bit (the clips of the first chunk prepared whole, of the others in halves), and
+    # the timings hold both threads' seconds.
+    ms = [*chunk, *chunk]
+    monkeypatch.setattr(_pipeline, "SPLIT_MIN", 10**9)
+    ref = M.fit_motions(ms, 2, chunk_size=len(chunk))
+    halves = []
+    split = _pipeline._prepare_split
+
+    def spy(entries, helper, opts):
+        halves.append(len(entries))
+        return split(entries, helper, opts)
+
+    monkeypatch.setattr(_pipeline, "SPLIT_MIN", 2)
+    monkeypatch.setattr(_pipeline, "_prepare_split", spy)
+    timings = {}
+    got = M.fit_motions(ms, 2, chunk_size=len(chunk), timings=timings)
+    assert [n for n in halves if n] == [len(chunk)]  # the second chunk: the first ran its programs whole
+    assert {"body_map", "segment", "glitch", "features", "contacts"} <= set(timings)
+    for g, r in zip(got, ref, strict=True):
+        assert _fields(g) == _fields(r)
+
+
+def test_an_error_in_either_half_is_raised(chunk, monkeypatch):
+    from fourierjax._motion import _batch
+
+    monkeypatch.setattr(_pipeline, "SPLIT_MIN", 2)
+    for bad in (0, 3):  # the helper's half, this thread's half
+        def failing(entries, bad=bad, **opts):
+            if any(i == len(chunk) + bad for i, _, _ in entries):
+                raise UserError(f"clip {bad}")
+            return _batch.prepare_chunk(entries, **opts)
+
+        monkeypatch.setattr(_pipeline, "prepare_chunk", failing)
+        with pytest.raises(UserError, match=f"clip {bad}"):
+            M.fit_motions([*chunk, *chunk], 2, chunk_size=len(chunk))

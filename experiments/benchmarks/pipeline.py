@@ -128,6 +128,20 @@ def per_chunk_stream():
         _pipeline._group_key, _pipeline.STREAM_HOLD = saved
 
 
+@contextlib.contextmanager
+def one_reader_thread():
+    """`fit_motions` with each chunk prepared by the reader thread alone, as in the last
+    session (no second thread preparing half of it: `_pipeline._prepare_split`)."""
+    from fourierjax._motion import _pipeline
+
+    saved = _pipeline.SPLIT_MIN
+    _pipeline.SPLIT_MIN = 1 << 62
+    try:
+        yield
+    finally:
+        _pipeline.SPLIT_MIN = saved
+
+
 def _companions(motions, fits, N, ctx) -> dict:
     """How much a clip's fit depends on the clips fitted with it: the first 100 clips fitted
     alone against the same clips in the whole run (``fits``), under ``ctx``'s stream."""
@@ -242,12 +256,14 @@ def run(size: str) -> list[Record]:
     with per_chunk_stream():
         M.fit_motions(motions, N)  # warm the per-chunk stream's buckets
     runs, cpu = {}, {}
-    # Interleaved (load drifts): the last session's per-chunk stream and this one; the per-clip
-    # path of two sessions ago once.
-    for name in ("chunk", "after", "chunk_again", "after_again", "before"):
+    # Interleaved (load drifts): the per-chunk stream of two sessions ago, the last session's
+    # one reader thread and this one; the per-clip path of three sessions ago once.
+    for name in ("chunk", "one_reader", "after", "chunk_again", "one_reader_again",
+                 "after_again", "before"):
         timings: dict = {}
         ctx = (per_clip_pipeline() if name == "before" else per_chunk_stream()
-               if name.startswith("chunk") else contextlib.nullcontext())
+               if name.startswith("chunk") else one_reader_thread()
+               if name.startswith("one_reader") else contextlib.nullcontext())
         with ctx:
             c0, t0 = _cpu_s(), time.perf_counter()
             fits = M.fit_motions(motions, N, timings=timings)
@@ -257,6 +273,8 @@ def run(size: str) -> list[Record]:
     wall = min(runs["after"][0], runs["after_again"][0])
     wall_before = min(runs["before"][0], runs["before_again"][0])
     wall_chunk = min(runs["chunk"][0], runs["chunk_again"][0])
+    wall_one = min(runs["one_reader"][0], runs["one_reader_again"][0])
+    timings_one = min((runs["one_reader"], runs["one_reader_again"]), key=lambda r: r[0])[1]
     timings = min((runs["after"], runs["after_again"]), key=lambda r: r[0])[1]
     timings_before = min((runs["before"], runs["before_again"]), key=lambda r: r[0])[1]
     timings_chunk = min((runs["chunk"], runs["chunk_again"]), key=lambda r: r[0])[1]
@@ -275,8 +293,9 @@ def run(size: str) -> list[Record]:
     sizes = (8, 13, 50, 120, 500) if size == "full" else (2,)
     compiles = _sweep_compiles(motions, infer_body_map(motions[0]), sizes)
     print(f"    pipeline: {num} clips in {wall:.2f} s warm ({num / wall:.1f} clips/s; per-clip "
-          f"path {num / wall_before:.1f} clips/s; per-chunk stream {num / wall_chunk:.1f} "
-          f"clips/s; first call {cold:.1f} s); fit_batch alone {fit_alone:.2f} s; stages "
+          f"path {num / wall_before:.1f} clips/s; one reader thread {num / wall_one:.1f} "
+          f"clips/s; per-chunk stream {num / wall_chunk:.1f} clips/s; first call {cold:.1f} s); "
+          f"fit_batch alone {fit_alone:.2f} s; stages "
           f"{timings}; per-chunk stages {timings_chunk}; per-clip stages {timings_before}; "
           f"companions {companions}", flush=True)
 
@@ -305,6 +324,14 @@ def run(size: str) -> list[Record]:
                 "stage_ms_per_clip": per_clip_ms(timings_before),
                 "speedup_of_the_chunked_path": round(wall_before / wall, 3),
                 "same_segments_strikes_and_omega": bool(same)},
+            "one_reader_thread": {
+                "clips_per_s": round(num / wall_one, 3),
+                "seconds_end_to_end": round(wall_one, 3),
+                "cpu_seconds_end_to_end": round(min(cpu["one_reader"],
+                                                    cpu["one_reader_again"]), 3),
+                "stage_seconds": {k: round(v, 3) for k, v in sorted(
+                    timings_one.items(), key=lambda kv: -kv[1])},
+                "speedup_of_two_preparing_threads": round(wall_one / wall, 3)},
             "per_chunk_stream": {
                 "clips_per_s": round(num / wall_chunk, 3),
                 "seconds_end_to_end": round(wall_chunk, 3),
@@ -314,8 +341,9 @@ def run(size: str) -> list[Record]:
                 "omega_fit_max_rel_diff_to_bucketed": float(np.max(om))},
             "fit_stage_over_fit_batch_alone": round(timings.get("fit", 0.0) / fit_alone, 3),
             "a_clip_alone_vs_in_the_run": companions,
-            "stage_note": "stages before 'fit' run in the reader thread, overlapping the fit "
-                          "of the chunk before; their sum can exceed the wall time; 'wait' is "
+            "stage_note": "stages before 'fit' run in the reader threads (two, half a chunk "
+                          "each, their seconds summed), overlapping the fit of the chunk "
+                          "before; their sum can exceed the wall time; 'wait' is "
                           "the fitting thread waiting for them (wall ~ wait + fit + "
                           "align_metrics: the preparation on the critical path). Each wall "
                           "time is the faster of two interleaved runs (the per-clip path: one "
