@@ -529,7 +529,8 @@ def _prepare_split(entries, helper, opts) -> list[_Clip]:
     one-thread executor), with the same clips (each clip's preparation is its own, whichever
     clips share its chunk). The preparation is the stream's critical path: per clip, NumPy and
     small JAX programs, much of it outside the GIL, so a second thread runs beside the fit
-    (500 Bandai-1 clips, 2 shared cores: wall -25%, CPU unchanged). ``opts``' ``timings``:
+    (500 Bandai-1 clips, Euler, 2 cores at a load of 6-10: wall -11%, the median of 10
+    paired rounds, CPU unchanged; tangent, whose fit is the critical path, no gain). ``opts``' ``timings``:
     each thread's own seconds, summed."""
     if len(entries) < SPLIT_MIN:
         return prepare_chunk(entries, **opts)
