@@ -79,9 +79,13 @@ def synth_limit(model, skeleton, body_map, headers: list[dict]):
         return None, ("a characteristic file does not record its clips' joint speeds (written before "
                       "`fourierjax characteristic` stored them, or from model files without a skeleton)")
     from fourierjax import style
+    from fourierjax.errors import UserError
 
     height = float(body_map.height)
-    base_s, base_rad = _peaks(model, skeleton, body_map)
+    try:
+        base_s, base_rad = _peaks(model, skeleton, body_map)
+    except UserError as err:  # a stored body map that does not fit the model file's skeleton
+        return None, f"the base's joint speeds cannot be measured ({err})"
     per_s = max(base_s, *(s[0] * height for s in stored))
     per_rad = max(base_rad, *(s[1] * height for s in stored))
     return style.SpeedLimit(skeleton, max_speed=per_s, max_phase_speed=per_rad, body_map=body_map), None
