@@ -220,11 +220,7 @@ def _load(path: pathlib.Path, key: str, specs: list, cpu_compiler_options) -> tu
     try:
         import jax
 
-        if not blob.startswith(_MAGIC):
-            raise ValueError("not a saved program")
-        record = pickle.loads(blob[len(_MAGIC):])
-        if record.get("key") != key:
-            raise ValueError("its key differs (another version or input)")
+        record = _unpack(blob, _MAGIC, key, checksum=False)
         exported = jax.export.deserialize(bytearray(record["exported"]))
         got = [(tuple(a.shape), a.dtype) for a in exported.in_avals]
         if got != [(tuple(s.shape), s.dtype) for s in specs]:
@@ -268,10 +264,33 @@ def _export(fun, treedef, static, dynamic, specs, path: pathlib.Path, key: str,
         # are those of every later call.
         exported = jax.export.deserialize(bytearray(blob))
         record = {"key": key, "out": out_skeleton, "exported": blob}
-        _write_atomic(path, _MAGIC + pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL))
+        _write_atomic(path, _pack(_MAGIC, record, checksum=False))
     except Exception as err:  # noqa: BLE001 (unpicklable output, full disk: still run it)
         _log.debug("fourierjax: could not save the program %s: %s", path, err)
     return _runner(exported, cpu_compiler_options), out_skeleton
+
+
+def _pack(magic: bytes, record: dict, *, checksum: bool) -> bytes:
+    """A saved file's bytes: ``magic``, then (``checksum``) the SHA-256 of the pickled
+    ``record`` and a newline, then the pickle."""
+    body = pickle.dumps(record, protocol=pickle.HIGHEST_PROTOCOL)
+    return magic + (hashlib.sha256(body).hexdigest().encode() + b"\n" if checksum else b"") + body
+
+
+def _unpack(blob: bytes, magic: bytes, key: str, *, checksum: bool) -> dict:
+    """The record `_pack` wrote, for ``key``; ValueError when ``blob`` is another kind of file,
+    its checksum differs (checked before anything is unpickled) or its key differs."""
+    if not blob.startswith(magic):
+        raise ValueError(f"not a {magic.decode().strip()} file")
+    body = blob[len(magic):]
+    if checksum:
+        digest, _, body = body.partition(b"\n")
+        if hashlib.sha256(body).hexdigest().encode() != digest:
+            raise ValueError("its checksum differs (truncated or corrupt)")
+    record = pickle.loads(body)
+    if not isinstance(record, dict) or record.get("key") != key:
+        raise ValueError("its key differs (another version, machine or input)")
+    return record
 
 
 def _write_atomic(path: pathlib.Path, data: bytes) -> None:
@@ -369,9 +388,8 @@ def _executable(jitted, name: str, args: tuple, key: str, stats: dict):
         from jax.experimental import serialize_executable
 
         payload, in_tree, out_tree = serialize_executable.serialize(compiled)
-        body = pickle.dumps({"key": key, "payload": bytes(payload), "in_tree": in_tree, "out_tree": out_tree},
-                            protocol=pickle.HIGHEST_PROTOCOL)
-        _write_atomic(path, _EXECUTABLE_MAGIC + hashlib.sha256(body).hexdigest().encode() + b"\n" + body)
+        record = {"key": key, "payload": bytes(payload), "in_tree": in_tree, "out_tree": out_tree}
+        _write_atomic(path, _pack(_EXECUTABLE_MAGIC, record, checksum=True))
         stats["saved"] += 1
     except Exception as err:  # noqa: BLE001 (unserializable, full disk: still run it)
         _log.debug("fourierjax: could not save the executable %s: %s", path, err)
@@ -386,14 +404,7 @@ def _load_executable(path: pathlib.Path, key: str):
     except OSError:
         return None
     try:
-        if not blob.startswith(_EXECUTABLE_MAGIC):
-            raise ValueError("not a saved executable")
-        digest, _, body = blob[len(_EXECUTABLE_MAGIC):].partition(b"\n")
-        if hashlib.sha256(body).hexdigest().encode() != digest:
-            raise ValueError("its checksum differs (truncated or corrupt)")
-        record = pickle.loads(body)
-        if record.get("key") != key:
-            raise ValueError("its key differs (another version, machine or input)")
+        record = _unpack(blob, _EXECUTABLE_MAGIC, key, checksum=True)
         from jax.experimental import serialize_executable
 
         return serialize_executable.deserialize_and_load(record["payload"], record["in_tree"],

@@ -560,8 +560,8 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # A sliding point is lifted to LIFT_BANDS bands over its floor, as far as the foot is not held.
     # A point is lifted only if it still slides once the feet are held (the horizontal shift
     # applied): a landing heel that the plant stops stays in contact.
-    held_h = shift  # in contact the horizontal shift is not eased (below)
-    still_lift = jnp.maximum(still_v, stillness(feet_pts + held_h[:, :, None], root_position, horizontal=1.0 - upv))
+    # (in contact the horizontal shift is not eased, below: `shift` is what is applied there)
+    still_lift = jnp.maximum(still_v, stillness(feet_pts + shift[:, :, None], root_position, horizontal=1.0 - upv))
     need = jnp.max(jnp.maximum(LIFT_BANDS * band - rel, 0.0) * (1.0 - still_lift), axis=-1)  # [T, 2]
     dy = jnp.maximum(dy, need * (1.0 - W))
     shift = shift + (sign * dy)[..., None] * upv[None, None]
