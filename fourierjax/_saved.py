@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import logging
@@ -355,7 +356,13 @@ def saved_executable(jitted: Callable) -> Callable:
         compiled = programs.get(fast)
         if compiled is None:
             key = _executable_key(name, treedef, fast[1])
-            compiled = programs[fast] = False if key is None else _executable(jitted, name, args, key, stats)
+            if key is None:
+                compiled = programs[fast] = False
+            else:
+                compiled, path = _executable(jitted, name, args, key, stats)
+                programs[fast] = compiled
+                if path is not None:  # read from a file: its first run is checked
+                    return _first_run(compiled, path, fast, key, args)
         if compiled is False:  # could not be saved or loaded: the plain function
             return jitted(*args)
         try:
@@ -365,25 +372,48 @@ def saved_executable(jitted: Callable) -> Callable:
             programs[fast] = False
             return jitted(*args)
 
+    def _first_run(compiled, path: pathlib.Path, fast, key: str, args: tuple):
+        """Run an executable just read from ``path`` to completion. One that fails at run time
+        (a file that loads but lacks a kernel, e.g. one saved by an earlier version from a
+        compile-cache hit) is deleted and compiled again, and this call runs that."""
+        import jax
+
+        try:
+            out = compiled(*args)
+            jax.block_until_ready(out)
+            return out
+        except (TypeError, ValueError) as err:  # inputs the executable refuses: never again
+            _log.debug("fourierjax: %s runs unsaved: %s", name, err)
+            programs[fast] = False
+            return jitted(*args)
+        except jax.errors.JaxRuntimeError as err:
+            _log.debug("fourierjax: the saved executable %s fails to run (%s); compiling again", path, err)
+            stats["rejected"] += 1
+            path.unlink(missing_ok=True)
+            compiled, _ = _executable(jitted, name, args, key, stats)
+            programs[fast] = compiled
+            return jitted(*args) if compiled is False else compiled(*args)
+
     wrapper.stats = stats  # type: ignore[attr-defined]
     return wrapper
 
 
 def _executable(jitted, name: str, args: tuple, key: str, stats: dict):
-    """The compiled program of ``jitted(*args)``: loaded from its file, else compiled (through
-    the compile cache) and saved; False when it can be neither."""
+    """The compiled program of ``jitted(*args)`` and the path it was read from: loaded from its
+    file (the path), else compiled afresh and saved (None); False when it can be neither."""
     path = _path(name, key, ".xlaexe")
     compiled = _load_executable(path, key)
     if compiled is not None:
         stats["loaded"] += 1
-        return compiled
+        return compiled, path
     if path.exists():
         stats["rejected"] += 1
     try:
-        compiled = jitted.lower(*args).compile()
+        with _compile_cache_bypassed():
+            compiled = jitted.lower(*args).compile()
     except Exception as err:  # noqa: BLE001 (the plain call raises it again, or runs)
         _log.debug("fourierjax: %s cannot be compiled ahead: %s", name, err)
-        return False
+        return False, None
     try:
         from jax.experimental import serialize_executable
 
@@ -393,7 +423,35 @@ def _executable(jitted, name: str, args: tuple, key: str, stats: dict):
         stats["saved"] += 1
     except Exception as err:  # noqa: BLE001 (unserializable, full disk: still run it)
         _log.debug("fourierjax: could not save the executable %s: %s", path, err)
-    return compiled
+    return compiled, None
+
+
+@contextlib.contextmanager
+def _compile_cache_bypassed():
+    """Compile without JAX's persistent compile cache (no read, no write) inside the block.
+
+    jaxlib 0.10 serializes an XLA:CPU executable that was read from the persistent cache
+    without some of its kernels: `fk_frames`' program serializes to 386,934 bytes against
+    497,962 compiled afresh, and the next process that loads it fails at run time ("NOT_FOUND:
+    Function gather.12_kernel not found"). So a program that is to be saved is compiled afresh.
+    JAX has no public switch for this once the cache is in use (`jax_enable_compilation_cache`
+    is read once per process), so the block sets the module's memo of it; a compile on another
+    thread meanwhile also skips the cache (slower, never wrong). Where that memo is missing (a
+    later jax), the block changes nothing, and `saved_executable`'s check of a loaded file's
+    first run still catches a broken file.
+    """
+    try:
+        from jax._src import compilation_cache as cc
+
+        before = (cc._cache_checked, cc._cache_used)
+    except (ImportError, AttributeError):
+        yield
+        return
+    cc._cache_checked, cc._cache_used = True, False
+    try:
+        yield
+    finally:
+        cc._cache_checked, cc._cache_used = before
 
 
 def _load_executable(path: pathlib.Path, key: str):

@@ -2,7 +2,12 @@
 lowering), equal to the plain call, and never loaded when stale, corrupt or turned off (issue 25)."""
 
 import hashlib
+import json
+import os
+import pathlib
 import pickle
+import subprocess
+import sys
 
 import jax
 import jax.numpy as jnp
@@ -111,3 +116,51 @@ def test_fk_entry_points_load_their_executables(cache_on, clip):
     np.testing.assert_allclose(np.asarray(got), want, atol=0)
     assert kinematics._joint_positions_jit.stats["saved"] + kinematics._joint_positions_jit.stats["loaded"] >= 1
     assert kinematics._joint_positions_jit.__fourierjax_jit__ is True
+
+
+_RUN = """
+import contextlib, hashlib, json, sys
+import numpy as np
+from fourierjax import _compile_cache, _saved, data, kinematics
+if sys.argv[1] == "old":  # the behaviour before the fix: save whatever the compile cache returns
+    _saved._compile_cache_bypassed = contextlib.nullcontext
+_compile_cache.enable_compile_cache()
+m = data.load("07_01", raw=True)
+pos = np.asarray(kinematics.fk_frames(m.skeleton(), m.channels[:64]).positions)
+print(json.dumps({"sha": hashlib.sha256(pos.tobytes()).hexdigest(), **kinematics._fk_frames_jit.stats}))
+"""
+
+
+def _process(cache: pathlib.Path, mode: str = "new") -> dict:
+    """One fresh process: FK of a bundled clip with the cache in ``cache``; its stats and a hash."""
+    env = {**os.environ, "FOURIERJAX_CACHE_DIR": str(cache)}
+    env.pop("FOURIERJAX_NO_CACHE", None)
+    done = subprocess.run([sys.executable, "-c", _RUN, mode], env=env, capture_output=True, text=True,
+                          timeout=300, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_a_program_the_compile_cache_holds_is_saved_whole_and_a_broken_file_is_replaced(tmp_path):
+    """jaxlib serializes an executable read from the persistent compile cache without some of its
+    kernels; saved, it loaded in the next process and failed there ("Function gather.12_kernel
+    not found"): every `fourierjax fit` failed after an upgrade. Across fresh processes: the
+    program to save is compiled afresh, and a loaded file that fails to run is replaced."""
+    first = _process(tmp_path, "old")  # compiled, saved, and written to the compile cache
+    assert first["saved"] == 1
+    exes = list(tmp_path.rglob("*.xlaexe"))
+    assert len(exes) == 1
+    # The executable is gone, the compile cache still holds the program (a new source hash).
+    exes[0].unlink()
+    broken = _process(tmp_path, "old")  # what the old code saved: the cache hit's executable
+    assert broken["saved"] == 1 and broken["sha"] == first["sha"]
+    mended = _process(tmp_path)  # loads the broken file, finds it fails, compiles and saves again
+    assert mended["sha"] == first["sha"]
+    assert mended["loaded"] == 1 and mended["rejected"] == 1 and mended["saved"] == 1
+    loaded = _process(tmp_path)
+    assert loaded == {**loaded, "sha": first["sha"], "loaded": 1, "rejected": 0, "saved": 0}
+    # With the fix, a save from a cache hit is whole: delete, save afresh, load.
+    next(tmp_path.rglob("*.xlaexe")).unlink()
+    assert _process(tmp_path)["saved"] == 1
+    again = _process(tmp_path)
+    assert again["sha"] == first["sha"] and again["loaded"] == 1 and again["rejected"] == 0
