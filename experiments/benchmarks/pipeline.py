@@ -343,8 +343,9 @@ def run(size: str) -> list[Record]:
             "a_clip_alone_vs_in_the_run": companions,
             "stage_note": "stages before 'fit' run in the reader threads (two, half a chunk "
                           "each, their seconds summed), overlapping the fit of the chunk "
-                          "before; their sum can exceed the wall time; 'wait' is "
-                          "the fitting thread waiting for them (wall ~ wait + fit + "
+                          "before; their sum can exceed the wall time; 'fit' and "
+                          "'align_metrics' sum two fitting threads too; 'wait' is "
+                          "the fitting thread waiting for them (wall <~ wait + fit + "
                           "align_metrics: the preparation on the critical path). Each wall "
                           "time is the faster of two interleaved runs (the per-clip path: one "
                           "run)",
