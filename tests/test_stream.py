@@ -454,3 +454,42 @@ def test_an_error_in_either_half_is_raised(chunk, monkeypatch):
         monkeypatch.setattr(_pipeline, "prepare_chunk", failing)
         with pytest.raises(UserError, match=f"clip {bad}"):
             M.fit_motions([*chunk, *chunk], 2, chunk_size=len(chunk))
+
+
+def test_chunks_fitted_two_at_once_fit_the_same(clips, monkeypatch):
+    # `_pipeline._fit_jobs`: with a pool, the chunks of a program that has run are fitted two at
+    # once (this thread and the pool's); a program's first chunk runs alone first (it compiles
+    # once, not in two threads at once); every ClipFit field is the one-thread fit's, bit for bit.
+    import concurrent.futures
+    import dataclasses
+    import time
+
+    ms, bm = clips
+    opts = dict(representation="euler", segment=False, use_contacts=False, start_frame=None,
+                stop_frame=None, timings=None)
+    base = [_pipeline._prepare(i, m, bm, **opts) for i, m in enumerate(ms)]
+    prepared = [dataclasses.replace(base[i % len(base)], index=i) for i in range(48)]  # 3 x 16
+    ref = _pipeline._fit_clips(prepared, 1, "euler", np.float32, {}, None)
+    monkeypatch.setattr(_pipeline, "_RUN_PROGRAMS", set())  # as if the program were new
+    calls = []
+    fit_chunk = _pipeline._fit_chunk
+    both = threading.Barrier(2, timeout=60)  # broken unless the last two chunks overlap
+
+    def spy(*args):
+        start = time.perf_counter()
+        if calls:
+            both.wait()
+        out = fit_chunk(*args)
+        calls.append((start, time.perf_counter(), threading.get_ident()))
+        return out
+
+    monkeypatch.setattr(_pipeline, "_fit_chunk", spy)
+    timings = {}
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        got = _pipeline._fit_clips(prepared, 1, "euler", np.float32, {}, timings, pool=pool)
+    first = min(calls)
+    assert len(calls) == 3 and all(first[1] <= c[0] for c in calls if c != first)
+    assert len({c[2] for c in calls}) == 2  # the two others: one in each thread
+    assert {"fit", "align_metrics"} <= set(timings)
+    for g, r in zip(got, ref, strict=True):
+        assert _fields(g) == _fields(r)

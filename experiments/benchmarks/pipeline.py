@@ -142,6 +142,24 @@ def one_reader_thread():
         _pipeline.SPLIT_MIN = saved
 
 
+@contextlib.contextmanager
+def one_fit_thread():
+    """`fit_motions` with each fit step's chunks fitted one after the other, as in the last
+    session (not two at once: `_pipeline._fit_jobs`)."""
+    from fourierjax._motion import _pipeline
+
+    saved = _pipeline._fit_jobs
+
+    def one(jobs, limit, pool, *args):
+        return saved(jobs, limit, None, *args)
+
+    _pipeline._fit_jobs = one
+    try:
+        yield
+    finally:
+        _pipeline._fit_jobs = saved
+
+
 def _companions(motions, fits, N, ctx) -> dict:
     """How much a clip's fit depends on the clips fitted with it: the first 100 clips fitted
     alone against the same clips in the whole run (``fits``), under ``ctx``'s stream."""
@@ -258,12 +276,13 @@ def run(size: str) -> list[Record]:
     runs, cpu = {}, {}
     # Interleaved (load drifts): the per-chunk stream of two sessions ago, the last session's
     # one reader thread and this one; the per-clip path of three sessions ago once.
-    for name in ("chunk", "one_reader", "after", "chunk_again", "one_reader_again",
-                 "after_again", "before"):
+    for name in ("chunk", "one_reader", "one_fit", "after", "chunk_again", "one_reader_again",
+                 "one_fit_again", "after_again", "before"):
         timings: dict = {}
         ctx = (per_clip_pipeline() if name == "before" else per_chunk_stream()
                if name.startswith("chunk") else one_reader_thread()
-               if name.startswith("one_reader") else contextlib.nullcontext())
+               if name.startswith("one_reader") else one_fit_thread()
+               if name.startswith("one_fit") else contextlib.nullcontext())
         with ctx:
             c0, t0 = _cpu_s(), time.perf_counter()
             fits = M.fit_motions(motions, N, timings=timings)
@@ -274,6 +293,7 @@ def run(size: str) -> list[Record]:
     wall_before = min(runs["before"][0], runs["before_again"][0])
     wall_chunk = min(runs["chunk"][0], runs["chunk_again"][0])
     wall_one = min(runs["one_reader"][0], runs["one_reader_again"][0])
+    wall_one_fit = min(runs["one_fit"][0], runs["one_fit_again"][0])
     timings_one = min((runs["one_reader"], runs["one_reader_again"]), key=lambda r: r[0])[1]
     timings = min((runs["after"], runs["after_again"]), key=lambda r: r[0])[1]
     timings_before = min((runs["before"], runs["before_again"]), key=lambda r: r[0])[1]
@@ -332,6 +352,10 @@ def run(size: str) -> list[Record]:
                 "stage_seconds": {k: round(v, 3) for k, v in sorted(
                     timings_one.items(), key=lambda kv: -kv[1])},
                 "speedup_of_two_preparing_threads": round(wall_one / wall, 3)},
+            "one_fit_thread": {
+                "clips_per_s": round(num / wall_one_fit, 3),
+                "cpu_seconds_end_to_end": round(min(cpu["one_fit"], cpu["one_fit_again"]), 3),
+                "speedup_of_two_fitting_threads": round(wall_one_fit / wall, 3)},
             "per_chunk_stream": {
                 "clips_per_s": round(num / wall_chunk, 3),
                 "seconds_end_to_end": round(wall_chunk, 3),
@@ -343,8 +367,9 @@ def run(size: str) -> list[Record]:
             "a_clip_alone_vs_in_the_run": companions,
             "stage_note": "stages before 'fit' run in the reader threads (two, half a chunk "
                           "each, their seconds summed), overlapping the fit of the chunk "
-                          "before; their sum can exceed the wall time; 'wait' is "
-                          "the fitting thread waiting for them (wall ~ wait + fit + "
+                          "before; their sum can exceed the wall time; 'fit' and "
+                          "'align_metrics' sum two fitting threads too; 'wait' is "
+                          "the fitting thread waiting for them (wall <~ wait + fit + "
                           "align_metrics: the preparation on the critical path). Each wall "
                           "time is the faster of two interleaved runs (the per-clip path: one "
                           "run)",
@@ -364,8 +389,12 @@ def _tangent(motions, source, num, N, dtype, size, wall_euler) -> Record:
     from fourierjax import motion as M
 
     M.fit_motions(motions, N, "tangent")  # warm
-    runs = []
-    for _ in range(2):
+    runs, one_fit = [], []
+    for _ in range(2):  # interleaved with the last session's one fitting thread
+        with one_fit_thread():
+            t0 = time.perf_counter()
+            M.fit_motions(motions, N, "tangent")
+            one_fit.append(time.perf_counter() - t0)
         timings: dict = {}
         c0, t0 = _cpu_s(), time.perf_counter()
         fits = M.fit_motions(motions, N, "tangent", timings=timings)
@@ -391,6 +420,8 @@ def _tangent(motions, source, num, N, dtype, size, wall_euler) -> Record:
             "clips_successful": sum(f.successful for f in fits),
             "euler_clips_per_s_same_process": round(num / wall_euler, 3),
             "tangent_over_euler": round(wall_euler / wall, 3),
+            "one_fit_thread_clips_per_s": round(num / min(one_fit), 3),
+            "speedup_of_two_fitting_threads": round(min(one_fit) / wall, 3),
             "stage_seconds": {k: round(v, 3) for k, v in sorted(timings.items(),
                                                                 key=lambda kv: -kv[1])},
             "stage_note": "the faster of two runs; stages before 'fit' overlap the fit"},

@@ -6,6 +6,7 @@ import concurrent.futures
 import dataclasses
 import itertools
 import os
+import threading
 import time
 from collections.abc import Iterator
 
@@ -122,10 +123,12 @@ def _group_key(c: _Clip, fit_kwargs) -> tuple:
 
 
 def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
-               keys=None) -> list[ClipFit]:
+               keys=None, pool=None) -> list[ClipFit]:
     """The batched fit of prepared clips: grouped by channel layout, search weights and length
     bucket (`_group_key`; ``keys``: theirs when known), cut into bucketed chunks
-    (`_fourier._buckets`), then aligned and scored; one ClipFit per clip, in order."""
+    (`_fourier._buckets`), then aligned and scored; one ClipFit per clip, in order. With
+    ``pool`` (a one-thread executor), two chunks are fitted at once where two fit the memory
+    budget (`_fit_jobs`)."""
     from fourierjax import fourier as fr
     from fourierjax._fourier._buckets import batch_plan, length_bucket
     from fourierjax._memory import fit_bytes_per_clip, resolve_limit
@@ -136,8 +139,8 @@ def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
     for c in clips:
         key = keys.get(c.index) or _group_key(c, fit_kwargs)
         groups.setdefault(key, []).append(c)
-    out: dict[int, ClipFit] = {}
     itemsize = jnp.zeros((), dtype).dtype.itemsize
+    jobs = []
     for (names, weights, _), group in groups.items():
         kw = dict(fit_kwargs)
         if weights is not None:
@@ -148,10 +151,68 @@ def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
         for start, size in batch_plan(len(group), per_clip, limit, name=(
                 f"fit_motions: a clip of {longest} frames x {C} channels")):
             chunk = group[start:start + size]
-            for r in _fit_chunk(chunk, size, names, num_harmonics, representation, dtype, kw,
-                                timings, fr, length_bucket):
-                out[r[0]] = r[1]
+            program = (size, length_bucket(max(len(c.features) for c in chunk)), names,
+                       weights, representation, num_harmonics, jnp.dtype(dtype).str)
+            jobs.append((program, size * per_clip, (chunk, size, names, num_harmonics,
+                                                    representation, dtype, kw)))
+    out: dict[int, ClipFit] = {}
+    for rows in _fit_jobs(jobs, limit, pool, timings, fr, length_bucket):
+        out.update(rows)
     return [out[c.index] for c in clips]
+
+
+#: The chunk programs (`_fit_jobs`' keys) that have run once in this process: a new one runs
+#: alone first, so that two threads never compile one program twice at once.
+_RUN_PROGRAMS: set = set()
+
+
+def _fit_jobs(jobs, limit, pool, timings, fr, length_bucket) -> list:
+    """`_fit_chunk` of each job ``(program key, bytes, arguments)``, in order; with ``pool``,
+    chunks whose programs have run before are fitted two at once (this thread and the pool's)
+    when two of the largest fit the memory budget ``limit``. A chunk's fit is its own program
+    on its own inputs, whichever thread runs it: the same ClipFits. The fit of a chunk runs
+    mostly on one core (500 Bandai-1 clips, tangent: 1.73 CPU-s in 1.62 s), so the second
+    core served only the reader before; ``timings``: both threads' seconds, summed."""
+    def run(job, t):
+        return _fit_chunk(*job[2], t, fr, length_bucket)
+
+    out: list = [None] * len(jobs)
+    done = [False] * len(jobs)
+    for k, job in enumerate(jobs):  # a new program's first chunk: compiled once, here
+        if job[0] not in _RUN_PROGRAMS:
+            out[k], done[k] = run(job, timings), True
+            _RUN_PROGRAMS.add(job[0])
+    left = [k for k in range(len(jobs)) if not done[k]]
+    rest = iter(left)
+    if pool is None or len(left) < 2 or 2 * max(j[1] for j in jobs) > limit:
+        for k in rest:
+            out[k] = run(jobs[k], timings)
+        return out
+    lock = threading.Lock()
+    stop = threading.Event()
+    theirs = None if timings is None else {}
+
+    def worker(t):
+        while not stop.is_set():
+            with lock:
+                k = next(rest, None)
+            if k is None:
+                return
+            try:
+                out[k] = run(jobs[k], t)
+            except BaseException:
+                stop.set()
+                raise
+
+    helper = pool.submit(worker, theirs)
+    try:
+        worker(timings)
+    finally:
+        concurrent.futures.wait([helper])
+    helper.result()
+    for k, v in (theirs or {}).items():
+        timings[k] = timings.get(k, 0.0) + v
+    return out
 
 
 def _hold_back(held, new, fit_kwargs, final, known=None) -> tuple[list[_Clip], list[_Clip], dict]:
@@ -372,7 +433,8 @@ def iter_fit_motions(
 
     ``motions`` is read as a stream, ``chunk_size`` clips at a time: the next chunk is read and
     prepared in a background thread while the current one is fitted (in two threads, half the
-    chunk each, once a chunk has run the preparation's programs). Each clip is fitted with
+    chunk each, once a chunk has run the preparation's programs), and the fit's chunks run two
+    at once (`_fit_jobs`). Each clip is fitted with
     the clips of its length bucket: of the clips of a bucket that a chunk brings, whole batches
     are fitted at once and the rest waits one chunk for more of its bucket (`STREAM_HOLD`), so
     a clip is padded to its own bucket and batches are full. ClipFits come out in the input
@@ -394,9 +456,9 @@ def iter_fit_motions(
         timings: a dict that receives the seconds spent per stage (``read``, ``body_map``,
             ``segment``, ``glitch``, ``features``, ``contacts``, ``fit``, ``align_metrics``;
             the stages before ``fit`` run in the background threads (their seconds summed),
-            overlapping the fit;
-            ``wait``: the fitting thread waiting for them, so that the wall time is about
-            ``wait + fit + align_metrics``).
+            overlapping the fit; ``fit`` and ``align_metrics`` run in two threads too (their
+            seconds summed); ``wait``: the fitting thread waiting for the preparation, so that
+            the wall time is at most about ``wait + fit + align_metrics``).
         passes: ``"longest"`` fits the steady segment; ``"auto"`` fits a clip that walks back
             and forth over every straight pass, each in its own heading frame with the passes'
             heel strikes phase-aligned (``fourierjax._passes.prepare_passes``; its frames are
@@ -464,6 +526,7 @@ def iter_fit_motions(
     yielded = 0
     with (concurrent.futures.ThreadPoolExecutor(1) as pool,
           concurrent.futures.ThreadPoolExecutor(1) as helper,
+          concurrent.futures.ThreadPoolExecutor(1) as fitter,
           tqdm(total=total, unit="clip", desc="fit_motions", disable=_no_bar(progress),
                leave=False) as bar):
         ahead = pool.submit(read_chunk)
@@ -478,7 +541,7 @@ def iter_fit_motions(
                 ahead = pool.submit(read_chunk)  # chunk k + 1 is read while chunk k is fitted
             now, held, keys = _hold_back(held, chunk, fit_kwargs, final=not chunk, known=keys)
             fits = _fit_clips(now, num_harmonics, representation, dtype, fit_kwargs, timings,
-                              keys) if now else []
+                              keys, fitter) if now else []
             done.update(zip((c.index for c in now), fits))
             bar.update(len(fits))
             while yielded in done:  # in the input order
