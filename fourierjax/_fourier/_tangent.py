@@ -69,8 +69,12 @@ def clip_means(q: Float[Array, "T K 4"], w: Float[Array, "T K"]) -> Float[Array,
     ref = jnp.take_along_axis(q, jnp.argmax(w, axis=0)[None, :, None], axis=0)[0]  # [K, 4]
     s = jnp.where(jnp.sum(q * ref[None], axis=-1) < 0, -1.0, 1.0).astype(q.dtype)
     m = rotations.quat_normalize(jnp.sum((w * s)[..., None] * q, axis=0))
+    # One pass over the frames builds each joint's 4x4 scatter matrix; the power steps are then
+    # 4x4 products. Stepping over the frames each time was 12 passes over [T, K, 4] (issue 25:
+    # the tangent fit of 500 Bandai-1 clips 1.73 -> 1.31 CPU-s).
+    scatter = jnp.einsum("tki,tkj->kij", w[..., None] * q, q)  # [K, 4, 4]
     for _ in range(_POWER_STEPS):
-        m = rotations.quat_normalize(jnp.sum((w * jnp.sum(q * m[None], axis=-1))[..., None] * q, axis=0))
+        m = rotations.quat_normalize(jnp.sum(scatter * m[:, None, :], axis=-1))
     return canonical_frames(m)
 
 
