@@ -46,7 +46,7 @@ from fourierjax._gait.metrics import (
 )
 from fourierjax._gait.path import GroundPath, circle_path, follow_path, polyline_path
 from fourierjax._gait.root import apply_step, integrate_phase, root_trajectory
-from fourierjax._gait.synthesis import GaitResult, ground_features, model_hip_curves, synthesize_gait
+from fourierjax._gait.synthesis import GaitResult, ground_features, model_ground, model_hip_curves, synthesize_gait
 
 if TYPE_CHECKING:
     from fourierjax.io.bvh import Motion
@@ -91,6 +91,7 @@ __all__ = [
     "lock_feet",
     "lowest_points",
     "model_body_map",
+    "model_ground",
     "model_hip_curves",
     "polyline_path",
     "root_height",

@@ -53,6 +53,11 @@ TOE_HOLD_FRAMES, TOE_REACH_FADE = 2, 0.03
 #: ankle (at most `TOE_CLEAR_MAX` radians, eased over `TOE_CLEAR_SMOOTH` times the frames) so that
 #: the toe's end point clears `LIFT_BANDS` contact bands (`_toe_clearance`).
 TOE_CLEAR_MAX, TOE_CLEAR_SMOOTH = 0.35, 2
+#: Heel-to-toe roll: in the second half of a stance, a foot point that has risen over its lowest
+#: height of the stance by more than the foot's least-risen point has is let go horizontally,
+#: from `ROLL_BANDS[0]` contact bands more (fully held) to `ROLL_BANDS[1]` (not held): the foot
+#: pivots about the points still down (`_roll_off`).
+ROLL_BANDS = (0.25, 0.5)
 #: Each contact's hold starts the easing's frames early (`_plant`'s `lead`), and the swing's
 #: easing towards it is warped by this power.
 LEAD_WARP = 1.6
@@ -434,6 +439,35 @@ def _band_lift(P, A, G, free, root_position, band, floor, up, sign):
     return out
 
 
+def _roll_off(rel, contact, band):
+    """`[T, 2, P]` in [0, 1]: how far each foot point is still held horizontally as its foot rolls
+    (`ROLL_BANDS`). Per stance (a run of `contact >= 0.5`), in its second half, a point's rise is
+    its height over its lowest height in the stance so far; a point that has risen by more than
+    the foot's least-risen point is pivoting off it (the heel when the foot rolls onto its ball):
+    held there, it drags the points that stay down. 1 elsewhere."""
+    on = contact >= 0.5  # [T, 2]
+    prev = jnp.concatenate([jnp.zeros_like(on[:1]), on[:-1]], 0)
+    start = jnp.broadcast_to((on & ~prev)[..., None], rel.shape)
+
+    def seg_min(a, b):
+        fa, va = a
+        fb, vb = b
+        return fa | fb, jnp.where(fb, vb, jnp.minimum(va, vb))
+
+    _, low = jax.lax.associative_scan(seg_min, (start, rel), axis=0)
+    # The second half of each stance only (the heel-off): at the landing and in mid-stance the
+    # foot settles, and a point let go there slid (07_04's landing heel 0.059 -> 0.075 units/s).
+    idx = jnp.arange(on.shape[0])[:, None]
+    first = jax.lax.cummax(jnp.where(on & ~prev, idx, -1), axis=0)
+    nxt = jnp.concatenate([on[1:], jnp.zeros_like(on[:1])], 0)
+    last = jax.lax.cummin(jnp.where(on & ~nxt, idx, on.shape[0]), axis=0, reverse=True)
+    late = on & (2 * idx > first + last)
+    rise = jnp.where(late[..., None], rel - low, 0.0)
+    roll = rise - jnp.min(rise, -1, keepdims=True)
+    lo, hi = ROLL_BANDS
+    return _smoothstep((hi * band - roll) / ((hi - lo) * band))
+
+
 def _before_still(down_loose, down_strict):
     """`[T, 2]`: the frames of each run of `down_loose` before its first `down_strict` frame."""
     idx = jnp.arange(down_loose.shape[0])[:, None]
@@ -496,7 +530,11 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
             still_v = still.at[..., -1].set(jnp.maximum(still[..., -1], off))
         still = still.at[..., -1].set(jnp.maximum(still[..., -1], off_late))
     hold = hold_weights(rel, contact, band)
-    lam = hold * still
+    # Horizontally a point pivoting off the foot's lowest ones is let go (`_roll_off`): held, the
+    # rising heel dragged the ball (Bandai-1 walk_happy: the ball at 0.3-1.1 units a frame late in
+    # stance, where the unlocked model's stood within 0.3).
+    hold_h = hold * _roll_off(rel, contact, band)
+    lam = hold_h * still
     # Tried for the landing (session 16, 02_03 / 09_01 against 0.39x / 0.50x skating, 28% / 25%
     # flight): counting a landing point still within 1 band of its planted target (or 0.5)
     # gave 0.43x / 0.56x (0.41x / 0.52x), flight 24% (27%); the heel then slides into the band at
@@ -534,7 +572,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         still_land = still_land.at[..., -1].set(jnp.maximum(still_land[..., -1], off_late))
     low_land = low_in & (still_land > 0.5)
     landing = _before_still(jnp.any(low_land, -1), jnp.any(low, -1))[..., None]  # [T, 2, 1]
-    lam_p = jnp.where(landing, hold * still_land, lam)
+    lam_p = jnp.where(landing, hold_h * still_land, lam)
     low_p = jnp.where(landing, low_land, low)
     planted = [_plant(feet_pts[:, f], lam_p[:, f], low_p[:, f], lead) for f in range(2)]
     shift = jnp.stack([p[0] for p in planted], 1)
@@ -547,7 +585,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         # out (smoothstep) as it stretches the hip-to-ankle distance by up to `TOE_REACH_FADE`
         # of the leg's length over the unheld foot's.
         low_free = low_in & (still_free > 0.5)
-        free = jnp.stack([_plant(feet_pts[:, f], (hold * still_free)[:, f], low_free[:, f])[0] for f in range(2)], 1)
+        free = jnp.stack([_plant(feet_pts[:, f], (hold_h * still_free)[:, f], low_free[:, f])[0] for f in range(2)], 1)
         free = free * (1.0 - upv)[None, None]
         H, K, A = (jnp.stack([pts[:, leg[k][0]] for leg in legs], 1) for k in range(3))  # [T, 2, 3]
         reach = safe_norm(K - H) + safe_norm(A - K)

@@ -77,7 +77,7 @@ def _integrate_trapezoid(v, dt):
 
 @saved
 @filter_jit
-def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump, phase0,
+def _synthesize_gait(model, skeleton, clearance, floor, step, speed, t_eff, gait, jump, phase0,
                      root_motion, frame_time_s, width, temperature, *,
                      num_frames, feet, groins, pelvis, rule, num_cycle_samples, up_axis,
                      check_traced=True):
@@ -110,7 +110,8 @@ def _synthesize_gait(model, skeleton, clearance, step, speed, t_eff, gait, jump,
     cyc_groins = all_groins[num_frames : num_frames + K]
     if clearance is None:
         clearance = estimate_sole_clearance(all_feet[num_frames + K :], up_axis=up_axis)
-    floor = captured_floor(cycle_lowest(own[:, 2], all_feet[num_frames + K :], clearance, up_axis=up_axis))
+    if floor is None:
+        floor = captured_floor(cycle_lowest(own[:, 2], all_feet[num_frames + K :], clearance, up_axis=up_axis))
     soft = temperature if rule == "smooth" else None
     cyc_leg = leg_heights(cyc_groins, cyc_feet, clearance, up_axis=up_axis, temperature=soft)
     leg = leg_heights(groin_local, foot_local, clearance, up_axis=up_axis, temperature=soft)
@@ -176,6 +177,7 @@ def synthesize_gait(
     contact_intervals: Float[ArrayLike, "2 2"] | None = None,
     path: GroundPath | None = None,
     path_smoothing: Float[ArrayLike, ""] | None = None,
+    floor: Float[ArrayLike, ""] | None = None,
 ) -> GaitResult:
     """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
 
@@ -223,6 +225,11 @@ def synthesize_gait(
             planted through the turns. The result's features, root and feet are the bent ones.
         path_smoothing: `follow_path`'s tangent half-chord (file units); default a quarter of
             the leg length (as `synth --path`).
+        floor: the floor's height (file units, up axis) the hip rule stands the feet on; default
+            the model's captured floor (`model_ground`). Pass the fitted model's `model_ground`
+            (floor and clearance) for a model edited from it (`style.superpose`,
+            `style.add_noise`): the default reads the floor under the model's own root height,
+            which an edit moves off its legs.
 
     Returns:
         A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
@@ -276,8 +283,13 @@ def synthesize_gait(
     speed = jnp.broadcast_to(speed, (num_frames,))
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
     t_eff = ticks * dt
+    if floor is not None:
+        check_finite(where, "floor", floor)
+        floor = jnp.asarray(floor, dtype)
+        if floor.shape != ():
+            raise UserError(f"{where}: `floor` must be a scalar (file units), got shape {floor.shape}")
     result = _synthesize_gait(
-        model, skeleton, clearance,
+        model, skeleton, clearance, floor,
         jnp.asarray(step, dtype), speed, t_eff, jnp.asarray(gait, dtype),
         jnp.asarray(jump, dtype), jnp.asarray(phase0, dtype), jnp.asarray(root_motion, bool),
         jnp.asarray(dt, dtype), jnp.asarray(width, dtype),
@@ -366,6 +378,54 @@ def _locked_result(result, skeleton, intervals, *, body_map, representation, smo
                             return_feet=True, smooth_frames=smooth_frames)
     lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis)) - result.floor
     return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
+
+
+@saved
+@filter_jit
+def _model_ground(model, skeleton, *, feet, pelvis, num_cycle_samples, up_axis):
+    from fourierjax.fourier import synthesize_phase
+
+    idx = jnp.asarray([feet.left, feet.right])
+    grid = jnp.linspace(0.0, 2 * jnp.pi, num_cycle_samples, endpoint=False, dtype=jnp.asarray(model.offset).dtype)
+    own = synthesize_phase(model, grid)
+    foot_local, _ = jax.vmap(lambda f: pose_points(skeleton, model.representation, idx, (pelvis,), f, pelvis))(own)
+    clearance = estimate_sole_clearance(foot_local, up_axis=up_axis)
+    return captured_floor(cycle_lowest(own[:, 2], foot_local, clearance, up_axis=up_axis)), clearance
+
+
+def model_ground(
+    model: FourierModel,
+    skeleton: Skeleton,
+    *,
+    body_map: BodyMap | None = None,
+    num_cycle_samples: int = 64,
+) -> tuple[Float[Array, ""], Float[Array, "2 P"]]:
+    """The ground a fitted model was captured on: its floor (`captured_floor` of its own cycle)
+    and its feet's sole clearances (`estimate_sole_clearance`), the ones `synthesize_gait` uses
+    by default.
+
+    Pass a fitted model's ground as `synthesize_gait(floor=, clearance=)` when synthesizing a
+    model edited from it (`style.superpose`, `style.add_noise`): both are read from the model's
+    own cycle, the floor under its own root height (its `root.y` channel), and an edit moves
+    that height off its legs and the stance off the foot's geometry. CMU 02_01 plus half of the
+    02_03-minus-02_01 characteristic read its floor 0.79 units (4.5 cm) under the walk's and its
+    ankle's clearance 1.54 units against 0.84: its feet went 1.9 cm under the capture's floor;
+    on the walk's ground they stand 2.6 cm over it, as the walk's own synthesis does.
+
+    Arguments:
+        model: a fitted `FourierModel` (its `root.y` channel the capture's).
+        skeleton: the `Skeleton` it animates.
+        body_map: a `body.BodyMap` of the skeleton; default the map of the model's own cycle.
+        num_cycle_samples: phases of the cycle (as `synthesize_gait`'s).
+
+    Returns:
+        `(floor, clearance)`: the floor's height (file units, up axis) and `[2, P]` clearances
+        (file units). Jitted; differentiable in the model.
+    """
+    num_cycle_samples = integer(num_cycle_samples, "model_ground: `num_cycle_samples`", 1)
+    feet, _, pelvis, up_axis = resolve_body("model_ground", model, skeleton, None, None, body_map, None)
+    return _model_ground(model, skeleton, feet=feet, pelvis=pelvis, num_cycle_samples=num_cycle_samples,
+                        up_axis=int(up_axis))
 
 
 @filter_jit

@@ -171,7 +171,7 @@ def skating_summary(result, frame_time_s: float, bmap, source=None) -> str:
 
 
 def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body_map=None, *,
-               contact_intervals=None, source=None):
+               contact_intervals=None, source=None, fitted=None):
     """Synthesize `num_frames` under the step constraints, on any rig the body map understands.
 
     Arguments:
@@ -184,6 +184,8 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
             map of the model's own poses (`--body-map FILE` overrides its fields).
         contact_intervals: `[2, 2]` contact phases stored with the model (None: estimated).
         source: the fitted frames of the source clip (a `Motion`) for the skating comparison.
+        fitted: the fitted model `model` was edited from (`--add`, `--noise`), or None: its
+            ground (floor and sole clearances, `gait.model_ground`) is the synthesis's.
 
     Returns:
         `(motion, summary line)`.
@@ -195,11 +197,14 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
 
     _check(args)
     bmap = body_map_for(model, template, body_map, getattr(args, "body_map", None))
+    floor = clearance = None
+    if fitted is not None:
+        floor, clearance = gait.model_ground(fitted, template.skeleton(), body_map=bmap)
     result = gait.synthesize_gait(
         model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
         root_motion=args.root_motion, foot_lock=getattr(args, "foot_lock", True),
-        contact_intervals=contact_intervals,
+        contact_intervals=contact_intervals, floor=floor, clearance=clearance,
         path=None if getattr(args, "path", None) is None else parse_path(args.path, bmap.metres_per_unit),
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model):

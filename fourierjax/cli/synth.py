@@ -123,8 +123,11 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
     intervals, source = _foot_lock_inputs(mf)
+    # An edited model stands on the fitted model's ground: its own root height and stance no
+    # longer match its legs (02_01 + 0.5 runness stood 1.9 cm under the captured floor).
     motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None),
-                                      contact_intervals=intervals, source=source)
+                                      contact_intervals=intervals, source=source,
+                                      fitted=mf.model if model is not mf.model else None)
     write_bvh_as_source(motion, out, source_up(getattr(mf, "provenance", None) or {}), args.out_up)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "
           f"{float(model.omega) / (2 * np.pi):.3f} Hz gait cycle")
