@@ -386,3 +386,32 @@ def test_cli_prints_the_url_and_passes_host_port(monkeypatch, capsys):
     assert seen["host"] == "127.0.0.1" and seen["messages"] == ["read 1"] and seen["library"] == "lib"
     assert main(["explore", "--host", "0.0.0.0", "--port", "8124"]) == 130
     assert opened == ["http://0.0.0.0:8124"]
+
+
+@pytest.mark.parametrize("edit", [dict(weights=(("run", 1.0),)), dict(weights=(("run", 1.5),), noise_deg=2.0)])
+def test_an_edited_gait_stands_on_the_captured_floor(library, edit):
+    """Issue 21's floor defect in the explorer (and `synth --config`, which renders the same): a
+    walk plus a characteristic stood on the floor read from its own edited cycle. 07_01 plus the
+    run-minus-walk characteristic at 1 and 1.5 floated 5.9 and 8.4 cm over the captured floor
+    (02_01 plus its own sank 1.4-1.8 cm under it); the plain walk stands 2.8 cm over it. The
+    lowest foot point, by numpy FK of the rendered motion (not the library's)."""
+    from fourierjax.body import infer_body_map
+    from tests.rigs import world
+
+    src = data.load("07_01")
+    bm = infer_body_map(src)
+    feet = list(bm.feet[0]) + list(bm.feet[1])
+
+    def lowest(motion):
+        P, E, _ = world(motion)
+        return np.concatenate([P, E], axis=1)[:, feet, bm.up_axis].min(axis=1) * bm.up_sign
+
+    cm = 100.0 * bm.metres_per_unit
+    floor = np.percentile(lowest(src), 2)
+    p = Params("07_01", "02_03", s=0.0, seconds=3.0, **edit)
+    plain = lowest(explore.render(library, dataclasses.replace(p, weights=(), noise_deg=0.0))[0]).min()
+    low = lowest(explore.render(library, p)[0]).min()
+    assert (low - floor) * cm >= -0.5  # not under the floor
+    assert abs(low - plain) * cm <= 1.0  # nor over it: the plain walk's contact height
+    assert explore.edited_ground(library.gait("07_01").model, library.gait("02_03").model,
+                                 dataclasses.replace(p, weights=(), noise_deg=0.0)) is None

@@ -7,6 +7,7 @@ from fourierjax.explore._engine import (
     Library,
     check_pair,
     default_library,
+    edited_ground,
     edited_model,
     fit_clips,
     ground_path,
@@ -30,7 +31,7 @@ from fourierjax.explore._params import (
 __all__ = [
     "CONFIG_FORMAT", "CONFIG_VERSION", "DEFAULT_CHARACTERISTICS", "DEFAULT_GAITS", "HIP_RULES", "Explorer",
     "MIN_PATH_RADIUS_M",
-    "Gait", "Library", "Params", "check_pair", "config_text", "default_library", "edited_model",
+    "Gait", "Library", "Params", "check_pair", "config_text", "default_library", "edited_ground", "edited_model",
     "fit_clips", "ground_path", "load_sources", "render", "result_motion", "synthesize_motion",
     "synthesize_result", "transition_motion", "view_positions",
 ]  # fmt: skip

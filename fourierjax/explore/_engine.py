@@ -200,20 +200,47 @@ def _circle(radius_units: float):
     return gait.circle_path(abs(radius_units), left=radius_units > 0)
 
 
-def synthesize_result(gait_a: Gait, model, p: Params):
+def edited_ground(a, b, p: Params):
+    """The model an edited model stands on (`synthesize_result(ground=)`): Unuma eq. 3 alone,
+    `style.interpolate(a, b, p.s)`, when characteristics or noise edit it; None otherwise (the
+    model's own ground).
+
+    The synthesis reads the floor under a model's own root height and the soles' clearances
+    from its own stance (`gait.model_ground`). Eq. 3 between two fitted gaits keeps both with
+    the legs; an added characteristic does not (`synth --add`, issue 21: the CMU walk plus half of
+    the run-minus-walk characteristic stood 1.9 cm under the captured floor).
+    """
+    if not p.weights and p.noise_deg <= 0:
+        return None
+    import jax.numpy as jnp
+
+    from fourierjax import style
+
+    return style.interpolate(a, b, jnp.asarray(p.s, jnp.asarray(a.offset).dtype))
+
+
+def synthesize_result(gait_a: Gait, model, p: Params, *, ground=None):
     """`gait.synthesize_gait` of `model` for `p.seconds` on gait a's skeleton and body map: the
     step constraints, the library's foot locking (`p.foot_lock`) and the path (`p.path_radius_m`:
     the straight walk is bent onto the circle before the feet are locked, as `synth --path`).
+
+    Arguments:
+        ground: the model whose floor and sole clearances the synthesis stands on
+            (`edited_ground`), or None for `model`'s own.
 
     Returns:
         The `gait.GaitResult`.
     """
     from fourierjax import gait
 
+    skeleton = gait_a.template.skeleton()
+    floor = clearance = None
+    if ground is not None:
+        floor, clearance = gait.model_ground(ground, skeleton, body_map=gait_a.body_map)
     return gait.synthesize_gait(
-        model, gait_a.template.skeleton(), p.num_frames, p.frame_time_s, body_map=gait_a.body_map,
+        model, skeleton, p.num_frames, p.frame_time_s, body_map=gait_a.body_map,
         step=p.step, speed=p.speed, gait=p.gait, jump=p.jump, rule=p.hip_rule, root_motion=p.root_motion,
-        foot_lock=bool(p.foot_lock), path=ground_path(gait_a, p.path_radius_m),
+        foot_lock=bool(p.foot_lock), path=ground_path(gait_a, p.path_radius_m), floor=floor, clearance=clearance,
     )
 
 
@@ -224,18 +251,19 @@ def result_motion(gait_a: Gait, channel_names, result, p: Params):
     return gait_motion(gait_a.template, result, channel_names, p.frame_time_s, body_map=gait_a.body_map)
 
 
-def synthesize_motion(gait_a: Gait, model, p: Params):
+def synthesize_motion(gait_a: Gait, model, p: Params, *, ground=None):
     """Synthesize `p.seconds` of `model` on gait `a`'s skeleton under the step constraints.
 
     Arguments:
         gait_a: the library gait whose skeleton, template and body map are used.
         model: the edited model (`edited_model`).
         p: the parameter set.
+        ground: the model it stands on (`edited_ground`), or None for its own.
 
     Returns:
         `(motion, result)`: a writeable `io.bvh.Motion` and the `gait.GaitResult`.
     """
-    result = synthesize_result(gait_a, model, p)
+    result = synthesize_result(gait_a, model, p, ground=ground)
     return result_motion(gait_a, model.channel_names, result, p), result
 
 
@@ -267,7 +295,8 @@ def render(library: Library, p: Params):
     check_pair(library, p)
     a, b = library.gait(p.a), library.gait(p.b)
     chars = [library.characteristics[n] for n, _ in p.weights]
-    return synthesize_motion(a, edited_model(a.model, b.model, chars, p), p)
+    return synthesize_motion(a, edited_model(a.model, b.model, chars, p), p,
+                             ground=edited_ground(a.model, b.model, p))
 
 
 def transition_motion(library: Library, p: Params, start_s: float, duration_s: float):

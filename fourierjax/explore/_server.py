@@ -169,7 +169,8 @@ class Explorer:
             _engine.check_pair(self.library, p)
             b, lib = self.library.gait(p.b), self.library
             model = _engine.edited_model(gait_a.model, b.model, [lib.characteristics[n] for n, _ in p.weights], p)
-            result = _engine.synthesize_result(gait_a, model, p)
+            result = _engine.synthesize_result(gait_a, model, p,
+                                               ground=_engine.edited_ground(gait_a.model, b.model, p))
             pos = _engine.view_positions(gait_a, model.representation, result)
             self._channel_names = model.channel_names
         else:
