@@ -85,11 +85,16 @@ def _heights(motion, bm):
     return low, root - np.outer(root @ up, up), face
 
 
-def measure(path: pathlib.Path, floor: float, bm, frame_time_s: float) -> dict:
-    """Advance along the facing, its alignment, turn radius, lowest foot over `floor` (cm), NaN check."""
+def measure(path: pathlib.Path, floor: float, bm, frame_time_s: float, *, z_up: bool = False) -> dict:
+    """Advance along the facing, its alignment, turn radius, lowest foot over `floor` (cm), NaN check.
+    ``z_up``: the file is Z-up (the commands write a Z-up input's outputs Z-up); it is turned Y-up,
+    as the sources were, before it is measured with their Y-up body map ``bm``."""
+    from fourierjax.io.axes import to_y_up
     from fourierjax.io.bvh import read_bvh
 
     m = read_bvh(path)
+    if z_up:
+        m = to_y_up(m, "z")
     if not np.isfinite(m.channels).all():
         return {"nan": True}
     if tuple(m.topology.names) != tuple(bm.joint_names):
@@ -146,7 +151,7 @@ def smoke_rig(rig: str, root: pathlib.Path, reps, log=print) -> list[dict]:
         files[kind] = d / f"{rig}_{kind}.bvh"
         write_bvh(rewrite(data.load(clip), rig), files[kind])
     src = {k: read_bvh(f) for k, f in files.items()}
-    if rig == "zup":  # `fit` turns a Z-up file Y-up on reading, and the outputs are written Y-up
+    if rig == "zup":  # measured Y-up: the sources here, the commands' Z-up outputs in `measure`
         from fourierjax.io.axes import to_y_up
 
         src = {k: to_y_up(m, "z") for k, m in src.items()}
@@ -164,7 +169,7 @@ def smoke_rig(rig: str, root: pathlib.Path, reps, log=print) -> list[dict]:
         if name.startswith("synth"):
             row["skate_synth"], row["skate_capture"] = _skating(r["out"])
         if r["rc"] == 0 and measure_out:
-            row.update(measure(d / measure_out, floor[kind], bm, dt))
+            row.update(measure(d / measure_out, floor[kind], bm, dt, z_up=rig == "zup"))
         if name.startswith("fit"):
             row["fit"] = _fit_table(r["out"])
         log(json.dumps(row), flush=True)
