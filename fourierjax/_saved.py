@@ -9,6 +9,7 @@ import logging
 import pathlib
 import pickle
 import re
+import threading
 from collections.abc import Callable
 
 _log = logging.getLogger(__name__)
@@ -354,42 +355,34 @@ def saved_executable(jitted: Callable) -> Callable:
         fast = (treedef, tuple((x.shape, jax.dtypes.canonicalize_dtype(x.dtype),
                                 bool(getattr(x, "weak_type", False))) for x in leaves))
         compiled = programs.get(fast)
+        read_from = None  # the file a program just loaded came from: its first run is checked
         if compiled is None:
             key = _executable_key(name, treedef, fast[1])
             if key is None:
                 compiled = programs[fast] = False
             else:
-                compiled, path = _executable(jitted, name, args, key, stats)
+                compiled, read_from = _executable(jitted, name, args, key, stats)
                 programs[fast] = compiled
-                if path is not None:  # read from a file: its first run is checked
-                    return _first_run(compiled, path, fast, key, args)
         if compiled is False:  # could not be saved or loaded: the plain function
             return jitted(*args)
         try:
-            return compiled(*args)
-        except (TypeError, ValueError) as err:  # inputs the executable refuses: never again
-            _log.debug("fourierjax: %s runs unsaved: %s", name, err)
-            programs[fast] = False
-            return jitted(*args)
-
-    def _first_run(compiled, path: pathlib.Path, fast, key: str, args: tuple):
-        """Run an executable just read from ``path`` to completion. One that fails at run time
-        (a file that loads but lacks a kernel, e.g. one saved by an earlier version from a
-        compile-cache hit) is deleted and compiled again, and this call runs that."""
-        import jax
-
-        try:
             out = compiled(*args)
-            jax.block_until_ready(out)
+            if read_from is not None:
+                jax.block_until_ready(out)
             return out
         except (TypeError, ValueError) as err:  # inputs the executable refuses: never again
             _log.debug("fourierjax: %s runs unsaved: %s", name, err)
             programs[fast] = False
             return jitted(*args)
         except jax.errors.JaxRuntimeError as err:
-            _log.debug("fourierjax: the saved executable %s fails to run (%s); compiling again", path, err)
+            if read_from is None:
+                raise
+            # A file that loads but fails to run (one lacking a kernel, e.g. saved by an
+            # earlier version from a compile-cache hit): deleted, compiled afresh and saved.
+            _log.debug("fourierjax: the saved executable %s fails to run (%s); compiling again",
+                       read_from, err)
             stats["rejected"] += 1
-            path.unlink(missing_ok=True)
+            read_from.unlink(missing_ok=True)
             compiled, _ = _executable(jitted, name, args, key, stats)
             programs[fast] = compiled
             return jitted(*args) if compiled is False else compiled(*args)
@@ -443,15 +436,28 @@ def _compile_cache_bypassed():
     try:
         from jax._src import compilation_cache as cc
 
-        before = (cc._cache_checked, cc._cache_used)
+        cc._cache_checked, cc._cache_used  # noqa: B018 (present in this jax?)
     except (ImportError, AttributeError):
         yield
         return
-    cc._cache_checked, cc._cache_used = True, False
+    # Nested or on two threads at once: the memo is set by the first block in and put back by
+    # the last out, never restored to another block's "off".
+    with _BYPASS_LOCK:
+        if _BYPASS["depth"] == 0:
+            _BYPASS["before"] = (cc._cache_checked, cc._cache_used)
+            cc._cache_checked, cc._cache_used = True, False
+        _BYPASS["depth"] += 1
     try:
         yield
     finally:
-        cc._cache_checked, cc._cache_used = before
+        with _BYPASS_LOCK:
+            _BYPASS["depth"] -= 1
+            if _BYPASS["depth"] == 0:
+                cc._cache_checked, cc._cache_used = _BYPASS["before"]
+
+
+_BYPASS_LOCK = threading.Lock()
+_BYPASS: dict = {"depth": 0, "before": None}
 
 
 def _load_executable(path: pathlib.Path, key: str):

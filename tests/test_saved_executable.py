@@ -164,3 +164,19 @@ def test_a_program_the_compile_cache_holds_is_saved_whole_and_a_broken_file_is_r
     assert _process(tmp_path)["saved"] == 1
     again = _process(tmp_path)
     assert again["sha"] == first["sha"] and again["loaded"] == 1 and again["rejected"] == 0
+
+
+def test_overlapping_compile_cache_bypasses_leave_the_cache_as_it_was():
+    """Two threads compiling programs to save at once: the first out must not turn the cache
+    back on under the second, nor the second leave it off for good."""
+    from jax._src import compilation_cache as cc
+
+    before = (cc._cache_checked, cc._cache_used)
+    a, b = _saved._compile_cache_bypassed(), _saved._compile_cache_bypassed()
+    a.__enter__()
+    b.__enter__()
+    assert cc._cache_used is False
+    a.__exit__(None, None, None)  # the first in leaves first
+    assert cc._cache_used is False
+    b.__exit__(None, None, None)
+    assert (cc._cache_checked, cc._cache_used) == before
