@@ -10,7 +10,7 @@ from jaxtyping import ArrayLike, Bool, Float, Int
 from fourierjax import _fk, _jit
 from fourierjax._fourier._buckets import length_bucket as _bucket
 from fourierjax._fourier._model import FourierModel
-from fourierjax.features import ROOT_CHANNELS, root_relative_positions
+from fourierjax.features import ROOT_CHANNELS, channel_names_for, root_relative_positions
 from fourierjax.skeleton import Skeleton
 
 
@@ -133,11 +133,12 @@ def _position_ve_impl(skeleton, x, xhat, mask, representation, pelvis):
 _position_ve_jit = _jit.filter_jit(_position_ve_impl)
 
 
-def _feature_quats(topology, x, representation, pelvis):
+def _feature_quats(topology, x, representation, pelvis, expmap_quats=None):
     """Local rotations of every joint from feature rows ``x`` ``[C, *S]``, as
     `features.local_pose_from_features` makes them (the same formulas, batch axes minor): 4
     components ``[J, *S]``, identity for joints without rotation features and at and above
-    the pelvis's ancestors (the pelvis keeps its own)."""
+    the pelvis's ancestors (the pelvis keeps its own). ``expmap_quats``: the expmap-valued
+    joints' quaternions ``[4, n, *S]`` when known (their features are then not read)."""
     from fourierjax._fourier._layout import ancestors
     from fourierjax._sincos import sincos
     from fourierjax.features import _layout_tables
@@ -148,7 +149,9 @@ def _feature_quats(topology, x, representation, pelvis):
     at = 0
     for key, (js, cols) in _layout_tables(topology, representation).items():
         a = [x[np.asarray(cols[:, k])] for k in range(3)]  # [n, *S] each
-        if key == "expmap":  # the library's exponential map (Taylor branch near zero)
+        if key == "expmap" and expmap_quats is not None:
+            q = expmap_quats
+        elif key == "expmap":  # the library's exponential map (Taylor branch near zero)
             q = jnp.moveaxis(quat_from_expmap(jnp.stack(a, axis=-1)), -1, 0)  # [4, n, *S]
         else:  # rotations.quat_from_euler: the product of the three axis quaternions
             q = [1, 0, 0, 0]
@@ -180,11 +183,17 @@ def root_relative_positions_frames_last(topology, offsets, x, representation, pe
     broadcastable against ``[J, 3, *S]`` (per-clip bones: a clip axis of size B, 1 elsewhere).
 
     Returns ``[J, 3, *S]`` file units (the pelvis at the origin of the heading frame)."""
+
+    return _positions_from_quats(topology, offsets, _feature_quats(topology, x, representation, pelvis),
+                                 pelvis, x.shape[1:], x.dtype)
+
+
+def _positions_from_quats(topology, offsets, q_all, pelvis, shape, dtype):
+    """`root_relative_positions_frames_last` from the joints' local rotations ``q_all`` (4
+    components ``[J, *S]``, `_feature_quats`)."""
     from fourierjax._fourier._layout import ancestors
 
-    shape, dtype = x.shape[1:], x.dtype
     plan = _fk.plan(topology, all_rotations=False)
-    q_all = _feature_quats(topology, x, representation, pelvis)
     zeroed = np.ones(topology.num_joints, bool)
     zeroed[[pelvis, *ancestors(topology, pelvis)]] = False
     offsets = jnp.where(jnp.asarray(zeroed).reshape(-1, *(1,) * (offsets.ndim - 1)),
@@ -198,15 +207,38 @@ def root_relative_positions_frames_last(topology, offsets, x, representation, pe
     return _fk.gather_levels(plan, p, 3, False, shape, dtype)
 
 
-def position_ve_batch(skeleton, x, xhat, frames, representation, pelvis):
+def position_ve_batch(skeleton, x, xhat, frames, representation, pelvis, means=None):
     """The position variance explained (`_position_ve_impl`) of a batch of clips that share a
     topology and pelvis: ``skeleton`` with offsets ``[B, J, 3]``, ``x``, ``xhat`` ``[B, T, C]``,
     ``frames`` ``bool [B, T]``: ``[B]``. One FK of data and model together, batch axes minor
-    (`root_relative_positions_frames_last`), then the masked sums of `variance_explained`."""
-    both = jnp.moveaxis(jnp.stack([x, xhat]), -1, 0)  # [C, 2, B, T]
+    (`root_relative_positions_frames_last`), then the masked sums of `variance_explained`.
+
+    ``means``: for a "tangent" model, its frames ``[B, K, 4]`` (`FourierModel.frames`); ``xhat``
+    is then its synthesis before `_tangent.from_tangent` (the tangent coordinates ``d``), and
+    the model's joint rotations ``M exp(d)`` go to FK as they are: the positions of its
+    features ``log(M exp(d))`` to float32 round-off, without the log, the branch choice and
+    the exp back (500 Bandai-1 clips: a quarter of the tangent fit's CPU went to them)."""
+    topo = skeleton.topology
     offsets = jnp.moveaxis(skeleton.offsets, 0, -1)[:, :, None, :, None]  # [J, 3, 1, B, 1]
-    p = root_relative_positions_frames_last(skeleton.topology, offsets, both, representation,
-                                            pelvis)  # [J, 3, 2, B, T]
+    if means is None:
+        both = jnp.moveaxis(jnp.stack([x, xhat]), -1, 0)  # [C, 2, B, T]
+        p = root_relative_positions_frames_last(topo, offsets, both, representation,
+                                                pelvis)  # [J, 3, 2, B, T]
+    else:
+        from fourierjax import rotations
+        from fourierjax._fourier._tangent import triples
+        from fourierjax.features import _layout_tables
+
+        cols = _layout_tables(topo, representation)["expmap"][1]
+        if not np.array_equal(cols, triples(channel_names_for(topo, representation), x.shape[-1])):
+            raise AssertionError("position_ve_batch: the tangent triples are not the features' joints")
+        m = jnp.asarray(means, x.dtype)[:, None, :, :]  # [B, 1, K, 4], as `_tangent.from_tangent`
+        q = rotations.quat_multiply(m, rotations.quat_from_expmap(xhat[..., cols]))  # [B, T, K, 4]
+        data = _feature_quats(topo, jnp.moveaxis(x, -1, 0), representation, pelvis)
+        model = _feature_quats(topo, jnp.moveaxis(xhat, -1, 0), representation, pelvis,
+                               expmap_quats=jnp.moveaxis(q, (-1, -2), (0, 1)))  # [4, K, B, T]
+        q_all = [jnp.stack([a, b], axis=1) for a, b in zip(data, model, strict=True)]
+        p = _positions_from_quats(topo, offsets, q_all, pelvis, (2, *x.shape[:-1]), x.dtype)
     target, approx = p[:, :, 0], p[:, :, 1]
     w = frames.astype(x.dtype)[None, None]  # [1, 1, B, T]
     mean = jnp.sum(w * target, axis=-1, keepdims=True) / jnp.maximum(
