@@ -66,20 +66,33 @@ def rot(name: str, *arrays, **static) -> np.ndarray:
     """``rotations.<name>(*arrays)`` on NumPy arrays whose first axis is time: padded to a
     length bucket (blocks of `ROW_BLOCK` rows beyond it) and run through one cached jit per
     function (eager JAX ops would compile again for every clip length)."""
+    return rot_blocks(name, arrays, static, whole_blocks=False)
+
+
+def rot_blocks(name: str, arrays, static: dict, *, whole_blocks: bool) -> np.ndarray:
+    """`rot`; with ``whole_blocks``, every block of rows (the last one too) is padded to
+    `ROW_BLOCK` rows, so that any number of rows runs the one program of that size."""
     F = arrays[0].shape[0]
     key = (name, tuple(sorted(static.items())))
     fn = _JITTED.get(key)
     if fn is None:
         fn = _JITTED[key] = _jit.filter_jit(functools.partial(getattr(rotations, name), **static))
-    if F > ROW_BLOCK:
-        return np.concatenate([rot(name, *(a[s:s + ROW_BLOCK] for a in arrays), **static)
-                               for s in range(0, F, ROW_BLOCK)])
-    Fp = bucket(F)
-    padded = [np.concatenate([a, np.repeat(a[-1:], Fp - F, axis=0)]) for a in arrays]
-    # Sliced in NumPy (slicing the JAX array is one more eager op per call), then a copy,
-    # writable: under x64 `np.asarray` of a float64 JAX array is a read-only view (callers write
-    # into the result, e.g. the pelvis's rows of `quat_from_euler`).
-    return np.array(np.asarray(fn(*padded))[:F], dtype=np.float64)
+    out = None
+    for s in range(0, max(F, 1), ROW_BLOCK):
+        block = [a[s:s + ROW_BLOCK] for a in arrays]
+        n = block[0].shape[0]
+        Fp = ROW_BLOCK if whole_blocks else bucket(n)
+        # Only a short block is padded (a whole one goes as it is: no copy of the rows).
+        padded = block if n == Fp else [np.concatenate([a, np.repeat(a[-1:], Fp - n, axis=0)])
+                                        for a in block]
+        r = np.asarray(fn(*padded))
+        if out is None:
+            out = np.empty((F, *r.shape[1:]), np.float64)
+        # Copied into a float64 array of our own, writable: under x64 `np.asarray` of a float64
+        # JAX array is a read-only view (callers write into the result, e.g. the pelvis's rows
+        # of `quat_from_euler`); sliced in NumPy (slicing the JAX array is one more eager op).
+        out[s:s + n] = r[:n]
+    return out
 
 
 def yaw_quat(psi: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ from fourierjax._fourier._layout import (
     ancestors,
     relative_position,
     rot,
+    rot_blocks,
     rotation_joints,
     world_pose,
     yaw_quat,
@@ -181,8 +182,8 @@ def _blocked(a: np.ndarray) -> np.ndarray:
 
 
 def _rot(name: str, *arrays, **static) -> np.ndarray:
-    """`rot` of the rows of ``arrays``, run in whole blocks."""
-    return rot(name, *map(_blocked, arrays), **static)[:len(arrays[0])]
+    """`rot` of the rows of ``arrays``, run in whole blocks (only the last one padded)."""
+    return rot_blocks(name, arrays, static, whole_blocks=True)
 
 
 
@@ -225,9 +226,9 @@ def _prepare_group(items: list[_Item], *, representation, segment, use_contacts,
     cat, starts = _concat(subs)
     n = np.diff(starts)
     dt_f = np.repeat(dts, n)  # per frame
-    glitch = _glitch_joints(cat, starts, dt_f, dts)
+    glitch, quats = _glitch_joints(cat, starts, dt_f, dts)
     clock("glitch")
-    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation, pose)
+    x = _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation, pose, quats)
     mask = feature_mask(glitch, topo, pelvis)
     names = channel_names_for(topo, representation)
     clock("features")
@@ -289,21 +290,25 @@ def _dilate(flags, starts, pad):
 
 
 def _glitch_joints(cat, starts, dt_f, dts, max_joint_speed_deg_s=5000.0, pad_s=0.1):
-    """`_segment.glitch_joints` of every clip of the concatenation ``cat``."""
+    """`_segment.glitch_joints` of every clip of the concatenation ``cat``, and the joints'
+    quaternions it compares, ``{order: [N, J_order, 4]}`` (the expmap features start from
+    the same ones)."""
     N, J = cat.num_frames, len(cat.topology.names)
     fast = np.zeros((N, J), bool)
     joints = rotation_joints(cat.topology)
     first = np.zeros(N, bool)
     first[starts[:-1]] = True  # no speed across two clips
+    quats = {}
     for order in dict.fromkeys(o for _, o, _ in joints):
         group = [(j, i) for j, o, i in joints if o == order]
         q = _rot("quat_from_euler", np.radians(cat.channels[:, np.array([i for _, i in group])]),
                  order=order)
+        quats[order] = q
         dot = np.clip(np.abs(np.sum(q[1:] * q[:-1], axis=-1)), 0.0, 1.0)
         f = np.degrees(2 * np.arccos(dot)) / dt_f[1:, None] > max_joint_speed_deg_s
         fast[1:, [j for j, _ in group]] = f & ~first[1:, None]
     pad = np.repeat(np.maximum(1, np.round(pad_s / dts).astype(int)), np.diff(starts))
-    return _dilate(fast, starts, pad)
+    return _dilate(fast, starts, pad), quats
 
 
 def _segment_sums(v, starts):
@@ -347,10 +352,12 @@ def _gradient(v, starts, dt_f):
 
 
 def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation,
-              pose=None) -> np.ndarray:
+              pose=None, quats=None) -> np.ndarray:
     """`features_from_motion(sub, representation, valid=~glitch, body_map=bm)` of every clip,
     rows concatenated ``[N, C]`` (expmap-valued layouts ignore ``valid``, as it does);
-    ``pose``: the pelvis's world pose of ``cat``'s frames when known."""
+    ``pose``: the pelvis's world pose of ``cat``'s frames when known; ``quats``: the joints'
+    quaternions of ``cat``'s frames by rotation order when known (`_glitch_joints`'), taken
+    over (their pelvis column is overwritten)."""
     topo = cat.topology
     B = len(items)
     pos, q_root = _world_pose(cat, pelvis) if pose is None else pose
@@ -385,7 +392,9 @@ def _features(cat, starts, dt_f, items, subs, glitch, pelvis, representation,
                 e[:, members.index(pelvis)] = _rot("euler_from_quat", q_rel, order=order)
             flat = _euler_continuous(e, order, ~glitch[:, members], layouts)
         else:
-            q = _rot("quat_from_euler", e, order=order)
+            # The glitch masks' quaternions of the same angles when given: the same values,
+            # one conversion of the chunk's frames fewer.
+            q = quats[order] if quats is not None else _rot("quat_from_euler", e, order=order)
             if pelvis in members:
                 q[:, members.index(pelvis)] = q_rel
             flat = _expmap_continuous(_rot("expmap_from_quat", q), layouts)
