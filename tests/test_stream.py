@@ -493,3 +493,32 @@ def test_chunks_fitted_two_at_once_fit_the_same(clips, monkeypatch):
     assert {"fit", "align_metrics"} <= set(timings)
     for g, r in zip(got, ref, strict=True):
         assert _fields(g) == _fields(r)
+
+
+@pytest.mark.parametrize("euler_only", [True, False])
+def test_winding_joints_with_cached_names_equal_the_clips_own(euler_only):
+    # `_pipeline.winding_joints` / `_search_weights` read each layout's channel names once;
+    # the same joints, in the same order, and the same weights as `_clip`'s, on Bandai-1's
+    # windings (its `Spine` near gimbal lock), the bundled clips and a few made-up spans.
+    from fourierjax._motion import _clip
+    from fourierjax.features import features_from_motion
+
+    try:
+        bandai = _bandai_clips(20)
+    except pytest.skip.Exception:
+        bandai = []
+    cases = []
+    for m in [*bandai, data.load("07_01"), data.load("142_02")]:
+        for rep in ("euler", "tangent", "expmap"):
+            x, names = features_from_motion(m, rep)
+            cases += [(x, names, np.ones(len(x), bool)), (x, names, np.arange(len(x)) % 3 == 0)]
+    x, names, _ = cases[0]
+    rng = np.random.default_rng(0)
+    for _ in range(20):  # random joints winding, some frames kept or none
+        y = x + rng.normal(size=x.shape[1]) * 4.0 * np.linspace(0, 1, len(x))[:, None]
+        cases.append((y, names, rng.random(len(x)) < rng.choice([0.0, 0.5, 1.0])))
+    assert any(_clip.winding_joints(*c, euler_only=euler_only) for c in cases)
+    for c in cases:
+        assert _pipeline.winding_joints(*c, euler_only=euler_only) == _clip.winding_joints(
+            *c, euler_only=euler_only)
+        assert _pipeline._search_weights(*c) == _clip._search_weights(*c)
