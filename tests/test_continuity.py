@@ -207,3 +207,30 @@ def test_jax_repair_matches_the_numpy_one_on_real_clips(x64):
                                        atol=1e-8, err_msg=f"{m.source} {order} masked")
             checked += 1
     assert checked >= len(data.list())
+
+
+def test_a_long_clip_stays_continuous_across_row_blocks():
+    """The library's NumPy-facing rotation helpers run long clips in blocks of `ROW_BLOCK`
+    rows. A joint that spins steadily through a clip longer than one block (5,000 frames, 40 s at
+    120 fps: 2,500 degrees) must come out as one continuous expmap path, like
+    `rotations.make_expmap_continuous` of the whole clip (it restarted at frame 4,096, a jump of
+    2 pi times the turns wound so far)."""
+    import dataclasses
+
+    from fourierjax import data
+    from fourierjax._fourier._layout import ROW_BLOCK
+    from fourierjax.features import joint_expmaps
+
+    m = data.load("02_01")
+    F = ROW_BLOCK + 904
+    col = m.topology.flat_channel_names.index("LeftArm.Yrotation")
+    ch = np.repeat(m.channels[:1], F, axis=0)
+    ch[:, col - 1:col + 2] = 0.0  # LeftArm's ZYX triple: a pure turn about its Y axis
+    spin = 0.5 * np.arange(F)  # degrees: ~7 turns
+    ch[:, col] = (spin + 180.0) % 360.0 - 180.0  # wrapped to [-180, 180), as files are
+    v, names = joint_expmaps(dataclasses.replace(m, channels=ch))
+    k = names.index("LeftArm.expmap0")
+    j = v[:, k:k + 3]
+    assert np.max(np.linalg.norm(np.diff(j, axis=0), axis=1)) < 0.01  # 0.5 deg a frame, no jump
+    np.testing.assert_allclose(j[:, [0, 2]], 0.0, atol=1e-9)
+    np.testing.assert_allclose(j[:, 1], np.radians(spin), rtol=1e-6, atol=1e-6)  # unwrapped

@@ -62,6 +62,10 @@ _JITTED: dict = {}
 ROW_BLOCK = 4096
 
 
+#: `rotations` functions that run along the time axis (each frame continues the previous one).
+_ALONG_TIME = frozenset({"make_expmap_continuous", "make_quat_continuous"})
+
+
 def rot(name: str, *arrays, **static) -> np.ndarray:
     """``rotations.<name>(*arrays)`` on NumPy arrays whose first axis is time: padded to a
     length bucket (blocks of `ROW_BLOCK` rows beyond it) and run through one cached jit per
@@ -77,9 +81,15 @@ def rot_blocks(name: str, arrays, static: dict, *, whole_blocks: bool) -> np.nda
     fn = _JITTED.get(key)
     if fn is None:
         fn = _JITTED[key] = _jit.filter_jit(functools.partial(getattr(rotations, name), **static))
+    # A continuity pass runs along time: each block after the first starts from the previous
+    # block's last output row (kept as given, then dropped), so that blocks continue one path.
+    carry = name in _ALONG_TIME
     out = None
-    for s in range(0, max(F, 1), ROW_BLOCK):
-        block = [a[s:s + ROW_BLOCK] for a in arrays]
+    s = 0
+    while s < max(F, 1):
+        block = [a[s:s + ROW_BLOCK - (carry and s > 0)] for a in arrays]
+        if carry and s > 0:
+            block = [np.concatenate([out[s - 1:s].astype(block[0].dtype), block[0]])]
         n = block[0].shape[0]
         Fp = ROW_BLOCK if whole_blocks else bucket(n)
         # Only a short block is padded (a whole one goes as it is: no copy of the rows).
@@ -91,7 +101,12 @@ def rot_blocks(name: str, arrays, static: dict, *, whole_blocks: bool) -> np.nda
         # Copied into a float64 array of our own, writable: under x64 `np.asarray` of a float64
         # JAX array is a read-only view (callers write into the result, e.g. the pelvis's rows
         # of `quat_from_euler`); sliced in NumPy (slicing the JAX array is one more eager op).
-        out[s:s + n] = r[:n]
+        if carry and s > 0:
+            out[s:s + n - 1] = r[1:n]
+            s += n - 1
+        else:
+            out[s:s + n] = r[:n]
+            s += max(n, 1)  # no rows: one pass, as for any other length
     return out
 
 
