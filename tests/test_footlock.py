@@ -123,12 +123,29 @@ def measure(mot, fit, *, foot_lock=True, seconds=SECONDS):
 # 0.297x -> 0.261x, 09_02 0.212x -> 0.191x; the walks 02_01 0.177x -> 0.179x, 07_01 0.096x ->
 # 0.095x, 07_04 0.088x, 07_12 0.100x -> 0.098x; knee steps unchanged. Over the whole stance
 # (landing and mid-stance too) the walks slid more (07_04 0.100x, 07_12 0.106x, 02_01 0.183x).
+# With the heading hold (session ground9, `footlock._heading_hold`: while a point of a foot is
+# down in stance the foot keeps the heading it landed with, so the ankle no longer slides against
+# the planted ball as the model's foot yaws): 02_03 0.251x -> 0.234x and 09_01 0.261x -> 0.226x
+# (both met), 09_02 0.191x -> 0.161x; 02_01 0.179x -> 0.132x, 07_01 0.095x -> 0.082x, 07_04
+# 0.088x -> 0.071x, 07_12 0.098x -> 0.072x; knee steps and flight unchanged (02_03 5.25 deg).
+# Holding the whole orientation (pitch too) helped the flat foot (Bandai walk_happy 0.303x ->
+# 0.152x) but fights the model's heel-off: held flat while the heel rises, the whole foot lifted
+# (walk_happy 8% flight, 09_01 0.568x); faded as the heel starts to rise (0.02-0.1 bands over
+# the least-risen point) it kept 09_01 (0.262x) but lost most of the gain (walk_happy 0.274x,
+# 02_03 0.264x); turned about the foot's low points instead of the ankle, it sank the foot
+# (0.07-0.18 cm below the floor) and skated more (09_01 0.31x).
+# 09_02's knee: the unlocked synthesis already steps 6.16 deg against the capture's 5.69 (the
+# N = 4 model's own swing), so the lock cannot meet it by undoing its own excess. The lock's
+# excess (7.01 deg, early swing, frame 43 of 600) comes from the toe hold: from the stance's end
+# the held toe keeps the leg at the soft reach (knee 163.8 deg for 12 frames, where the model's
+# goes to 171.4) and the swing starts 0.69 units behind the model's foot (the tip slides that far
+# at toe-off), so the knee is 9-11 deg straighter in its fastest flexion, where a given change of
+# hip-to-ankle distance turns it more. The swing's easing warp does not change it (LEAD_WARP 1.0:
+# 7.19 deg, 2.2: 7.04, 3.0: 7.01); fading the toe hold where it stretches the leg (the 30 fps rule,
+# `TOE_REACH_FADE`, at 120 fps) gave 6.52 deg but doubled 02_03's skating (0.498x).
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 NOT_MET = {
-    "02_03": "skating 1.80 vs 7.17 units/s (0.251x; 0.270x before the roll-off; the ankle's heel-off and the toe's "
-             "release are most of it); knee step 5.27 vs 5.28 deg (met)",
-    "09_01": "skating 1.89 vs 7.23 units/s (0.261x; 0.297x before the roll-off); knee step 7.6 vs 8.2 deg (met)",
-    "09_02": "skating 1.87 vs 9.76 units/s (0.191x, met); knee step 7.0 vs 5.7 deg (the unlocked synthesis's is 6.2)",
+    "09_02": "skating 1.58 vs 9.76 units/s (0.161x, met); knee step 7.0 vs 5.7 deg (the unlocked synthesis's is 6.2)",
 }
 
 
@@ -181,15 +198,21 @@ BANDAI_CLIPS = tuple(f"{kind}_{style}" for kind in ("walk", "run") for style in 
 # landing: it rolls about the planted ball, so it moves forward as it rises through the band
 # (walk_happy's heel-off: 3.6 units forward for one band up, the pure pivot about the ball).
 # walk_not-confident meets the knee bound by 0.4 deg (11.9 vs 12.3; 12.27 with the shift eased).
+# With the heading hold (ground9) still 23/30: the walks skate 0-10% less (walk_musical 0.209x ->
+# 0.196x, walk_sad 0.074x -> 0.067x; walk_chimpira 0.109x -> 0.111x), the runs either way
+# (run_happy 0.283x -> 0.276x, run_chimpira 0.483x -> 0.505x, run_old 0.176x -> 0.184x): at 30 fps
+# the hold takes and leaves the foot within a frame or two. run_childish's knee: the unlocked
+# synthesis steps 19.50 deg against the capture's 19.42 (the model's own swing; the lock adds 0.2).
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 BANDAI_NOT_MET = {
-    "walk_happy": "skating 7.31 vs 24.12 units/s (0.303x; 0.364x before the roll-off, 0.338x eased in contact)",
-    "run_active": "skating 13.86 vs 34.69 units/s (0.399x; 0.402x before the roll-off)",
-    "run_angry": "skating 12.66 vs 47.94 units/s (0.264x; 0.270x before the roll-off)",
-    "run_childish": "skating 9.86 vs 45.37 units/s (0.217x, met); knee step 19.7 vs 19.4 deg (as before)",
-    "run_chimpira": "skating 14.94 vs 30.92 units/s (0.483x; 0.494x before the roll-off)",
-    "run_happy": "skating 11.32 vs 39.97 units/s (0.283x, as before the roll-off)",
-    "run_masculinity": "skating 17.36 vs 69.18 units/s (0.251x; 0.258x before the roll-off)",
+    "walk_happy": "skating 7.22 vs 24.12 units/s (0.299x; 0.303x before the heading hold, 0.364x before the roll-off)",
+    "run_active": "skating 14.03 vs 34.69 units/s (0.404x; 0.399x before the heading hold, 0.402x before the roll-off)",
+    "run_angry": "skating 12.45 vs 47.94 units/s (0.260x; 0.264x before the heading hold)",
+    "run_childish": "skating 9.65 vs 45.37 units/s (0.213x, met); knee step 19.7 vs 19.4 deg (the unlocked "
+                    "synthesis's is 19.5)",
+    "run_chimpira": "skating 15.60 vs 30.92 units/s (0.505x; 0.483x before the heading hold)",
+    "run_happy": "skating 11.04 vs 39.97 units/s (0.276x; 0.283x before the heading hold)",
+    "run_masculinity": "skating 17.79 vs 69.18 units/s (0.257x; 0.251x before the heading hold)",
 }
 
 # Within 0.5% of the bound: not strict, since another machine's float32 rounding could tip it
@@ -406,4 +429,35 @@ def test_toe_clearance_turns_the_foot_toes_up_about_its_ankle_outside_stance():
     np.testing.assert_allclose(tip[:, 0], 0.0, atol=1e-6)
     g = jax.grad(lambda h: _toe_clearance(P, A.at[:, 1].set(v + h), A.at[:, 1].set(v + h), contact, 0.0, band, 1,
                                           1.0, 30.0, 1)[1].sum())(heights)
+    assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_heading_hold_keeps_the_landing_heading_and_every_height():
+    """A foot that yaws and pitches through a stance keeps, by the weight, the heading (turn about
+    the up axis) of the stance's first frame of full weight; its pitch, and so every height of
+    the points it turns about the ankle, is left as it is; the identity where the weight is 0."""
+    from fourierjax import rotations
+    from fourierjax._gait.footlock import _heading_hold
+
+    T = 12
+    yaw = jnp.linspace(0.0, 0.6, T)  # radians about y (up)
+    pitch = jnp.linspace(-0.2, 0.3, T)  # about x
+    q = rotations.quat_multiply(rotations.quat_from_expmap(yaw[:, None] * jnp.asarray([[0.0, 1.0, 0.0]])),
+                                rotations.quat_from_expmap(pitch[:, None] * jnp.asarray([[1.0, 0.0, 0.0]])))
+    w = jnp.asarray([0.0, 0.3, 0.7, 1.0, 1.0, 1.0, 1.0, 1.0, 0.6, 0.2, 0.0, 0.0])
+    turn = _heading_hold(q, w, 1)
+    held = rotations.quat_multiply(turn, q)
+    fwd = np.asarray(rotations.quat_apply(held, jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), (T, 3))))
+    heading = np.arctan2(fwd[:, 0], fwd[:, 2])
+    # Full weight from frame 2 (the first with w >= 0.5) on: the heading of frame 2.
+    np.testing.assert_allclose(heading[3:8], float(yaw[2]), atol=1e-5)
+    np.testing.assert_allclose(heading[[0, 10, 11]], np.asarray(yaw)[[0, 10, 11]], atol=1e-6)
+    np.testing.assert_allclose(heading[8], float(yaw[8]) + 0.6 * float(yaw[2] - yaw[8]), atol=1e-5)
+    # A turn about the up axis: heights are left as they are.
+    pts = jnp.asarray([[0.0, -3.0, 8.0], [1.0, -7.0, -2.0]])
+    pts = jnp.broadcast_to(pts[None], (T, 2, 3))
+    before = np.asarray(rotations.quat_apply(jnp.broadcast_to(q[:, None], (T, 2, 4)), pts))
+    after = np.asarray(rotations.quat_apply(jnp.broadcast_to(held[:, None], (T, 2, 4)), pts))
+    np.testing.assert_allclose(after[..., 1], before[..., 1], atol=1e-5)
+    g = jax.grad(lambda q: jnp.sum(_heading_hold(q, w, 1) ** 2 * jnp.arange(4.0)[None]))(q)
     assert np.all(np.isfinite(np.asarray(g)))
