@@ -520,7 +520,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     # turn about the up axis through the ankle) it landed with (`_heading_hold`). The model's
     # foot yaws in stance, and a translation cannot hold both heel and ball of a turning foot:
     # the ankle slid against the planted ball (skating 02_03 0.251x -> 0.234x, 09_01 0.261x ->
-    # 0.226x, 02_01 0.179x -> 0.138x). The turn leaves every height as it is.
+    # 0.226x, 02_01 0.179x -> 0.132x). The turn leaves every height as it is.
     yaw_w = contact * jnp.max(hold_weights(rel, contact, band), -1)  # [T, 2]
     ankles = [leg[2][0] for leg in legs]
     q_yaw = jnp.stack([_heading_hold(quats[:, a], yaw_w[:, f], up) for f, a in enumerate(ankles)], 1)  # [T, 2, 4]

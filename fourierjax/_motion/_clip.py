@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax.numpy as jnp
 import numpy as np
@@ -174,34 +175,53 @@ def closed_loop(motion) -> bool:
 _WINDING_SPAN = np.pi
 
 
+@dataclasses.dataclass(frozen=True)
+class _Channels:
+    """What `winding_joints` reads of each channel name of a layout: its joint
+    (``joint [C]``, an index into ``joints``), whether it is an Euler rotation channel
+    (``*rotation``) and whether it is an angle (not ``root.*``)."""
+
+    joints: tuple[str, ...]
+    joint: np.ndarray
+    euler: np.ndarray
+    angle: np.ndarray
+
+
+@functools.lru_cache(maxsize=64)
+def _channels(names: tuple[str, ...]) -> _Channels:
+    joint = [n.rsplit(".", 1)[0] for n in names]
+    joints = tuple(dict.fromkeys(joint))
+    index = {j: k for k, j in enumerate(joints)}
+    return _Channels(joints, np.array([index[j] for j in joint], int),
+                     np.array([n.endswith("rotation") for n in names], bool),
+                     np.array([not n.startswith("root.") for n in names], bool))
+
+
 def winding_joints(x, names, keep, *, euler_only: bool = True) -> tuple[str, ...]:
     """Joints whose continuous Euler channels (``*rotation``; with ``euler_only=False`` any
     channel but ``root.*``) span more than `_WINDING_SPAN` over the kept frames: they pass near
     gimbal lock, so their Fourier series depend on the rig's joint frames and fit poorly
-    (``representation="tangent"`` has no such joints)."""
-    if not np.any(keep):
+    (``representation="tangent"`` has no such joints). In order of first channel. The channel
+    names are read once per layout (`_channels`), not once per clip: 500 Bandai-1 clips parsed
+    70,000 names, 0.1 CPU-s of the fitting thread; a layout without such channels reads no frame."""
+    ch = _channels(tuple(names))
+    cols = np.flatnonzero(ch.euler if euler_only else ch.angle)
+    keep = np.asarray(keep, bool)
+    if not len(cols) or not keep.any():
         return ()
-    span = np.ptp(x[np.asarray(keep, bool)], axis=0)
-    out = []
-    for n, sp in zip(names, span):
-        joint = n.rsplit(".", 1)[0]
-        angle = n.endswith("rotation") if euler_only else not n.startswith("root.")
-        if angle and sp > _WINDING_SPAN and joint not in out:
-            out.append(joint)
-    return tuple(out)
+    span = np.ptp(x[keep][:, cols], axis=0)
+    return tuple(ch.joints[j] for j in dict.fromkeys(ch.joint[cols[span > _WINDING_SPAN]].tolist()))
 
 
 def _search_weights(x, names, keep) -> tuple[float, ...] | None:
     """Channel weights of the ω search: ``fourier.fit_batch``'s default (1 for rotations, 0 for
     ``root.*``), and 0 for every channel of a joint whose Euler angles wind near gimbal lock
     (their spectrum is the winding, not the gait). None when no joint winds (the default)."""
-    from fourierjax.fourier import angle_channel_mask
-
-    w = np.asarray(angle_channel_mask(names), float)
-    joints = set(winding_joints(x, names, keep, euler_only=False))
+    joints = winding_joints(x, names, keep, euler_only=False)
     if not joints:
         return None
-    w = np.where([n.rsplit(".", 1)[0] in joints for n in names], 0.0, w)
+    ch = _channels(tuple(names))
+    w = np.where(np.isin(ch.joint, [ch.joints.index(j) for j in joints]), 0.0, ch.angle.astype(float))
     if not w.any():
         return None
     return tuple(float(v) for v in w)

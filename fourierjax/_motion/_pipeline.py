@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
-import functools
 import itertools
 import os
 import threading
@@ -19,13 +18,14 @@ import numpy as np
 from fourierjax import _jit, _passes, _saved
 from fourierjax._motion._batch import prepare_chunk
 from fourierjax._motion._clip import (
-    _WINDING_SPAN,
     ClipFit,
     _frame_range,
     _hip_flexion_channel,
     _hip_flexion_phase,
+    _search_weights,
     _steps,
     closed_loop,
+    winding_joints,
 )
 from fourierjax._motion._poses import _position_ve, foot_contacts_of, position_ve_batch
 from fourierjax._motion._segment import feature_mask, glitch_joints, steady_segment
@@ -120,53 +120,6 @@ def _group_key(c: _Clip, fit_kwargs) -> tuple:
     w = None if "channel_weights" in fit_kwargs else _search_weights(c.features, c.names,
                                                                      c.mask.any(axis=1))
     return c.names, w, length_bucket(len(c.features))
-
-
-@dataclasses.dataclass(frozen=True)
-class _Channels:
-    """What `_clip.winding_joints` reads of each channel name of a layout: its joint
-    (``joint [C]``, an index into ``joints``), whether it is an Euler rotation channel
-    (``*rotation``) and whether it is an angle (not ``root.*``)."""
-
-    joints: tuple[str, ...]
-    joint: np.ndarray
-    euler: np.ndarray
-    angle: np.ndarray
-
-
-@functools.lru_cache(maxsize=64)
-def _channels(names: tuple[str, ...]) -> _Channels:
-    joint = [n.rsplit(".", 1)[0] for n in names]
-    joints = tuple(dict.fromkeys(joint))
-    index = {j: k for k, j in enumerate(joints)}
-    return _Channels(joints, np.array([index[j] for j in joint], int),
-                     np.array([n.endswith("rotation") for n in names], bool),
-                     np.array([not n.startswith("root.") for n in names], bool))
-
-
-def winding_joints(x, names, keep, *, euler_only: bool = True) -> tuple[str, ...]:
-    """`_clip.winding_joints` (the same joints, in the same order), the channel names read once
-    per layout (`_channels`), not once per clip: 500 Bandai-1 clips parsed 70,000 names (0.1
-    CPU-s of the fitting thread); a layout without such channels (tangent) reads no frame."""
-    ch = _channels(tuple(names))
-    cols = np.flatnonzero(ch.euler if euler_only else ch.angle)
-    keep = np.asarray(keep, bool)
-    if not len(cols) or not keep.any():
-        return ()
-    span = np.ptp(x[keep][:, cols], axis=0)
-    return tuple(ch.joints[j] for j in dict.fromkeys(ch.joint[cols[span > _WINDING_SPAN]].tolist()))
-
-
-def _search_weights(x, names, keep) -> tuple[float, ...] | None:
-    """`_clip._search_weights` (the same weights), through `winding_joints` above."""
-    joints = winding_joints(x, names, keep, euler_only=False)
-    if not joints:
-        return None
-    ch = _channels(tuple(names))
-    w = np.where(np.isin(ch.joint, [ch.joints.index(j) for j in joints]), 0.0, ch.angle.astype(float))
-    if not w.any():
-        return None
-    return tuple(float(v) for v in w)
 
 
 def _fit_clips(clips, num_harmonics, representation, dtype, fit_kwargs, timings,
