@@ -540,3 +540,22 @@ def test_knee_speed_limit_is_the_largest_knee_step_per_second():
     with pytest.raises(UserError, match="positions"):
         gait.knee_speed_limit(p[:1], dt, bm)
 
+
+def test_knee_speed_is_stored_with_the_model_and_old_files_have_none(tmp_path):
+    from fourierjax import model_io
+
+    mot, fit = _fits()["07_01"]
+    limit = gait.fit_knee_speed(fit, mot)
+    from fourierjax import motion as M
+
+    sub = mot[fit.frame_start:fit.frame_stop]
+    np.testing.assert_allclose(limit, gait.knee_speed_limit(M.motion_joint_positions(sub), mot.frame_time_s,
+                                                            fit.body_map))
+    assert limit.shape == (2,) and np.all(limit > 0)
+    path = tmp_path / "m.npz"
+    model_io.save_model(path, fit.model, motion=mot, body_map=fit.body_map, knee_speed_rad_s=limit)
+    np.testing.assert_allclose(model_io.load_model(path).knee_speed_rad_s, limit)
+    model_io.save_model(path, fit.model, motion=mot, body_map=fit.body_map)
+    assert model_io.load_model(path).knee_speed_rad_s is None
+    with pytest.raises(UserError, match="knee_speed_rad_s"):
+        model_io.save_model(path, fit.model, motion=mot, knee_speed_rad_s=[1.0, -2.0])
