@@ -34,23 +34,28 @@ def knee_angles(positions, body_map):
     return np.stack(out, -1)
 
 
-def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
+def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None, knee_cap=True, frame_time_s=None):
     """dict: skating synthesized and captured (units/s), depth below the floor (m), largest knee
     step synthesized and captured (degrees), the most straight knee (degrees) and the flight
     fraction synthesized and captured (`gait.contact_flight_fraction`; the capture on its fitted
     ground plane, `contacts.estimate_ground`) of a clip's
     locked synthesis, through an independent FK of the written motion. `path` (a `GroundPath`)
-    walks it along the path (`gait.synthesize_gait(path=...)`)."""
+    walks it along the path (`gait.synthesize_gait(path=...)`). `knee_cap` passes the capture's
+    largest knee speed (`gait.fit_knee_speed`) to the lock; `frame_time_s` synthesizes at another
+    frame rate than the clip's (the capture is measured at its own)."""
     from fourierjax import gait
     from fourierjax import motion as M
     from fourierjax.io.gait_bvh import gait_motion, grounded_motion
 
-    bm, dt = fit.body_map, mot.frame_time_s
+    bm, dt_cap = fit.body_map, mot.frame_time_s
+    dt = dt_cap if frame_time_s is None else float(frame_time_s)
     sub = mot[fit.frame_start:fit.frame_stop]
     iv = gait.contact_intervals(fit.model, mot.skeleton(), body_map=bm, contacts=M.foot_contacts_of(sub, body_map=bm),
-                                frame_time_s=dt, phase_shift=fit.phase_shift)
+                                frame_time_s=dt_cap, phase_shift=fit.phase_shift)
     T = int(round(seconds / dt))
     kw = {} if path is None else {"path": path}
+    if knee_cap:
+        kw["knee_speed_rad_s"] = gait.fit_knee_speed(fit, mot)
     r = gait.synthesize_gait(fit.model, mot.skeleton(), T, dt, body_map=bm, contact_intervals=iv,
                              foot_lock=foot_lock, **kw)
     if path is None:
@@ -60,19 +65,20 @@ def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None):
     p_syn = M.foot_positions_of(out, body_map=bm)
     p_cap = M.foot_positions_of(sub, body_map=bm)
     s_syn = float(gait.contact_skating(p_syn, dt, body_map=bm).mean_speed)
-    s_cap = float(gait.contact_skating(p_cap, dt, body_map=bm).mean_speed)
+    s_cap = float(gait.contact_skating(p_cap, dt_cap, body_map=bm).mean_speed)
     low = p_syn[..., bm.up_axis] - np.asarray(r.clearance)[None] - float(r.floor)  # over the captured floor
     depth_m = max(0.0, -float(low.min())) * bm.metres_per_unit
     from fourierjax import contacts
 
-    ground = contacts.estimate_ground(p_cap, dt, up_axis=bm.up_axis)
+    ground = contacts.estimate_ground(p_cap, dt_cap, up_axis=bm.up_axis)
     f_cap = float(gait.contact_flight_fraction(p_cap, body_map=bm,
                                                floor=contacts.floor_heights(ground, p_cap, up_axis=bm.up_axis)))
     f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm,
                                                floor=float(r.floor) + np.asarray(r.clearance)[None]))
     ka_syn = knee_angles(M.motion_joint_positions(out), bm)
     k_syn = np.abs(np.diff(ka_syn, axis=0)).max()
-    k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()
+    # The capture's largest knee speed, as a step at the synthesized frame rate.
+    k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max() * dt / dt_cap
     return {"skating_synth": s_syn, "skating_capture": s_cap, "ratio": s_syn / s_cap, "depth_m": depth_m,
             "knee_step_synth_deg": float(np.degrees(k_syn)), "knee_step_capture_deg": float(np.degrees(k_cap)),
             "straightest_knee_deg": float(np.degrees(ka_syn.max())), "flight_synth": f_syn, "flight_capture": f_cap,
@@ -134,6 +140,8 @@ def main(argv=None) -> int:
     ap.add_argument("--path", default=None, help="e.g. circle:3 (metres)")
     ap.add_argument("--out", default=None, help="JSON file")
     ap.add_argument("--cache", default=None, help="folder of pickled fits (development)")
+    ap.add_argument("--no-knee-cap", action="store_true", help="without the capture's knee speed cap")
+    ap.add_argument("--fps", type=float, default=None, help="synthesize at this frame rate (default: the clip's)")
     ap.add_argument("--breakdown", action="store_true",
                     help="also print the synthesized skating by foot point and by landing / mid / release")
     args = ap.parse_args(argv)
@@ -151,12 +159,13 @@ def main(argv=None) -> int:
             from fourierjax.cli._gait_args import parse_path
 
             path = parse_path(args.path, f.body_map.metres_per_unit)
-        row = measure(m, f, path=path)
+        row = measure(m, f, path=path, knee_cap=not args.no_knee_cap,
+                      frame_time_s=None if args.fps is None else 1.0 / args.fps)
         _, mot = row.pop("result"), row.pop("motion")
         if args.breakdown:
             from fourierjax import motion as M
 
-            row["breakdown"] = skating_breakdown(M.foot_positions_of(mot, body_map=f.body_map), m.frame_time_s,
+            row["breakdown"] = skating_breakdown(M.foot_positions_of(mot, body_map=f.body_map), mot.frame_time_s,
                                                  f.body_map).tolist()
         row["clip"] = pathlib.Path(n).stem.replace("dataset-1_", "")
         row["met"] = met(row)

@@ -35,6 +35,7 @@ from fourierjax._gait.hip import (
     lowest_points,
     root_height,
 )
+from fourierjax._gait.kneespeed import fit_knee_speed, knee_angles, knee_speed_limit
 from fourierjax._gait.metrics import (
     SkatingStats,
     contact_flight_fraction,
@@ -70,6 +71,7 @@ __all__ = [
     "feet_of",
     "fit_contact_intervals",
     "fit_hip_rule",
+    "fit_knee_speed",
     "flight_fraction",
     "follow_path",
     "foot_skating",
@@ -84,6 +86,8 @@ __all__ = [
     "init_hold_state",
     "integrate_phase",
     "integrate_root",
+    "knee_angles",
+    "knee_speed_limit",
     "intervals_from_contacts",
     "intervals_from_model",
     "leg_heights",

@@ -143,10 +143,14 @@ def measure(mot, fit, *, foot_lock=True, seconds=SECONDS):
 # hip-to-ankle distance turns it more. The swing's easing warp does not change it (LEAD_WARP 1.0:
 # 7.19 deg, 2.2: 7.04, 3.0: 7.01); fading the toe hold where it stretches the leg (the 30 fps rule,
 # `TOE_REACH_FADE`, at 120 fps) gave 6.52 deg but doubled 02_03's skating (0.498x).
+# With the knee-speed cap (session ground10, `footlock._knee_speed_cap`: where the foot is free,
+# the knee's angle changes no faster than the capture's largest knee speed, `gait.fit_knee_speed`,
+# passed as `synthesize_gait(knee_speed_rad_s=)`): 09_02 7.03 -> 5.61 deg (met), 02_03 5.25 ->
+# 4.98, 09_01 7.6 -> 6.6; skating and flight unchanged on all 7. Synthesized at 60 fps: 09_02
+# 13.7 -> 11.3 deg against the capture's speed as a 60 fps step, 11.4; at 30 fps 24.8 -> 22.5
+# against 22.7.
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
-NOT_MET = {
-    "09_02": "skating 1.58 vs 9.76 units/s (0.161x, met); knee step 7.0 vs 5.7 deg (the unlocked synthesis's is 6.2)",
-}
+NOT_MET: dict[str, str] = {}
 
 
 @pytest.mark.parametrize("name", [
@@ -202,14 +206,27 @@ BANDAI_CLIPS = tuple(f"{kind}_{style}" for kind in ("walk", "run") for style in 
 # 0.196x, walk_sad 0.074x -> 0.067x; walk_chimpira 0.109x -> 0.111x), the runs either way
 # (run_happy 0.283x -> 0.276x, run_chimpira 0.483x -> 0.505x, run_old 0.176x -> 0.184x): at 30 fps
 # the hold takes and leaves the foot within a frame or two. run_childish's knee: the unlocked
-# synthesis steps 19.50 deg against the capture's 19.42 (the model's own swing; the lock adds 0.2).
+# synthesis steps 19.50 deg against the capture's 19.42 (the model's own swing; the lock adds 0.2);
+# with the knee-speed cap (ground10) 19.74 -> 19.2 deg (met), 24/30; the other 29 clips unchanged.
+# Synthesized at 60 fps: 9.9 -> 9.6 deg against the capture's speed as a 60 fps step, 9.7; at
+# 120 fps 5.0 deg against 4.9 either way: there the largest step is the lock's, in stance (the
+# knee flexing after the landing, weight 1), which the cap leaves alone.
+# Tried, not kept (ground10): holding the foot's roll with its heading (every change since the
+# landing's first frame of full weight but the pitch about the foot's lateral axis, heights
+# measured again after the turn): Bandai-1 25/30 (run_masculinity 0.257x -> 0.243x met,
+# run_chimpira 0.505x -> 0.457x, run_active 0.404x -> 0.397x, run_happy 0.276x -> 0.267x,
+# run_angry 0.260x -> 0.254x, walk_happy 0.299x -> 0.296x) but the CMU clips skated 3-17% more
+# (07_12 0.072x -> 0.084x, 07_04 0.071x -> 0.082x, 02_01 0.132x -> 0.141x, 02_03 0.234x ->
+# 0.237x, 09_01 0.226x -> 0.233x; their landing heel rolls flat after the reference frame) and
+# two Bandai runs flew more (run_tired 19% -> 23%). The roll taken at mid-stance instead (about
+# the foot's forward axis): CMU still mixed (07_01 0.082x -> 0.071x, 07_12 0.085x, 02_01
+# 0.140x), Bandai run_active 0.431x. Keeping the heading hold on for 0.1 s after the phase's
+# stance ends (the toe still in the band): run_active 0.404x -> 0.434x, run_chimpira 0.496x.
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 BANDAI_NOT_MET = {
     "walk_happy": "skating 7.22 vs 24.12 units/s (0.299x; 0.303x before the heading hold, 0.364x before the roll-off)",
     "run_active": "skating 14.03 vs 34.69 units/s (0.404x; 0.399x before the heading hold, 0.402x before the roll-off)",
     "run_angry": "skating 12.45 vs 47.94 units/s (0.260x; 0.264x before the heading hold)",
-    "run_childish": "skating 9.65 vs 45.37 units/s (0.213x, met); knee step 19.7 vs 19.4 deg (the unlocked "
-                    "synthesis's is 19.5)",
     "run_chimpira": "skating 15.60 vs 30.92 units/s (0.505x; 0.483x before the heading hold)",
     "run_happy": "skating 11.04 vs 39.97 units/s (0.276x; 0.283x before the heading hold)",
     "run_masculinity": "skating 17.79 vs 69.18 units/s (0.257x; 0.251x before the heading hold)",
@@ -269,9 +286,10 @@ def test_lock_feet_vmaps_over_characters_and_is_differentiable():
     feats = jnp.stack([r.features, r.features.at[:, 3:].multiply(1.01)])
     roots = jnp.stack([r.root_position, r.root_position])
 
-    def one(f, root, smooth_frames=0):
+    def one(f, root, smooth_frames=0, knee_speed=None):
         return gait.lock_feet(f, sk, w, body_map=bm, representation="euler", root_position=root,
-                              clearance=r.clearance, smooth_frames=smooth_frames)
+                              clearance=r.clearance, smooth_frames=smooth_frames, knee_speed_rad_s=knee_speed,
+                              frame_time_s=dt)
 
     batched = jax.jit(jax.vmap(one))(feats, roots)
     for i in range(2):
@@ -283,6 +301,15 @@ def test_lock_feet_vmaps_over_characters_and_is_differentiable():
     # One frame of easing (30 fps): the band lift (`footlock._band_lift`) is on the path.
     g = jax.grad(lambda f: jnp.sum(one(f, roots[0], 1)[:, 3:] ** 2))(feats[0])
     assert np.all(np.isfinite(np.asarray(g))) and np.abs(np.asarray(g)).max() > 0
+    # The knee-speed cap, tight enough to act on the swing: under vmap and grad (in the cap too).
+    cap = jnp.asarray([2.0, 2.5])  # rad/s; 07_01's swing knee reaches about 6
+    capped = jax.jit(jax.vmap(lambda f, root: one(f, root, 3, cap)))(feats, roots)
+    np.testing.assert_allclose(np.asarray(capped[1]), np.asarray(one(feats[1], roots[1], 3, cap)), atol=1e-4)
+    assert np.abs(np.asarray(capped[0]) - np.asarray(one(feats[0], roots[0], 3))).max() > 1e-3
+    g = jax.grad(lambda c: jnp.sum(one(feats[0], roots[0], 3, c)[:, 3:] ** 2))(cap)
+    assert np.all(np.isfinite(np.asarray(g))) and np.abs(np.asarray(g)).max() > 0
+    with pytest.raises(UserError, match="knee_speed_rad_s"):
+        one(feats[0], roots[0], 3, jnp.zeros((3,)))
 
 
 def test_foot_lock_under_vmap_needs_the_map_and_intervals():
@@ -461,3 +488,85 @@ def test_heading_hold_keeps_the_landing_heading_and_every_height():
     np.testing.assert_allclose(after[..., 1], before[..., 1], atol=1e-5)
     g = jax.grad(lambda q: jnp.sum(_heading_hold(q, w, 1) ** 2 * jnp.arange(4.0)[None]))(q)
     assert np.all(np.isfinite(np.asarray(g)))
+
+
+def test_knee_speed_cap_spreads_a_fast_knee_step_over_its_neighbours():
+    """Where the knee already changes slower than the cap the goals stay; a faster change is
+    replaced by the mean of its Lipschitz envelopes (no lag: symmetric in time), whose steps are
+    within the cap; the stance (`free` 0) keeps its goals; gradients are finite."""
+    from fourierjax._gait.footlock import _knee_speed_cap
+
+    T, l1, l2 = 40, 4.0, 4.0
+    k = jnp.arange(T, dtype=jnp.float32)
+    theta = 2.0 + 0.4 * jnp.tanh((k - 20.0) / 1.5)  # a 0.8 rad flexion, 0.13 rad a frame at its fastest
+    d = jnp.sqrt(l1 ** 2 + l2 ** 2 - 2 * l1 * l2 * jnp.cos(theta))
+    H = jnp.zeros((T, 3))
+    G = jnp.stack([0.3 * d, -jnp.sqrt(0.91) * d, jnp.zeros(T)], -1)
+    ones, step = jnp.ones((T,)), 0.08
+
+    def knee(g):
+        dd = jnp.linalg.norm(g - H, axis=-1)
+        return np.arccos(np.clip((l1 ** 2 + l2 ** 2 - np.asarray(dd) ** 2) / (2 * l1 * l2), -1, 1))
+
+    G2, moved = _knee_speed_cap(H, G, jnp.full((T,), l1), jnp.full((T,), l2), step, ones, 6)
+    th2 = knee(G2)
+    assert np.abs(np.diff(knee(G))).max() > 0.12
+    assert np.abs(np.diff(th2)).max() <= step + 1e-5
+    np.testing.assert_allclose(th2[[0, 1, -2, -1]], np.asarray(theta)[[0, 1, -2, -1]], atol=1e-5)
+    assert not bool(moved[0]) and bool(moved[18]) and bool(moved[22])
+    np.testing.assert_allclose(th2[20], float(theta[20]), atol=1e-4)  # centred: the midpoint stays
+    # The goals move along the hip-to-goal line only.
+    u1 = np.asarray(G / jnp.linalg.norm(G, axis=-1, keepdims=True))
+    u2 = np.asarray(G2 / jnp.linalg.norm(G2, axis=-1, keepdims=True))
+    np.testing.assert_allclose(u1, u2, atol=1e-5)
+    stance = ones.at[15:25].set(0.0)
+    G3, moved3 = _knee_speed_cap(H, G, jnp.full((T,), l1), jnp.full((T,), l2), step, stance, 6)
+    np.testing.assert_array_equal(np.asarray(G3[15:25]), np.asarray(G[15:25]))
+    assert not bool(jnp.any(moved3[15:25]))
+    g = jax.grad(lambda g: jnp.sum(_knee_speed_cap(H, g, jnp.full((T,), l1), jnp.full((T,), l2), step, ones,
+                                                   6)[0] ** 2))(G)
+    assert np.all(np.isfinite(np.asarray(g)))
+    # A per-frame cap (a speed schedule): each step within its own frame's.
+    steps = jnp.where(k < 20, 0.06, 0.1)
+    G4, _ = _knee_speed_cap(H, G, jnp.full((T,), l1), jnp.full((T,), l2), steps, ones, 12)
+    assert np.all(np.abs(np.diff(knee(G4))) <= np.asarray(steps)[:-1] + 1e-5)
+
+
+def test_knee_speed_limit_is_the_largest_knee_step_per_second():
+    from types import SimpleNamespace
+
+    T, dt = 30, 1 / 60
+    ang = np.linspace(0.0, 1.2, T) ** 2  # the left knee bends faster and faster
+    leg_l = SimpleNamespace(hip=0, knee=1, ankle=2)
+    leg_r = SimpleNamespace(hip=3, knee=4, ankle=5)
+    bm = SimpleNamespace(left=leg_l, right=leg_r)
+    p = np.zeros((T, 6, 3))
+    p[:, 0] = [0.0, 1.0, 0.0]  # hip over the knee at the origin
+    p[:, 2] = np.stack([np.sin(ang), -np.cos(ang), 0 * ang], -1)  # the shin turns by `ang` from straight
+    p[:, 3:6] = p[:, 0:3] + [5.0, 0.0, 0.0]
+    p[:, 5] = [5.0, -1.0, 0.0]  # the right leg stays straight
+    limit = gait.knee_speed_limit(p, dt, bm)
+    np.testing.assert_allclose(limit, [np.abs(np.diff(ang)).max() / dt, 0.0], atol=1e-6)
+    np.testing.assert_allclose(gait.knee_angles(p, bm)[:, 0], np.pi - ang, atol=1e-6)
+    with pytest.raises(UserError, match="positions"):
+        gait.knee_speed_limit(p[:1], dt, bm)
+
+
+def test_knee_speed_is_stored_with_the_model_and_old_files_have_none(tmp_path):
+    from fourierjax import model_io
+
+    mot, fit = _fits()["07_01"]
+    limit = gait.fit_knee_speed(fit, mot)
+    from fourierjax import motion as M
+
+    sub = mot[fit.frame_start:fit.frame_stop]
+    np.testing.assert_allclose(limit, gait.knee_speed_limit(M.motion_joint_positions(sub), mot.frame_time_s,
+                                                            fit.body_map))
+    assert limit.shape == (2,) and np.all(limit > 0)
+    path = tmp_path / "m.npz"
+    model_io.save_model(path, fit.model, motion=mot, body_map=fit.body_map, knee_speed_rad_s=limit)
+    np.testing.assert_allclose(model_io.load_model(path).knee_speed_rad_s, limit)
+    model_io.save_model(path, fit.model, motion=mot, body_map=fit.body_map)
+    assert model_io.load_model(path).knee_speed_rad_s is None
+    with pytest.raises(UserError, match="knee_speed_rad_s"):
+        model_io.save_model(path, fit.model, motion=mot, knee_speed_rad_s=[1.0, -2.0])

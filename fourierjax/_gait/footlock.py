@@ -61,6 +61,9 @@ ROLL_BANDS = (0.25, 0.5)
 #: Each contact's hold starts the easing's frames early (`_plant`'s `lead`), and the swing's
 #: easing towards it is warped by this power.
 LEAD_WARP = 1.6
+#: The knee-speed cap (`_knee_speed_cap`) is a Lipschitz envelope over this many seconds on each
+#: side of a frame, aiming at this share of the cap (float32 rounding of the written motion).
+KNEE_CAP_WINDOW_S, KNEE_CAP_MARGIN = 0.1, 0.99
 
 
 def _smoothstep(x):
@@ -496,8 +499,45 @@ def _before_still(down_loose, down_strict):
     return down_loose & ~seen
 
 
+def _knee_speed_cap(H, G, l1, l2, step, free, window):
+    """Ankle goals `[T, 3]` (from hip `H` to goal `G`, thigh `l1`, shin `l2`, `[T]`) whose knee
+    angle changes by at most `step[t]` radians from frame t to t + 1 (`[T]`) where the foot is
+    free (`free` `[T]` in [0, 1]; the stance keeps its goals), and whether a goal moved (`[T]`).
+
+    The knee angle of the two-bone chain is a function of the hip-to-goal distance. Its series is
+    replaced by the mean of its lower and upper Lipschitz envelopes over `window` frames each
+    side (`min_k theta(t + k) + |S(t + k) - S(t)|` and `max_k theta(t + k) - |S(t + k) - S(t)|`,
+    `S` the running sum of `step`): equal to it where it already changes slower, no lag
+    (symmetric in time), and the goal moves along
+    the hip-to-goal line to the new distance. Faster steps (the low-harmonic model's early swing,
+    CMU 09_02's knee at 6.2 deg a frame against the capture's 5.7) are spread over their
+    neighbours. An excess that lasts longer than the window is spread only in part."""
+    from fourierjax._math import safe_sqrt
+
+    HG = G - H
+    d = safe_norm(HG)
+    cos = jnp.clip((l1 ** 2 + l2 ** 2 - d ** 2) / (2.0 * l1 * l2), -1.0 + 1e-6, 1.0 - 1e-6)
+    theta = jnp.arccos(cos)
+    T = theta.shape[0]
+    inf = jnp.full((window,), jnp.inf, theta.dtype)
+    lo_p = jnp.concatenate([inf, theta, inf])
+    hi_p = jnp.concatenate([-inf, theta, -inf])
+    S = jnp.concatenate([jnp.zeros((1,), theta.dtype), jnp.cumsum(jnp.broadcast_to(step, (T,))[:-1])])
+    S_p = jnp.concatenate([jnp.repeat(S[:1], window), S, jnp.repeat(S[-1:], window)])  # beside the inf
+    lower, upper = theta, theta
+    for k in range(1, window + 1):
+        for off in (window - k, window + k):
+            dist = jnp.abs(S_p[off:off + T] - S)
+            lower = jnp.minimum(lower, lo_p[off:off + T] + dist)
+            upper = jnp.maximum(upper, hi_p[off:off + T] - dist)
+    capped = theta + free * (0.5 * (lower + upper) - theta)
+    d2 = safe_sqrt(l1 ** 2 + l2 ** 2 - 2.0 * l1 * l2 * jnp.cos(capped))
+    moved = capped != theta
+    return jnp.where(moved[:, None], H + HG * (d2 / jnp.maximum(d, 1e-9))[:, None], G), moved
+
+
 def _lock(features, skeleton, contact, root_position, clearance, ground, band, *, representation,
-          body_map, legs, smooth_frames=0):
+          body_map, legs, smooth_frames=0, knee_step=None, knee_window=0):
     from fourierjax.features import local_pose_from_features
     from fourierjax.kinematics import forward_kinematics
 
@@ -699,6 +739,13 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         if 1 <= smooth_frames < TOE_HOLD_FRAMES:
             lift = _band_lift(P, A, G, 1.0 - W[:, f], root_position, band, ground + clearance[f], up, sign)
             G = G + lift[:, None] * (sign * upv)[None]
+        if knee_step is not None:
+            # The knee's speed where the foot is free (swing) stays within the capture's
+            # (`knee_step`, radians a frame; `_knee_speed_cap`): the stance's hold is untouched.
+            free = (1.0 - contact[:, f]) * (1.0 - W[:, f])
+            G, capped = _knee_speed_cap(H, G, l1, l2, KNEE_CAP_MARGIN * knee_step[:, f], free, knee_window)
+        else:
+            capped = jnp.zeros(features.shape[:1], bool)
         K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, K - H)
         R1 = quat_between(K - H, K2 - H)
         R2 = quat_between(rotations.quat_apply(R1, A - K), G - K2)
@@ -709,7 +756,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         q_foot = qm(q_yaw[:, f], Q[:, ankle])
         q_foot = q_foot if q_clear is None else qm(q_clear, q_foot)
         q_ankle = qm(qc(Q[:, parents[ankle]]), qm(qc(R1), qm(qc(R2), q_foot)))
-        active = (W[:, f] > 0) | (gap[:, f] < 0) | jnp.any(shift[:, f] != 0, -1) | (yaw_w[:, f] > 0)
+        active = (W[:, f] > 0) | (gap[:, f] < 0) | jnp.any(shift[:, f] != 0, -1) | (yaw_w[:, f] > 0) | capped
         if q_clear is not None:
             active = active | (phi > 0)
         for q, col, order in ((q_hip, c_hip, o_hip), (q_knee, c_knee, o_knee), (q_ankle, c_ankle, o_ankle)):
@@ -743,6 +790,7 @@ def lock_feet(
     contact_band: Float[ArrayLike, ""] | None = None,
     return_feet: bool = False,
     smooth_frames: int = 0,
+    knee_speed_rad_s: Float[ArrayLike, "*T 2"] | None = None,
 ) -> Float[Array, "T C"] | tuple[Float[Array, "T C"], Float[Array, "T 2 P 3"]]:
     """Planted feet for synthesized feature frames: a post-process by two-bone leg IK.
 
@@ -768,7 +816,7 @@ def lock_feet(
         representation: the features' ("euler" or "expmap"); static.
         root_position: `[T, 3]` world pelvis positions (`GaitResult.root_position`); default the
             trapezoid integral of `root.vx, root.vz` (needs `frame_time_s`) at height `root.y`.
-        frame_time_s: seconds per frame (only without `root_position`).
+        frame_time_s: seconds per frame (without `root_position`, and with `knee_speed_rad_s`).
         clearance: `[2, P]` sole clearances of the foot points (`GaitResult.clearance`); default 0.
         ground: floor height (file units; the hip rule's ground is 0).
         contact_band: a foot whose lowest point is within this height (file units) of the floor
@@ -781,6 +829,11 @@ def lock_feet(
             they are. The frames also set the landing's lead-in and, below `TOE_HOLD_FRAMES`,
             the 30 fps toe hold and band lift.
             `synthesize_gait` uses `SMOOTH_S` seconds of frames.
+        knee_speed_rad_s: `[2]` (left, right), scalar or `[T, 2]` (per frame, e.g. scaled by a
+            speed schedule): the largest knee angular speed (radians per second;
+            `knee_speed_limit` of the captured clip) where the foot is free
+            (out of stance and not held): the swing's knee is slowed to it (`_knee_speed_cap`,
+            over `KNEE_CAP_WINDOW_S` each side). Needs `frame_time_s`. Default None: no cap.
 
     Returns:
         `[T, C]` features (and the foot points with `return_feet`). Pure: jit, vmap over
@@ -809,13 +862,24 @@ def lock_feet(
     if clearance.shape != (2, P):
         raise UserError(f"lock_feet: `clearance` must be [2, {P}], got {clearance.shape}")
     legs = _leg_columns(skeleton, representation, body_map)
+    knee_step, knee_window = None, 0
+    if knee_speed_rad_s is not None:
+        if frame_time_s is None:
+            raise UserError("lock_feet: `knee_speed_rad_s` needs `frame_time_s` (seconds per frame)")
+        knee_speed = jnp.asarray(knee_speed_rad_s, features.dtype)
+        if knee_speed.shape not in ((), (2,), (T, 2)):
+            raise UserError(f"lock_feet: `knee_speed_rad_s` must be a scalar, [2] (left, right) or [T={T}, 2], "
+                            f"got {knee_speed.shape}")
+        knee_step = jnp.broadcast_to(knee_speed, (T, 2)) * float(frame_time_s)
+        knee_window = max(1, int(round(KNEE_CAP_WINDOW_S / float(frame_time_s))))
     if contact_band is None:
         contact_band = CONTACT_HEIGHT_FRACTION * float(body_map.height)
     out, feet, _ = _lock(features, skeleton, contact, root_position, clearance,
                          jnp.asarray(ground, features.dtype),
                          jnp.asarray(contact_band, features.dtype),
                          representation=representation, body_map=body_map, legs=legs,
-                         smooth_frames=integer(smooth_frames, "lock_feet: `smooth_frames`", 0))
+                         smooth_frames=integer(smooth_frames, "lock_feet: `smooth_frames`", 0),
+                         knee_step=knee_step, knee_window=knee_window)
     return (out, feet) if return_feet else out
 
 

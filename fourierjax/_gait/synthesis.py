@@ -178,6 +178,7 @@ def synthesize_gait(
     path: GroundPath | None = None,
     path_smoothing: Float[ArrayLike, ""] | None = None,
     floor: Float[ArrayLike, ""] | None = None,
+    knee_speed_rad_s: Float[ArrayLike, "*2"] | None = None,
 ) -> GaitResult:
     """Synthesize a gait under Unuma's step constraints (§3.1): step, speed, gait, jump.
 
@@ -230,6 +231,10 @@ def synthesize_gait(
             (floor and clearance) for a model edited from it (`style.superpose`,
             `style.add_noise`): the default reads the floor under the model's own root height,
             which an edit moves off its legs.
+        knee_speed_rad_s: the foot lock's cap on the knee's angular speed where the foot is
+            free, `[2]` (left, right) or scalar, radians per second (`knee_speed_limit` of the
+            captured clip, its largest knee speed), scaled per frame by `speed` and `|step|`;
+            default None: no cap (`lock_feet`).
 
     Returns:
         A `GaitResult`. Jitted; differentiable in the model, `step`, `speed`, `gait`, `jump`
@@ -308,7 +313,15 @@ def synthesize_gait(
             return _world_feet(result, skeleton, body_map=body_map, representation=model.representation)
     if not foot_lock:
         return result
-    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt)
+    if knee_speed_rad_s is not None:
+        knee_speed_rad_s = jnp.asarray(knee_speed_rad_s, dtype)
+        if knee_speed_rad_s.shape not in ((), (2,)):
+            raise UserError(f"{where}: `knee_speed_rad_s` must be a scalar or [2] (left, right), got "
+                            f"{knee_speed_rad_s.shape}")
+        # The knee turns faster by the speed schedule and by the step's amplitude scale.
+        knee_speed_rad_s = (jnp.broadcast_to(knee_speed_rad_s, (2,))[None, :]
+                            * (speed * jnp.abs(jnp.asarray(step, dtype)))[:, None])
+    return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt, knee_speed_rad_s)
 
 
 def _path_body_map(where, model, skeleton, body_map):
@@ -345,7 +358,7 @@ def _world_feet(result, skeleton, *, body_map, representation):
     return eqx.tree_at(lambda r: (r.foot_positions, r.lowest), result, (feet, lowest))
 
 
-def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, frame_time_s):
+def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, frame_time_s, knee_speed_rad_s=None):
     from fourierjax._gait.common import model_body_map
     from fourierjax._gait.footlock import SMOOTH_S, intervals_from_model
 
@@ -362,20 +375,22 @@ def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, fram
     iv = jnp.asarray(contact_intervals, result.features.dtype)
     if iv.shape != (2, 2):
         raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
-    return _locked_result(result, skeleton, iv, body_map=body_map,
+    return _locked_result(result, skeleton, iv, knee_speed_rad_s, body_map=body_map,
                           representation=model.representation,
-                          smooth_frames=int(round(SMOOTH_S / frame_time_s)))
+                          smooth_frames=int(round(SMOOTH_S / frame_time_s)), frame_time_s=float(frame_time_s))
 
 
 @saved
 @filter_jit
-def _locked_result(result, skeleton, intervals, *, body_map, representation, smooth_frames):
+def _locked_result(result, skeleton, intervals, knee_speed_rad_s, *, body_map, representation, smooth_frames,
+                   frame_time_s):
     from fourierjax._gait.footlock import contact_weights, lock_feet
 
     weights = contact_weights(result.phase, intervals)  # in the program: 15 eager ones outside
     feats, feet = lock_feet(result.features, skeleton, weights, body_map=body_map, representation=representation,
                             root_position=result.root_position, clearance=result.clearance, ground=result.floor,
-                            return_feet=True, smooth_frames=smooth_frames)
+                            return_feet=True, smooth_frames=smooth_frames, knee_speed_rad_s=knee_speed_rad_s,
+                            frame_time_s=frame_time_s)
     lowest = lowest_points(feet, result.clearance, up_axis=int(body_map.up_axis)) - result.floor
     return eqx.tree_at(lambda r: (r.features, r.foot_positions, r.lowest), result, (feats, feet, lowest))
 

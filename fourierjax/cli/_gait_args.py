@@ -171,7 +171,7 @@ def skating_summary(result, frame_time_s: float, bmap, source=None) -> str:
 
 
 def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body_map=None, *,
-               contact_intervals=None, source=None, fitted=None):
+               contact_intervals=None, source=None, fitted=None, knee_speed_rad_s=None):
     """Synthesize `num_frames` under the step constraints, on any rig the body map understands.
 
     Arguments:
@@ -186,6 +186,8 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         source: the fitted frames of the source clip (a `Motion`) for the skating comparison.
         fitted: the fitted model `model` was edited from (`--add`, `--noise`), or None: its
             ground (floor and sole clearances, `gait.model_ground`) is the synthesis's.
+        knee_speed_rad_s: `[2]` the source clip's largest knee speed stored with the model
+            (`gait.fit_knee_speed`): the foot lock's cap on the swing's knee; None: no cap.
 
     Returns:
         `(motion, summary line)`.
@@ -204,7 +206,7 @@ def apply_gait(args, model, template, num_frames: int, frame_time_s: float, body
         model, template.skeleton(), num_frames, frame_time_s, body_map=bmap,
         step=args.step, speed=args.speed, gait=args.gait, jump=args.jump, rule=args.hip_rule,
         root_motion=args.root_motion, foot_lock=getattr(args, "foot_lock", True),
-        contact_intervals=contact_intervals, floor=floor, clearance=clearance,
+        contact_intervals=contact_intervals, floor=floor, clearance=clearance, knee_speed_rad_s=knee_speed_rad_s,
         path=None if getattr(args, "path", None) is None else parse_path(args.path, bmap.metres_per_unit),
     )
     # The summary's numbers all come from the one GaitResult (no second pass through the model):

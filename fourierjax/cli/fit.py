@@ -178,7 +178,8 @@ def _row(args, text, path, motion, skip, up, fit, out, to_folder, version, model
 
         model_io.save_model(target, fit.model, motion=motion, provenance=prov,
                             alignment=fit.alignment, body_map=fit.body_map,
-                            contact_intervals=gait.fit_contact_intervals(fit, motion))
+                            contact_intervals=gait.fit_contact_intervals(fit, motion),
+                            knee_speed_rad_s=gait.fit_knee_speed(fit, motion))
         row["model"] = str(target)
     return row
 

@@ -127,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
     # longer match its legs (02_01 + 0.5 runness stood 1.9 cm under the captured floor).
     motion, gait_summary = apply_gait(args, model, template, num, dt, getattr(mf, "body_map", None),
                                       contact_intervals=intervals, source=source,
+                                      # The capture's knee speed bounds its own model, not an edit.
+                                      knee_speed_rad_s=getattr(mf, "knee_speed_rad_s", None) if model is mf.model
+                                      else None,
                                       fitted=mf.model if model is not mf.model else None)
     write_bvh_as_source(motion, out, source_up(getattr(mf, "provenance", None) or {}), args.out_up)
     print(f"wrote {out}: {num} frames at {1 / dt:.6g} fps, "

@@ -90,6 +90,9 @@ class ModelFile:
     stored_body_map: object | None = None  # fourierjax.body.BodyMap read from the header
     #: `[2, 2]` (left, right) × (start, end) contact phases in radians (version 3), or None.
     contact_intervals: np.ndarray | None = None
+    #: `[2]` (left, right) the capture's largest knee speed in rad/s (`gait.fit_knee_speed`), or
+    #: None (an optional header key: older readers ignore it, older files have none).
+    knee_speed_rad_s: np.ndarray | None = None
 
     @functools.cached_property
     def body_map(self):
@@ -337,7 +340,7 @@ def _check_arrays(path: str, header: dict, data: dict, trailing: dict) -> tuple[
 
 
 def save_model(path, model, *, motion=None, provenance: dict | None = None,
-               alignment: str = "none", body_map=None, contact_intervals=None) -> None:
+               alignment: str = "none", body_map=None, contact_intervals=None, knee_speed_rad_s=None) -> None:
     """Write one FourierModel (no batch axis) to ``path``, written whole or not at all.
 
     Format ``fourierjax.fourier_model``, version 1: an uncompressed ``.npz`` holding ``header``
@@ -354,7 +357,9 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     ``contact_intervals`` (``[[left start, left end], [right start, right end]]``, radians of the
     cycle; `fourierjax.gait.contact_intervals`); a file without them keeps version 1 or 2.
     Version 4 adds ``frames [K, 4]`` (wxyz), the clip means of a ``"tangent"`` model, only
-    written for such models (other models keep versions 1-3).
+    written for such models (other models keep versions 1-3). An optional ``knee_speed_rad_s``
+    (``[left, right]`` rad/s, `fourierjax.gait.fit_knee_speed`) in the header needs no version:
+    a reader that does not know it ignores it.
 
     Arguments:
         path: output file (written as given; conventionally ``*.npz``).
@@ -365,6 +370,7 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
         body_map: the skeleton's `fourierjax.body.BodyMap` (e.g. ``ClipFit.body_map``), stored
             with ``motion``'s skeleton, or None.
         contact_intervals: ``[2, 2]`` contact phases of the feet (radians), or None.
+        knee_speed_rad_s: ``[2]`` the source clip's largest knee speed per leg (rad/s), or None.
 
     Raises:
         UserError, before anything is written, for what `load_model` would refuse.
@@ -381,6 +387,7 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
     intervals = _contact_intervals(os.fspath(path), contact_intervals, UserError)
     if intervals is not None:
         version = 3
+    knee_speed = _knee_speed(os.fspath(path), knee_speed_rad_s, UserError)
     if getattr(model, "frames", None) is not None:
         version = FORMAT_VERSION  # a tangent model: its joints' clip means
     header = _header(FORMAT_NAME, version, model, "model", skeleton=None,
@@ -414,23 +421,33 @@ def save_model(path, model, *, motion=None, provenance: dict | None = None,
             header["body_map"] = body_map.to_dict()
     if intervals is not None:
         header["contact_intervals"] = intervals.tolist()
+    if knee_speed is not None:
+        header["knee_speed_rad_s"] = knee_speed.tolist()
     _write_archive(path, header, arrays)
 
 
-def _contact_intervals(path: str, value, error):
-    """``value`` as a finite ``[2, 2]`` float64 array (None stays None), else ``error``."""
+def _knee_speed(path: str, value, error):
+    """``value`` as a finite ``[2]`` float64 array >= 0 (None stays None), else ``error``."""
+    return _contact_intervals(path, value, error, shape=(2,), least=0.0, wrap=False,
+                              what="knee_speed_rad_s must be 2 finite numbers >= 0 (left, right) rad/s")
+
+
+def _contact_intervals(path: str, value, error, *, shape=(2, 2), least=-np.inf, wrap=True,
+                       what="contact_intervals must be 2 x 2 finite numbers (left, right) x (start, end) radians"):
+    """``value`` as a finite ``[2, 2]`` float64 array, wrapped into [0, 2 pi) (None stays None),
+    else ``error`` (another ``shape``, a ``least`` value, no wrap and the message ``what`` serve
+    `_knee_speed`)."""
     if value is None:
         return None
     try:
         a = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         a = None
-    if a is None or a.shape != (2, 2) or not np.all(np.isfinite(a)):
-        what = "contact_intervals must be 2 x 2 finite numbers (left, right) x (start, end) radians"
+    if a is None or a.shape != shape or not np.all(np.isfinite(a)) or np.any(a < least):
         if error is UserError:
             raise UserError(f"save_model: {what}; not written to {path}")
         raise error(path, what)
-    return np.mod(a, 2 * np.pi)
+    return np.mod(a, 2 * np.pi) if wrap else a
 
 
 def load_model(path) -> ModelFile:
@@ -513,7 +530,9 @@ def load_model(path) -> ModelFile:
         except (BodyMapError, KeyError, TypeError, ValueError) as err:
             raise ModelFileError(path, f"bad body_map record: {err}") from None
     intervals = _contact_intervals(path, header.get("contact_intervals"), ModelFileError)
-    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment, body_map, intervals)
+    knee_speed = _knee_speed(path, header.get("knee_speed_rad_s"), ModelFileError)
+    return ModelFile(model, topology, offsets, ends, frame_time, provenance, alignment, body_map, intervals,
+                     knee_speed)
 
 
 _EULER_NAME = re.compile(r"\.[XYZ]rotation$")
