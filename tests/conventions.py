@@ -174,3 +174,12 @@ def undo(positions: np.ndarray, convention: str) -> np.ndarray:
     if convention == "metres":
         return positions / CMU_METRES_PER_UNIT
     return positions
+
+
+def scale_units(motion: Motion, factor: float) -> Motion:
+    """`motion` with every length (offsets, End Sites, position channels) times `factor` (a clip in
+    centimetres turned into metres: 0.01); the motion is the same."""
+    t = motion.topology
+    scale = np.array([factor if c.endswith("position") else 1.0 for chans in t.channels for c in chans])
+    return dataclasses.replace(motion, offsets=motion.offsets * factor,
+                               end_site_offsets=motion.end_site_offsets * factor, channels=motion.channels * scale)

@@ -318,6 +318,41 @@ def world(motion: Motion):
     return P, ends, np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
+def resample(motion: Motion, fps: float) -> Motion:
+    """`motion` at `fps` frames per second over the same time span: joint rotations slerped and
+    translations (position channels) linearly interpolated between the two nearest source frames;
+    the same rig and channels. The last frame is at or before the source's last. A rate within
+    0.1% of the source's (120 against a file's rounded 0.008333 s) keeps its frames."""
+    from scipy.spatial.transform import Slerp
+
+    rig = _Rig.of(motion)
+    F = len(rig.T)
+    dt = 1.0 / float(fps)
+    if abs(dt - motion.frame_time_s) < 1e-3 * motion.frame_time_s:
+        return motion
+    t_src = np.arange(F) * motion.frame_time_s
+    t = np.arange(int(np.floor(t_src[-1] / dt + 1e-9)) + 1) * dt
+    t = np.minimum(t, t_src[-1])
+    R = np.empty((len(t), len(rig.names), 3, 3))
+    for j in range(len(rig.names)):
+        R[:, j] = Slerp(t_src, Rotation.from_matrix(rig.R[:, j]))(t).as_matrix()
+    T = np.stack([np.stack([np.interp(t, t_src, rig.T[:, j, a]) for a in range(3)], -1)
+                  for j in range(len(rig.names))], 1)
+    rig.R, rig.T, rig.frame_time_s = R, T, dt
+    out = rig.motion()
+    return dataclasses.replace(out, channels=_continue(out, motion), source=motion.source)
+
+
+def _continue(out: Motion, ref: Motion) -> np.ndarray:
+    """`out`'s rotation channels (degrees, from matrices: in [-180, 180]) shifted by whole turns
+    to follow `ref`'s first frame and each other frame to frame, as a capture's are."""
+    ch = out.channels.copy()
+    rot = np.array([c.endswith("rotation") for chans in out.topology.channels for c in chans])
+    d = np.diff(ch[:, rot], axis=0)
+    ch[1:, rot] -= 360.0 * np.cumsum(np.round(d / 360.0), axis=0)
+    ch[:, rot] += 360.0 * np.round((ref.channels[0, rot] - ch[0, rot]) / 360.0)
+    return ch
+
 #: name -> rewrite of a CMU clip
 RIGS = {"genesis8": genesis8, "unreal": unreal, "blender": blender, "no_toes": no_toes,
         "rest_rotated": rest_rotated}

@@ -147,7 +147,7 @@ def infer(topology, positions, end_site_positions, rotations, moving, *, up=None
     left_arm, right_arm = _arms(ov, names, parents, sources)
 
     # -- scale and units -----------------------------------------------------------------
-    heights = local @ u_local
+    heights = local[body_points(point_parents, pelvis, head)] @ u_local
     height = float(ov.get("height", heights.max() - heights.min()))
     if "units" in ov or "metres_per_unit" in ov:
         units, mpu = parse_units(ov["units"] if "units" in ov else ov["metres_per_unit"])
@@ -228,6 +228,16 @@ def _subtree(point_parents, root: int) -> list[int]:
         if point_parents[i] in inside:
             inside.add(i)
     return sorted(inside)
+
+
+def body_points(point_parents, pelvis: int, head: int) -> list[int]:
+    """The points (joints, then End Sites) that are the body: the trunk's subtree at `pelvis`.
+    The pelvis's ancestors and their other branches are not (Unreal's `root` and Blender's
+    `Armature -> Root` on the floor, a Bandai `joint_Root`, IK target bones): counted in the
+    height, a joint on the floor under the mean pose's lifted feet made the same body 4% taller.
+    Every point when the head is not below the pelvis (a trunk the names did not find)."""
+    inside = _subtree(point_parents, pelvis)
+    return inside if head < 0 or head in inside else list(range(len(point_parents)))
 
 
 def _pelvis_from_reach(mean: np.ndarray, point_parents, J: int, up_given) -> tuple[int, tuple[int, int]]:
@@ -679,7 +689,8 @@ def infer_named_many(topology, positions, rotations, moving, pre) -> list:
     ok &= good | ~moves
     forward = np.where(moves[:, None], along, facing)
     # -- height
-    heights = np.matmul(local, u_local[:, :, None])[..., 0]
+    body = body_points(tuple(topology.parents) + tuple(topology.end_site_parents), pelvis, plan["head"])
+    heights = np.matmul(local[:, body], u_local[:, :, None])[..., 0]
     height = heights.max(axis=1) - heights.min(axis=1)
     out: list = []
     for b in range(B):

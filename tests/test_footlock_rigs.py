@@ -1,0 +1,87 @@
+"""Issue #21's foot-lock figures do not depend on the rig a motion is written in.
+
+The same CMU walk rewritten into other rigs (`tests.rigs`, `tests.conventions`) is the same motion:
+its body height (the contact band of `gait.contact_skating` and of the foot lock is 2% of it) and
+its #21 figures (skating ratio, depth, knee steps, flight; `experiments.footlock_bounds.measure`)
+must match the CMU rig's. `experiments/footlock_rigs.py` measures every rig and frame rate.
+"""
+
+import numpy as np
+import pytest
+
+import fourierjax.data
+from fourierjax.body import infer_body_map
+from fourierjax.io.axes import to_y_up
+from tests import rigs
+from tests.conventions import CMU_METRES_PER_UNIT, convert, scale_units
+
+
+@pytest.fixture(scope="module")
+def walk():
+    return fourierjax.data.load("02_01")
+
+
+def _height_m(motion):
+    bm = infer_body_map(motion)
+    return float(bm.height) * bm.metres_per_unit
+
+
+@pytest.mark.parametrize("rig", ["unreal", "blender", "genesis8", "rest_rotated", "mixamo", "bandai", "metres",
+                                 "scrambled", "zup"])
+def test_body_height_is_rig_invariant(walk, rig):
+    """A root joint on the floor above the pelvis (Unreal's `root`, Blender's `Armature -> Root`)
+    is not part of the body: it made the same walk 4% taller (1.468 against 1.408 m), which moved
+    the contact band and the capture's skating (0.2664 against 0.2682 m/s)."""
+    if rig in rigs.RIGS:
+        m = rigs.RIGS[rig](walk)
+    elif rig == "zup":
+        m = to_y_up(convert(walk, "zup"), "z")
+    else:
+        m = convert(walk, rig)
+    assert _height_m(m) == pytest.approx(_height_m(walk), rel=1e-6)
+
+
+def test_scale_units_is_the_metres_convention(walk):
+    a, b = scale_units(walk, CMU_METRES_PER_UNIT), convert(walk, "metres")
+    np.testing.assert_allclose(a.channels, b.channels)
+    np.testing.assert_allclose(a.offsets, b.offsets)
+
+
+def test_resample(walk):
+    """At the clip's own rate the clip itself; at 30 fps (every 4th frame of 120) the same joint
+    positions, and rotation channels that stay continuous."""
+    assert rigs.resample(walk, 120.0) is walk
+    r = rigs.resample(walk, 30.0)
+    assert r.frame_time_s == pytest.approx(1 / 30)
+    span_s = (walk.num_frames - 1) * walk.frame_time_s
+    assert r.num_frames == int(span_s * 30 + 1e-9) + 1
+    P, _, _ = rigs.world(walk)
+    Q, _, _ = rigs.world(r)
+    k = np.minimum(np.round(np.arange(r.num_frames) * 4 * (1 / 120) / walk.frame_time_s).astype(int),
+                   walk.num_frames - 1)
+    assert np.abs(Q - P[k]).max() < 0.01  # file units (CMU: 0.6 mm); 120 fps is not quite 0.0083333 s
+    rot = np.array([c.endswith("rotation") for chans in r.topology.channels for c in chans])
+    assert np.abs(np.diff(r.channels[:, rot], axis=0)).max() < 90.0
+    r60 = rigs.resample(walk, 60.0)
+    assert r60.num_frames == int(span_s * 60 + 1e-9) + 1
+
+
+@pytest.mark.slow
+def test_footlock_figures_are_rig_invariant(walk):
+    """02_01 on the Unreal rig (root joint on the floor, twist leaf bones): the #21 figures equal
+    the CMU rig's (float32 noise; units, names and axes: `experiments.footlock_rigs`). Before
+    the body height ignored the pelvis's ancestors, the Unreal rig read skating 0.1343x against
+    0.1317x (5 s) and its capture 0.2664 against 0.2682 m/s."""
+    from experiments.footlock_bounds import measure
+    from fourierjax import motion as M
+
+    variants = {"cmu": walk, "unreal": rigs.unreal(walk)}
+    fits = M.fit_motions(list(variants.values()), 4)
+    got = {}
+    for (k, m), f in zip(variants.items(), fits, strict=True):
+        r = measure(m, f, seconds=2.0)
+        mpu = f.body_map.metres_per_unit
+        got[k] = np.array([r["ratio"], r["skating_synth"] * mpu, r["skating_capture"] * mpu, r["depth_m"],
+                           r["knee_step_synth_deg"] / 100, r["knee_step_capture_deg"] / 100, r["flight_synth"],
+                           r["flight_capture"]])
+    np.testing.assert_allclose(got["unreal"], got["cmu"], atol=2e-4)
