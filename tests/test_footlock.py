@@ -224,12 +224,22 @@ BANDAI_CLIPS = tuple(f"{kind}_{style}" for kind in ("walk", "run") for style in 
 # stance ends (the toe still in the band): run_active 0.404x -> 0.434x, run_chimpira 0.496x.
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 BANDAI_NOT_MET = {
-    "walk_happy": "skating 7.22 vs 24.12 units/s (0.299x; 0.303x before the heading hold, 0.364x before the roll-off)",
-    "run_active": "skating 14.03 vs 34.69 units/s (0.404x; 0.399x before the heading hold, 0.402x before the roll-off)",
-    "run_angry": "skating 12.45 vs 47.94 units/s (0.260x; 0.264x before the heading hold)",
-    "run_chimpira": "skating 15.60 vs 30.92 units/s (0.505x; 0.483x before the heading hold)",
-    "run_happy": "skating 11.04 vs 39.97 units/s (0.276x; 0.283x before the heading hold)",
-    "run_masculinity": "skating 17.79 vs 69.18 units/s (0.257x; 0.251x before the heading hold)",
+    # Since cf7fe81 the body's height leaves out Bandai-1's joint_Root on the floor (bodies ~2%
+    # shorter, so a narrower 2% contact band): the figures below are measured with it; the
+    # ratio before it follows in brackets where it moved.
+    "walk_childish": "skating 3.71 vs 14.16 units/s (0.262x; 0.240x, met, with the taller body)",
+    "walk_happy": "skating 7.14 vs 24.12 units/s (0.296x; 0.299x before the height fix, 0.303x before the heading "
+                  "hold, 0.364x before the roll-off)",
+    "run_active": "skating 13.21 vs 30.13 units/s (0.438x; 0.404x before the height fix, 0.399x before the heading "
+                  "hold)",
+    "run_angry": "skating 12.18 vs 47.94 units/s (0.254x; 0.260x before the height fix, 0.264x before the heading "
+                 "hold)",
+    "run_chimpira": "skating 15.32 vs 29.21 units/s (0.524x; 0.505x before the height fix, 0.483x before the "
+                    "heading hold)",
+    "run_happy": "skating 11.04 vs 35.66 units/s (0.310x; 0.276x before the height fix, 0.283x before the heading "
+                 "hold)",
+    "run_masculinity": "skating 17.77 vs 62.30 units/s (0.285x; 0.257x before the height fix, 0.251x before the "
+                       "heading hold)",
 }
 
 # Within 0.5% of the bound: not strict, since another machine's float32 rounding could tip it
