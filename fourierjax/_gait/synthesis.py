@@ -377,7 +377,9 @@ def _foot_lock(where, result, model, skeleton, body_map, contact_intervals, fram
         raise UserError(f"{where}: `contact_intervals` must be [2, 2] (foot, start/end), got {iv.shape}")
     return _locked_result(result, skeleton, iv, knee_speed_rad_s, body_map=body_map,
                           representation=model.representation,
-                          smooth_frames=int(round(SMOOTH_S / frame_time_s)), frame_time_s=float(frame_time_s))
+                          smooth_frames=int(round(SMOOTH_S / frame_time_s)),
+                          # static: only the knee cap reads it, so without one every rate shares a program
+                          frame_time_s=None if knee_speed_rad_s is None else float(frame_time_s))
 
 
 @saved
