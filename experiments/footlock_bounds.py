@@ -23,17 +23,6 @@ STYLES = ("active", "angry", "childish", "chimpira", "feminine", "giant", "happy
           "normal", "not-confident", "old", "proud", "sad", "tired")
 
 
-def knee_angles(positions, body_map):
-    """`[T, 2]` knee angles (radians, pi = straight) from joint positions `[T, J, 3]`."""
-    out = []
-    for leg in (body_map.left, body_map.right):
-        a = positions[:, leg.hip] - positions[:, leg.knee]
-        b = positions[:, leg.ankle] - positions[:, leg.knee]
-        cos = (a * b).sum(-1) / np.linalg.norm(a, axis=-1) / np.linalg.norm(b, axis=-1)
-        out.append(np.arccos(np.clip(cos, -1.0, 1.0)))
-    return np.stack(out, -1)
-
-
 def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None, knee_cap=True, frame_time_s=None):
     """dict: skating synthesized and captured (units/s), depth below the floor (m), largest knee
     step synthesized and captured (degrees), the most straight knee (degrees) and the flight
@@ -75,10 +64,10 @@ def measure(mot, fit, *, foot_lock=True, seconds=5.0, path=None, knee_cap=True, 
                                                floor=contacts.floor_heights(ground, p_cap, up_axis=bm.up_axis)))
     f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm,
                                                floor=float(r.floor) + np.asarray(r.clearance)[None]))
-    ka_syn = knee_angles(M.motion_joint_positions(out), bm)
+    ka_syn = gait.knee_angles(M.motion_joint_positions(out), bm)
     k_syn = np.abs(np.diff(ka_syn, axis=0)).max()
     # The capture's largest knee speed, as a step at the synthesized frame rate.
-    k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max() * dt / dt_cap
+    k_cap = np.abs(np.diff(gait.knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max() * dt / dt_cap
     return {"skating_synth": s_syn, "skating_capture": s_cap, "ratio": s_syn / s_cap, "depth_m": depth_m,
             "knee_step_synth_deg": float(np.degrees(k_syn)), "knee_step_capture_deg": float(np.degrees(k_cap)),
             "straightest_knee_deg": float(np.degrees(ka_syn.max())), "flight_synth": f_syn, "flight_capture": f_cap,

@@ -213,7 +213,6 @@ def cli_rows(motions: dict, rigs, out: pathlib.Path, seconds: float, log=print) 
 def measure_files(source, synth, frames) -> dict:
     """The #21 figures of a synthesized Motion against its source clip's fitted `frames`
     (`[start, stop)` of the file, as `fit --json` reports them)."""
-    from experiments.footlock_bounds import knee_angles
     from fourierjax import contacts, gait
     from fourierjax import motion as M
     from fourierjax.body import infer_body_map
@@ -233,8 +232,8 @@ def measure_files(source, synth, frames) -> dict:
     f_cap = float(gait.contact_flight_fraction(p_cap, body_map=bm,
                                                floor=contacts.floor_heights(ground, p_cap, up_axis=up)))
     f_syn = float(gait.contact_flight_fraction(p_syn, body_map=bm, floor=rest[None]))
-    k_syn = np.abs(np.diff(knee_angles(M.motion_joint_positions(synth), bm), axis=0)).max()
-    k_cap = np.abs(np.diff(knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()
+    k_syn = np.abs(np.diff(gait.knee_angles(M.motion_joint_positions(synth), bm), axis=0)).max()
+    k_cap = np.abs(np.diff(gait.knee_angles(M.motion_joint_positions(sub), bm), axis=0)).max()
     mpu = float(bm.metres_per_unit)
     return {"skating_synth": s_syn, "skating_capture": s_cap, "ratio": s_syn / s_cap, "depth_m": depth,
             "knee_step_synth_deg": float(np.degrees(k_syn)), "knee_step_capture_deg": float(np.degrees(k_cap)),
