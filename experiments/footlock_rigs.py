@@ -20,9 +20,12 @@ rotations, Daz's bend/twist split) change the Euler fit, so the figures move by 
 (rest-rotated 02_01: 0.1893x, knee step 5.90 against the capture's 3.49 deg); the tangent
 representation (the command line's default) gives the CMU rig's figures on all of them but
 Daz's split bones (02_01: 0.1318x against 0.1306x). Frame rate: the lock's easing is
-``round(0.04 s / frame time)`` frames, 1 at 30 fps, and 02_01 at 30 fps pops the knee
-(16.69 against 13.13 deg), 02_03 at 60 fps reads 0.258x, Bandai-1 run_happy meets all three
+``round(0.04 s / frame time)`` frames, 1 at 30 fps, and 02_01 at 30 fps popped the knee
+(16.69 against 13.13 deg), 02_03 at 60 fps read 0.258x, Bandai-1 run_happy met all three
 bounds at 60 fps (0.2145x) but not at its own 30 fps (0.3095x, flight 28.7% against 17.3%).
+Since session 30 `synthesize_gait` locks on frames near 120 fps (`gait.lock_supersampling`) and
+decimates: 02_01 at 30 fps 0.164x, knee 9.35 deg; 02_03 at 30 fps 0.242x, flight 15% against
+16%; Bandai-1 run_happy 0.246x at its own 30 fps.
 Usage:
 ``python -m experiments.footlock_rigs [--out DIR] [--clips 02_01,...] [--rigs a,b] [--fps 30,60,120]
 [--cli] [--rep euler|tangent] [--seconds S]``.

@@ -25,6 +25,7 @@ from fourierjax._gait.footlock import (
     intervals_from_contacts,
     intervals_from_model,
     lock_feet,
+    lock_supersampling,
 )
 from fourierjax._gait.hip import (
     HipRule,
@@ -93,6 +94,7 @@ __all__ = [
     "leg_heights",
     "lock_crowd",
     "lock_feet",
+    "lock_supersampling",
     "lowest_points",
     "model_body_map",
     "model_ground",

@@ -391,6 +391,12 @@ def grounded_transition(
         if isinstance(frame_time_s, jax.core.Tracer):
             raise UserError("grounded_transition: foot locking needs a concrete `frame_time_s` (it sets "
                             "the easing's frame count), or foot_lock=False")
+        # At the frames' own rate, not `gait.lock_supersampling`'s denser ones (as
+        # `synthesize_gait` does): on Bandai-1 walk_normal <-> run_normal (N = 5, 30 fps) locking
+        # at 4x flew the run part 35% / 38% (walk -> run / run -> walk) against 43% at 1x and the
+        # captured 17%, but the run's swing toe (which covers the offsets of the plants from the
+        # model's own feet: `_plant`'s easing in the air) moved 21.25 units a frame against the
+        # sources' largest 20.98, a pop by issue 21's rule (20.42 at 1x; 20.98 at 2x; session 30).
         smooth_frames = int(round(SMOOTH_S / float(frame_time_s)))
     contact_intervals = _contact_intervals(a, b, skeleton, body_map, contact_intervals)
     return _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, contact_intervals,

@@ -116,7 +116,10 @@ def run_config(args) -> int:
     from fourierjax import _memory
 
     model = library.gait("a").model
-    _memory.check_synthesis(f"--config {args.config}: {params.seconds:g} s at {params.fps:g} fps", params.num_frames,
+    from fourierjax import gait
+
+    dense = params.num_frames * (gait.lock_supersampling(params.frame_time_s) if params.foot_lock else 1)
+    _memory.check_synthesis(f"--config {args.config}: {params.seconds:g} s at {params.fps:g} fps", dense,
                             model.num_channels, model.num_harmonics)
     motion, _ = explore.render(library, params)
     write_bvh_as_source(motion, out, "y", getattr(args, "out_up", None))  # the explorer's models: Y-up

@@ -116,9 +116,11 @@ def run(args: argparse.Namespace) -> int:
     from fourierjax.cli.interpolate import frame_count
 
     num = frame_count(args.seconds, dt)
-    from fourierjax import _memory
+    from fourierjax import _memory, gait
 
-    _memory.check_synthesis(f"--seconds {args.seconds:g} at {1 / dt:g} fps", num, model.num_channels,
+    # Under 100 fps the lock runs on denser frames (`gait.lock_supersampling`).
+    dense = num * (gait.lock_supersampling(dt) if getattr(args, "foot_lock", True) else 1)
+    _memory.check_synthesis(f"--seconds {args.seconds:g} at {1 / dt:g} fps", dense, model.num_channels,
                             model.num_harmonics)
     from fourierjax.cli._gait_args import apply_gait  # step, speed, hip rule, root motion
 
