@@ -44,7 +44,7 @@ SLIDING_SHARE = 0.4
 SMOOTH_S = 0.04
 #: `synthesize_gait` locks the feet on frames about this many per second
 #: (`lock_supersampling` times as dense as the output, at most `MAX_SUPERSAMPLING`), synthesized
-#: from the model, and keep every such frame: the lock sees the same motion at any frame rate.
+#: from the model, and keeps every k-th of them: the lock sees the same motion at any frame rate.
 LOCK_FPS, MAX_SUPERSAMPLING = 120.0, 8
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
@@ -854,7 +854,8 @@ def lock_feet(
             horizontal only in the swing (planted points stay put); 0 (default) keeps them as
             they are. The frames also set the landing's lead-in and, below `TOE_HOLD_FRAMES`,
             the 30 fps toe hold and band lift.
-            `synthesize_gait` uses `SMOOTH_S` seconds of frames.
+            `synthesize_gait` uses `SMOOTH_S` seconds of frames, on frames near 120 fps
+            (`lock_supersampling`), so it never takes the 1-frame rules.
         knee_speed_rad_s: `[2]` (left, right), scalar or `[T, 2]` (per frame, e.g. scaled by a
             speed schedule): the largest knee angular speed (radians per second;
             `knee_speed_limit` of the captured clip) where the foot is free

@@ -220,7 +220,7 @@ def synthesize_gait(
         foot_lock: plant the feet (`lock_feet`, two-bone leg IK on the synthesized frames; on by
             default). `foot_lock=False` gives the frames of the step constraints alone. Under
             100 fps the lock runs on `lock_supersampling` times as many frames (4 at 30 fps),
-            synthesized from the model, and every such frame is returned: the same motion
+            synthesized from the model, and every k-th is returned: the same motion
             locks alike at any frame rate. The root then comes from the denser frames too (Bandai-1
             run_happy at 30 fps: 2.7 units from `foot_lock=False`'s over 5 s, 0.2% of the path).
         contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
@@ -304,7 +304,7 @@ def synthesize_gait(
             num_cycle_samples=num_cycle_samples, up_axis=given_up_axis, foot_lock=True,
             contact_intervals=contact_intervals, path=path, path_smoothing=path_smoothing, floor=floor,
             knee_speed_rad_s=knee_speed_rad_s)
-        return every_kth_frame(dense, k)
+        return _every_kth_frame(dense, k)
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
     t_eff = ticks * dt
     if floor is not None:
@@ -343,7 +343,7 @@ def synthesize_gait(
     return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt, knee_speed_rad_s)
 
 
-def every_kth_frame(result: GaitResult, k: int) -> GaitResult:
+def _every_kth_frame(result: GaitResult, k: int) -> GaitResult:
     """`result` with its per-frame arrays at every `k`-th frame (from the first)."""
     hip = result.hip._replace(L=result.hip.L[::k], N=result.hip.N[::k], lift=result.hip.lift[::k],
                               flight=result.hip.flight[::k])
