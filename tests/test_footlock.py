@@ -225,15 +225,17 @@ BANDAI_CLIPS = tuple(f"{kind}_{style}" for kind in ("walk", "run") for style in 
 # Strict: a clip that starts meeting the bounds fails here until it is moved out of this table.
 BANDAI_NOT_MET = {
     # Since session 30 the lock runs at 120 fps (`gait.lock_supersampling`: 4x at Bandai-1's 30
-    # fps) and the frames are decimated; the ratio at 30 fps (one frame of easing) follows in
-    # brackets. run_angry (0.254x) and run_happy (0.310x) now meet (0.208x, 0.246x).
-    "walk_childish": "skating 0.279x the capture's (0.262x at 30 fps; 0.240x, met, with the taller body before "
-                     "cf7fe81)",
+    # fps), after a pre-roll of a whole contact, and the frames are decimated; the ratio at 30 fps
+    # (one frame of easing) follows in brackets. run_angry (0.254x) and run_happy (0.310x) now
+    # meet (0.207x, 0.246x).
+    "walk_childish": "skating 0.265x the capture's (0.279x at 120 fps without the pre-roll, 0.262x at 30 fps; "
+                     "0.240x, met, with the taller body before cf7fe81)",
     "walk_happy": "skating 0.286x the capture's (0.296x at 30 fps, 0.364x before the roll-off)",
-    "run_active": "skating 0.401x the capture's (0.438x at 30 fps): the heel-off pivot about the planted ball, "
+    "run_active": "skating 0.402x the capture's (0.438x at 30 fps): the heel-off pivot about the planted ball, "
                   "as in the unlocked model",
     "run_chimpira": "skating 0.579x the capture's (0.524x at 30 fps)",
-    "run_masculinity": "skating 0.366x the capture's (0.285x at 30 fps, 0.251x before the heading hold)",
+    "run_masculinity": "skating 0.459x the capture's (0.366x at 120 fps without the pre-roll, 0.285x at 30 fps, "
+                       "0.251x before the heading hold)",
 }
 
 # Within 0.5% of the bound: not strict, since another machine's float32 rounding could tip it
@@ -272,7 +274,10 @@ def test_foot_lock_off_is_the_step_constraints_alone():
     sk, dt = mot.skeleton(), mot.frame_time_s
     off = gait.synthesize_gait(fit.model, sk, 240, dt, body_map=fit.body_map, foot_lock=False)
     on = gait.synthesize_gait(fit.model, sk, 240, dt, body_map=fit.body_map)
-    np.testing.assert_array_equal(np.asarray(on.root_position), np.asarray(off.root_position))
+    # The locked synthesis starts a contact earlier (`_lock_preroll`) and is re-anchored there: its
+    # root moves off the unlocked one's by float32 rounding and the pre-roll's share of the root
+    # rule's means (02_01, 5 s: 0.0044 units at most, 0.03 mm).
+    np.testing.assert_allclose(np.asarray(on.root_position), np.asarray(off.root_position), rtol=0, atol=0.01)
     # Only leg channels change.
     names = fit.model.channel_names
     leg = {sk.topology.names[j] for g in (fit.body_map.left, fit.body_map.right) for j in (g.hip, g.knee, g.ankle)}

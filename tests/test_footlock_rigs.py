@@ -105,3 +105,20 @@ def test_a_30_fps_clip_locks_as_at_120_fps():
     assert run["knee_step_synth_deg"] <= run["knee_step_capture_deg"], run
     for r in (walk, run):
         assert r["depth_m"] <= 0.005, r
+
+
+@pytest.mark.slow
+def test_the_first_contact_is_locked_whole(walk):
+    """02_01 on joint frames turned by large rest rotations (`rigs.rest_rotated`), Euler N = 4: its
+    synthesis starts near the end of a right stance. Planted at the middle of that contact's
+    visible frames, the foot was let go at frame 26 and the knee stepped 5.31 deg against the
+    capture's 3.49 (3.18 at most elsewhere). The lock now starts a whole contact earlier
+    (`synthesize_gait`'s pre-roll) and drops those frames."""
+    from experiments.footlock_bounds import measure
+    from fourierjax import motion as M
+
+    mot = rigs.rest_rotated(walk)
+    fit = M.fit_motions([mot], 4)[0]
+    r = measure(mot, fit)
+    assert r["knee_step_synth_deg"] <= r["knee_step_capture_deg"], r
+    assert r["ratio"] <= 0.25 and r["depth_m"] <= 0.005, r

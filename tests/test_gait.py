@@ -656,12 +656,20 @@ def test_synthesize_gait_does_not_retrace_for_new_numbers(monkeypatch):
     monkeypatch.setattr(synthesis, "apply_step", counting_apply_step)
     outs = [
         G.synthesize_gait(model, sk, 12, dt, feet=fp, groins=groins, rule="smooth", width=w,
-                          temperature=t, gait=g, jump=1.0, num_cycle_samples=8)
+                          temperature=t, gait=g, jump=1.0, num_cycle_samples=8, foot_lock=False)
         for dt, w, t, g in ((1 / 30, 0.01, 0.1, 0.05), (1 / 25, 0.02, 0.2, 0.06), (1 / 24, 0.03, 0.3, 0.07))
     ]
     assert len(traces) <= 1
     # ... and the values still matter.
     assert not np.allclose(outs[0].root_position, outs[1].root_position)
+    # Locked, the frames are denser under 100 fps and start a pre-roll earlier, a frame count set by
+    # the frame time (at 30 fps 45 + 120 dense frames, at 24 fps 56 + 120): one program a frame
+    # rate, whatever the other numbers.
+    traces.clear()
+    for w, t, g in ((0.01, 0.1, 0.05), (0.02, 0.2, 0.06), (0.03, 0.3, 0.07)):
+        G.synthesize_gait(model, sk, 12, 1 / 30, feet=fp, groins=groins, rule="smooth", width=w,
+                          temperature=t, gait=g, jump=1.0, num_cycle_samples=8)
+    assert len(traces) <= 1
 
 
 def test_synthesize_gait_rejects_bad_numbers_and_indices():

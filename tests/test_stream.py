@@ -195,6 +195,23 @@ def chunk():
     return ms + [read_bvh(p)[:250] for p in files]
 
 
+def _same_map(a, b) -> bool:
+    """Two body maps equal but for float64 rounding in their directions and lengths: the batched
+    path's pelvis matrices are a view into all the clips' (numpy takes another SIMD path; on one
+    machine `facing` came out 1 ulp apart, -0.02344579054170553 against -0.023445790541705525)."""
+    da, db = a.to_dict(), b.to_dict()
+    if da.keys() != db.keys():
+        return False
+    for k in da:
+        x, y = da[k], db[k]
+        if isinstance(x, float) or (isinstance(x, list | tuple) and x and all(isinstance(v, float) for v in x)):
+            if not np.allclose(x, y, rtol=1e-12, atol=1e-12):
+                return False
+        elif x != y:
+            return False
+    return True
+
+
 @pytest.mark.parametrize("representation", ["euler", "tangent", "expmap"])
 def test_prepare_chunk_equals_the_per_clip_path(chunk, representation, monkeypatch):
     from fourierjax._motion import _batch
@@ -219,7 +236,7 @@ def test_prepare_chunk_equals_the_per_clip_path(chunk, representation, monkeypat
         assert np.array_equal(g.left, r.left) and np.array_equal(g.right, r.right)
         np.testing.assert_allclose(g.features, r.features, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(g.omega_steps, r.omega_steps, rtol=1e-6)
-        assert g.body_map == r.body_map
+        assert _same_map(g.body_map, r.body_map)
     # The chunk holds heel strikes. (Its 142_02 cut holds no glitch frame once segmented: the
     # glitch path of the continuity is tested on 142_02[1000:1300] above.)
     assert any(len(g.left) for g in got)
@@ -240,7 +257,7 @@ def test_body_maps_of_a_chunk_are_each_clips_own(chunk, monkeypatch):
     assert moments  # the pelvis-frame means of each skeleton's clips, computed together
     assert len({(c.topology, c.offsets.tobytes()) for c in clips}) >= 3
     for c, g in zip(clips, got, strict=True):
-        assert g == infer_body_map(c)
+        assert _same_map(g, infer_body_map(c))
     assert got[0].to_dict() != got[1].to_dict()  # the same skeleton, its own motion's map
 
 
@@ -274,7 +291,7 @@ def test_body_maps_of_many_bandai_clips_are_each_clips_own(monkeypatch):
     got = _batch.infer_body_maps(clips)
     assert sum(m is not None for m in named) == len(clips)  # all through the batched path
     for c, g in zip(clips, got, strict=True):
-        assert g == infer_body_map(c)
+        assert _same_map(g, infer_body_map(c))
 
 
 def test_body_maps_inferred_together_fall_back_per_clip(monkeypatch):
@@ -286,7 +303,7 @@ def test_body_maps_inferred_together_fall_back_per_clip(monkeypatch):
     monkeypatch.setattr(_infer, "_named_plan", lambda topology: None)
     assert _infer.infer_named_many(clips[0].topology, np.zeros((1, 2, 1, 3)), None, [[]], {}) == [None]
     for c, g in zip(clips, _batch.infer_body_maps(clips), strict=True):
-        assert g == infer_body_map(c)
+        assert _same_map(g, infer_body_map(c))
 
 
 def test_closed_loops_of_a_chunk_are_each_clips_own():

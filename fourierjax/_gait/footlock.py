@@ -46,6 +46,10 @@ SMOOTH_S = 0.04
 #: (`lock_supersampling` times as dense as the output, at most `MAX_SUPERSAMPLING`), synthesized
 #: from the model, and keeps every k-th of them: the lock sees the same motion at any frame rate.
 LOCK_FPS, MAX_SUPERSAMPLING = 120.0, 8
+#: `synthesize_gait` locks at least this much more of the cycle before the first frame than its
+#: longest contact (seconds at speed 1), then drops it (`_lock_preroll`): at least `PREROLL_S`,
+#: in steps of half that (`PREROLL_S` when it cannot tell).
+PREROLL_MARGIN_S, PREROLL_S = 0.2, 1.0
 #: Contact: a foot point within this fraction of the body height of its floor (issue 21).
 CONTACT_HEIGHT_FRACTION = 0.02
 #: The toe's end point is held to the end of the stance at toe-off (horizontally and vertically)

@@ -265,7 +265,6 @@ def synthesize_gait(
         raise UserError(f"{where}: `frame_time_s` must be a number (seconds), got {frame_time_s!r}") from None
     if not (math.isfinite(dt) and dt > 0):
         raise UserError(f"{where}: `frame_time_s` must be finite and > 0 (seconds), got {frame_time_s}")
-    given_feet, given_groins, given_up_axis = feet, groins, up_axis
     feet, groins, pelvis, up_axis = resolve_body(where, model, skeleton, feet, groins, body_map, up_axis)
     if len(feet.left) != len(feet.right):
         raise UserError("synthesize_gait: both feet must have the same number of points")
@@ -293,18 +292,35 @@ def synthesize_gait(
     # One shape for scalar and scheduled speeds: one compilation serves both.
     speed = jnp.broadcast_to(speed, (num_frames,))
     k = lock_supersampling(dt) if foot_lock else 1
-    if k > 1:
-        # Under 100 fps the feet are locked on k times as many frames, and every k-th is kept
-        # (`lock_supersampling`): the phase at frame k i of the dense frames is frame i's.
-        fine = k * (num_frames - 1) + 1
-        dense = synthesize_gait(
-            model, skeleton, fine, dt / k, feet=given_feet, groins=given_groins, body_map=body_map,
-            clearance=clearance, step=step, speed=jnp.repeat(speed, k)[:fine], gait=gait, jump=jump, rule=rule,
-            root_motion=root_motion, phase0=phase0, width=width, temperature=temperature,
-            num_cycle_samples=num_cycle_samples, up_axis=given_up_axis, foot_lock=True,
-            contact_intervals=contact_intervals, path=path, path_smoothing=path_smoothing, floor=floor,
-            knee_speed_rad_s=knee_speed_rad_s)
-        return _every_kth_frame(dense, k)
+    if foot_lock and contact_intervals is None and not isinstance(jnp.asarray(model.offset), jax.core.Tracer):
+        from fourierjax._gait.common import model_body_map
+        from fourierjax._gait.footlock import intervals_from_model
+
+        body_map = model_body_map(model, skeleton) if body_map is None else body_map
+        contact_intervals = intervals_from_model(model, skeleton, body_map=body_map)
+    pre = _lock_preroll(model, contact_intervals, dt / k) if foot_lock and path is None else 0
+    checked = dict(where=where, model=model, skeleton=skeleton, clearance=clearance, floor=floor, step=step, gait=gait,
+                   jump=jump, root_motion=root_motion, width=width, temperature=temperature, feet=feet, groins=groins,
+                   pelvis=pelvis, up_axis=up_axis, rule=rule, num_cycle_samples=num_cycle_samples, path=path,
+                   path_smoothing=path_smoothing, body_map=body_map, foot_lock=foot_lock,
+                   contact_intervals=contact_intervals, knee_speed_rad_s=knee_speed_rad_s, dtype=dtype)
+    if k == 1 and pre == 0:
+        return _synthesize_checked(num_frames=num_frames, dt=dt, speed=speed, phase0=phase0, **checked)
+    # The feet are locked on denser frames under 100 fps (`lock_supersampling`: the phase at
+    # frame k i of the dense frames is frame i's), and after `pre` frames of the cycle before
+    # the first (`_lock_preroll`), dropped after the lock.
+    fine = k * (num_frames - 1) + 1
+    dense_speed = jnp.concatenate([jnp.broadcast_to(speed[:1], (pre,)), jnp.repeat(speed, k)[:fine]])
+    omega = jnp.asarray(model.omega, dtype)
+    dense = _synthesize_checked(num_frames=pre + fine, dt=dt / k, speed=dense_speed,
+                                phase0=jnp.asarray(phase0, dtype) - omega * (pre * dt / k) * speed[0], **checked)
+    return _every_kth_frame(dense, k, pre, int(up_axis))
+
+
+def _synthesize_checked(*, where, model, skeleton, num_frames, dt, speed, phase0, clearance, floor, step, gait, jump,
+                        root_motion, width, temperature, feet, groins, pelvis, up_axis, rule, num_cycle_samples, path,
+                        path_smoothing, body_map, foot_lock, contact_intervals, knee_speed_rad_s, dtype):
+    """`synthesize_gait` after its checks, on `num_frames` frames `dt` apart (`speed` `[num_frames]`)."""
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
     t_eff = ticks * dt
     if floor is not None:
@@ -343,13 +359,46 @@ def synthesize_gait(
     return _foot_lock(where, result, model, skeleton, body_map, contact_intervals, dt, knee_speed_rad_s)
 
 
-def _every_kth_frame(result: GaitResult, k: int) -> GaitResult:
-    """`result` with its per-frame arrays at every `k`-th frame (from the first)."""
-    hip = result.hip._replace(L=result.hip.L[::k], N=result.hip.N[::k], lift=result.hip.lift[::k],
-                              flight=result.hip.flight[::k])
+def _lock_preroll(model, contact_intervals, dt) -> int:
+    """Frames (static) of the cycle that `synthesize_gait` synthesizes and locks before the first
+    frame, then drops: the longest contact of the two feet at speed 1 (`contact_intervals`),
+    plus `PREROLL_MARGIN_S`, so that the first frame's contact is whole. A contact cut by the
+    first frame was planted at the middle of its visible part and let go at toe-off: on a rig with
+    rotated joint frames (`tests.rigs.rest_rotated`) the Euler fit of 02_01 stepped its knee 5.31 deg
+    at the first toe-off, frame 26, against the capture's 3.49 (3.18 at most elsewhere; 3.18 with 30
+    frames of this). At least `PREROLL_S` (1 s), in steps of half that, so that most models
+    share one dense frame count (one compiled program); `PREROLL_S` when the model or the intervals
+    are traced."""
+    from fourierjax._gait.footlock import PREROLL_MARGIN_S, PREROLL_S
+
+    omega, iv = model.omega, contact_intervals
+    if isinstance(jnp.asarray(omega), jax.core.Tracer) or iv is None or isinstance(jnp.asarray(iv), jax.core.Tracer):
+        return int(math.ceil(PREROLL_S / dt))
+    try:
+        omega, iv = float(jnp.asarray(omega)), jnp.asarray(iv, jnp.float32)
+    except (TypeError, ValueError):
+        return 0  # `_foot_lock` names a bad `contact_intervals`
+    if iv.shape != (2, 2):
+        return 0
+    stance = float(jnp.max(jnp.mod(iv[:, 1] - iv[:, 0], 2 * math.pi)))
+    if not (math.isfinite(omega) and omega > 0 and math.isfinite(stance)):
+        return 0
+    # In steps of `PREROLL_S / 2`, at least `PREROLL_S`: the dense frame count is static, and one
+    # per model would compile a program per model.
+    half = 0.5 * PREROLL_S
+    seconds = max(PREROLL_S, half * math.ceil((stance / omega + PREROLL_MARGIN_S) / half))
+    return int(math.ceil(seconds / dt))
+
+
+def _every_kth_frame(result: GaitResult, k: int, pre: int = 0, up_axis: int = 1) -> GaitResult:
+    """`result` with its per-frame arrays at every `k`-th frame from frame `pre`, the root's
+    horizontal components (and the feet with them) shifted to start at 0 there."""
+    hip = result.hip._replace(L=result.hip.L[pre::k], N=result.hip.N[pre::k], lift=result.hip.lift[pre::k],
+                              flight=result.hip.flight[pre::k])
+    shift = result.root_position[pre].at[up_axis].set(0.0)
     return eqx.tree_at(lambda r: (r.features, r.phase, r.root_position, r.foot_positions, r.lowest, r.hip), result,
-                       (result.features[::k], result.phase[::k], result.root_position[::k],
-                        result.foot_positions[::k], result.lowest[::k], hip))
+                       (result.features[pre::k], result.phase[pre::k], result.root_position[pre::k] - shift[None],
+                        result.foot_positions[pre::k] - shift[None, None, None], result.lowest[pre::k], hip))
 
 
 def _path_body_map(where, model, skeleton, body_map):
