@@ -212,3 +212,19 @@ def test_feet_stay_planted_on_a_circle(walk):
     assert ours <= 0.25 * theirs
     with pytest.raises(UserError, match="GroundPath"):
         gait.synthesize_gait(mf.model, t.skeleton(), 20, mf.frame_time_s, body_map=bmap, path=[[0, 0], [1, 1]])
+
+
+def test_a_path_at_30_fps_is_every_4th_frame_of_120_fps(walk):
+    """Under 100 fps the lock runs on denser frames (`gait.lock_supersampling`); on a path there is
+    no pre-roll and the root is not re-anchored: the 30 fps walk along the circle is the 120 fps one
+    at every 4th frame, starting where the path starts."""
+    mf, t, bmap, _ = walk
+    R = 3.0 / bmap.metres_per_unit
+    # A polyline that starts off the origin: re-anchored at its first frame, the root left the path.
+    for path in (gait.circle_path(R), gait.polyline_path([[0.5 * R, 0.3 * R], [0.5 * R, 3 * R], [2 * R, 4 * R]])):
+        kw = dict(body_map=bmap, contact_intervals=mf.contact_intervals, path=path)
+        at30 = gait.synthesize_gait(mf.model, t.skeleton(), 41, 1 / 30, **kw)
+        at120 = gait.synthesize_gait(mf.model, t.skeleton(), 161, 1 / 120, **kw)
+        np.testing.assert_allclose(np.asarray(at30.root_position), np.asarray(at120.root_position)[::4], atol=1e-3)
+        np.testing.assert_allclose(np.asarray(at30.foot_positions), np.asarray(at120.foot_positions)[::4],
+                                   atol=1e-3)

@@ -221,8 +221,11 @@ def synthesize_gait(
             default). `foot_lock=False` gives the frames of the step constraints alone. Under
             100 fps the lock runs on `lock_supersampling` times as many frames (4 at 30 fps),
             synthesized from the model, and every k-th is returned: the same motion
-            locks alike at any frame rate. The root then comes from the denser frames too (Bandai-1
-            run_happy at 30 fps: 2.7 units from `foot_lock=False`'s over 5 s, 0.2% of the path).
+            locks alike at any frame rate. Without a `path`, the lock also starts a whole contact
+            before the first frame (a pre-roll of at least 1 s, dropped after it), so the first
+            contact is planted like any other. The root then comes from the denser and longer
+            frames too, re-anchored at the first frame (Bandai-1 run_happy at 30 fps: 2.7 units
+            from `foot_lock=False`'s over 5 s, 0.2% of the path; 02_01 at 120 fps: 0.0044).
         contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
             with the model by `fourierjax fit`); default estimated from the model's cycle
             (a concrete model; under vmap or grad pass them, and `body_map`).
@@ -391,11 +394,12 @@ def _lock_preroll(model, contact_intervals, dt) -> int:
 
 
 def _every_kth_frame(result: GaitResult, k: int, pre: int = 0, up_axis: int = 1) -> GaitResult:
-    """`result` with its per-frame arrays at every `k`-th frame from frame `pre`, the root's
-    horizontal components (and the feet with them) shifted to start at 0 there."""
+    """`result` with its per-frame arrays at every `k`-th frame from frame `pre`; after a pre-roll
+    (`pre > 0`, never with a path) the root's horizontal components (and the feet with them) are
+    shifted to start at 0 there, as without one."""
     hip = result.hip._replace(L=result.hip.L[pre::k], N=result.hip.N[pre::k], lift=result.hip.lift[pre::k],
                               flight=result.hip.flight[pre::k])
-    shift = result.root_position[pre].at[up_axis].set(0.0)
+    shift = result.root_position[pre].at[up_axis].set(0.0) * (1.0 if pre > 0 else 0.0)
     return eqx.tree_at(lambda r: (r.features, r.phase, r.root_position, r.foot_positions, r.lowest, r.hip), result,
                        (result.features[pre::k], result.phase[pre::k], result.root_position[pre::k] - shift[None],
                         result.foot_positions[pre::k] - shift[None, None, None], result.lowest[pre::k], hip))
