@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -90,10 +91,11 @@ def _yaw_quat(psi, up_axis):
 
 
 @filter_jit
-def _follow(features, root, path, smoothing, sway, frame_time_s, *, columns, order, up_axis):
+def _follow(features, root, path, smoothing, sway, frame_time_s, start, *, columns, order, up_axis):
     horiz = [k for k in range(3) if k != up_axis]
-    ground = root[:, horiz] - root[:1, horiz]
-    travel = ground[-1]
+    origin = jax.lax.dynamic_slice_in_dim(root[:, horiz], start, 1)  # [1, 2]
+    ground = root[:, horiz] - origin
+    travel = ground[-1] - ground[0]
     norm = safe_sqrt(jnp.sum(travel * travel), floor=1e-24)
     d = jnp.where(norm > 1e-9, travel / norm, jnp.asarray([0.0, 1.0], travel.dtype))
     n = jnp.stack([d[1], -d[0]])  # the ground-plane normal of d (a, b) -> (b, -a)
@@ -109,7 +111,7 @@ def _follow(features, root, path, smoothing, sway, frame_time_s, *, columns, ord
     t_len = safe_sqrt(jnp.sum(ahead * ahead, axis=-1), floor=1e-24)
     tangent = ahead / t_len[:, None]
     normal = jnp.stack([tangent[:, 1], -tangent[:, 0]], axis=-1)
-    new_ground = root[:1, horiz] + p + (sway * lateral)[:, None] * normal
+    new_ground = origin + p + (sway * lateral)[:, None] * normal
     # Yaw about +up that turns d into the tangent; heading angle atan2(a, b) for Y up (x, z).
     def heading(v):
         return jnp.arctan2(v[..., 0], v[..., 1])
@@ -138,6 +140,7 @@ def follow_path(
     up_axis: int = 1,
     smoothing: Float[ArrayLike, ""] = 0.0,
     sway: Float[ArrayLike, ""] = 0.0,
+    start_frame: int = 0,
 ) -> tuple[Float[Array, "T C"], Float[Array, "T 3"], Float[Array, " T"]]:
     """Bend a straight synthesized gait onto a path: heading and root follow it at the gait's speed.
 
@@ -151,7 +154,7 @@ def follow_path(
         features: `[T, C]` frames of one character (`synthesize_gait(...).features`).
         root_position: `[T, 3]` its world pelvis path (`GaitResult.root_position`).
         path: a `GroundPath` in file units, starting where the root starts (its first point
-            is placed at the root's first position).
+            is placed at the root's position at `start_frame`).
         channel_names: the features' names; pelvis_name: the body map's pelvis joint name.
         frame_time_s: seconds per frame.
         up_axis: the up axis (Y, 1).
@@ -161,6 +164,9 @@ def follow_path(
         sway: the fraction of the root's sideways deviation from its mean line that is kept
             (0: the root stays on the path; 1: the gait's own sway, on CMU 07_01 4.7 cm peak
             to peak per cycle plus 2.5 cm of slow drift, so up to 3.7 cm off the path).
+        start_frame: the frame (in `[0, T)`) that stands at the path's first point; the frames
+            before it walk up to it (an open path's first segment extended backwards, a closed
+            one's end): `synthesize_gait`'s lock pre-roll.
 
     Returns:
         `(features [T, C]` with the pelvis rotation turned and `root.vx, root.vz` the world
@@ -179,6 +185,11 @@ def follow_path(
     if root.shape != (features.shape[0], 3):
         raise UserError(f"follow_path: `root_position` must be [T={features.shape[0]}, 3], got {root.shape}")
     path = GroundPath(jnp.asarray(path.points, features.dtype), closed=path.closed)
+    if isinstance(start_frame, bool) or not isinstance(start_frame, (int, np.integer)) or not (
+            0 <= start_frame < features.shape[0]):
+        raise UserError(f"follow_path: `start_frame` must be a frame index in [0, {features.shape[0]}), "
+                        f"got {start_frame!r}")
     f = features.dtype
     return _follow(features, root, path, jnp.asarray(smoothing, f), jnp.asarray(sway, f),
-                   jnp.asarray(frame_time_s, f), columns=tuple(cols), order=order, up_axis=up_axis)
+                   jnp.asarray(frame_time_s, f), jnp.asarray(start_frame, jnp.int32), columns=tuple(cols),
+                   order=order, up_axis=up_axis)

@@ -221,9 +221,9 @@ def synthesize_gait(
             default). `foot_lock=False` gives the frames of the step constraints alone. Under
             100 fps the lock runs on `lock_supersampling` times as many frames (4 at 30 fps),
             synthesized from the model, and every k-th is returned: the same motion
-            locks alike at any frame rate. Without a `path`, the lock also starts a whole contact
-            before the first frame (a pre-roll of at least 1 s, dropped after it), so the first
-            contact is planted like any other. The root then comes from the denser and longer
+            locks alike at any frame rate. The lock also starts a whole contact before the first
+            frame (a pre-roll of at least 1 s, dropped after it; with a `path`, walking up to its
+            first point), so the first contact is planted like any other. The root then comes from the denser and longer
             frames too, re-anchored at the first frame (Bandai-1 run_happy at 30 fps: 2.7 units
             from `foot_lock=False`'s over 5 s, 0.2% of the path; 02_01 at 120 fps: 0.0044).
         contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
@@ -301,14 +301,15 @@ def synthesize_gait(
 
         body_map = model_body_map(model, skeleton) if body_map is None else body_map
         contact_intervals = intervals_from_model(model, skeleton, body_map=body_map)
-    pre = _lock_preroll(model, contact_intervals, dt / k) if foot_lock and path is None else 0
+    pre = _lock_preroll(model, contact_intervals, dt / k) if foot_lock else 0
     checked = dict(where=where, model=model, skeleton=skeleton, clearance=clearance, floor=floor, step=step, gait=gait,
                    jump=jump, root_motion=root_motion, width=width, temperature=temperature, feet=feet, groins=groins,
                    pelvis=pelvis, up_axis=up_axis, rule=rule, num_cycle_samples=num_cycle_samples, path=path,
                    path_smoothing=path_smoothing, body_map=body_map, foot_lock=foot_lock,
                    contact_intervals=contact_intervals, knee_speed_rad_s=knee_speed_rad_s, dtype=dtype)
     if k == 1 and pre == 0:
-        return _synthesize_checked(num_frames=num_frames, dt=dt, speed=speed, phase0=phase0, **checked)
+        return _synthesize_checked(num_frames=num_frames, dt=dt, speed=speed, phase0=phase0, path_start=0,
+                                   **checked)
     # The feet are locked on denser frames under 100 fps (`lock_supersampling`: the phase at
     # frame k i of the dense frames is frame i's), and after `pre` frames of the cycle before
     # the first (`_lock_preroll`), dropped after the lock.
@@ -316,14 +317,16 @@ def synthesize_gait(
     dense_speed = jnp.concatenate([jnp.broadcast_to(speed[:1], (pre,)), jnp.repeat(speed, k)[:fine]])
     omega = jnp.asarray(model.omega, dtype)
     dense = _synthesize_checked(num_frames=pre + fine, dt=dt / k, speed=dense_speed,
-                                phase0=jnp.asarray(phase0, dtype) - omega * (pre * dt / k) * speed[0], **checked)
+                                phase0=jnp.asarray(phase0, dtype) - omega * (pre * dt / k) * speed[0], path_start=pre,
+                                **checked)
     return _every_kth_frame(dense, k, pre, int(up_axis))
 
 
 def _synthesize_checked(*, where, model, skeleton, num_frames, dt, speed, phase0, clearance, floor, step, gait, jump,
                         root_motion, width, temperature, feet, groins, pelvis, up_axis, rule, num_cycle_samples, path,
-                        path_smoothing, body_map, foot_lock, contact_intervals, knee_speed_rad_s, dtype):
-    """`synthesize_gait` after its checks, on `num_frames` frames `dt` apart (`speed` `[num_frames]`)."""
+                        path_smoothing, path_start, body_map, foot_lock, contact_intervals, knee_speed_rad_s, dtype):
+    """`synthesize_gait` after its checks, on `num_frames` frames `dt` apart (`speed` `[num_frames]`);
+    a path starts at frame `path_start` (after the lock's pre-roll)."""
     ticks = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(speed)[:-1]])
     t_eff = ticks * dt
     if floor is not None:
@@ -346,7 +349,7 @@ def _synthesize_checked(*, where, model, skeleton, num_frames, dt, speed, phase0
     )
     if path is not None:
         body_map = _path_body_map(where, model, skeleton, body_map)
-        result = _bend(result, model, path, path_smoothing, dt, body_map)
+        result = _bend(result, model, path, path_smoothing, dt, body_map, path_start)
         if not foot_lock:
             return _world_feet(result, skeleton, body_map=body_map, representation=model.representation)
     if not foot_lock:
@@ -395,8 +398,8 @@ def _lock_preroll(model, contact_intervals, dt) -> int:
 
 def _every_kth_frame(result: GaitResult, k: int, pre: int = 0, up_axis: int = 1) -> GaitResult:
     """`result` with its per-frame arrays at every `k`-th frame from frame `pre`; after a pre-roll
-    (`pre > 0`, never with a path) the root's horizontal components (and the feet with them) are
-    shifted to start at 0 there, as without one."""
+    (`pre > 0`; on a path, the frame at its first point) the root's horizontal components (and
+    the feet with them) are shifted to start at 0 there, as without one."""
     hip = result.hip._replace(L=result.hip.L[pre::k], N=result.hip.N[pre::k], lift=result.hip.lift[pre::k],
                               flight=result.hip.flight[pre::k])
     shift = result.root_position[pre].at[up_axis].set(0.0) * (1.0 if pre > 0 else 0.0)
@@ -415,8 +418,9 @@ def _path_body_map(where, model, skeleton, body_map):
     return model_body_map(model, skeleton)
 
 
-def _bend(result, model, path, smoothing, frame_time_s, body_map):
-    """The unlocked straight result bent onto `path` (features and root; feet are recomputed)."""
+def _bend(result, model, path, smoothing, frame_time_s, body_map, start=0):
+    """The unlocked straight result bent onto `path` from frame `start` (features and root; feet
+    are recomputed)."""
     from fourierjax._gait.path import GroundPath, follow_path
 
     if not isinstance(path, GroundPath):
@@ -425,7 +429,7 @@ def _bend(result, model, path, smoothing, frame_time_s, body_map):
         smoothing = 0.25 * float(body_map.leg_length)
     feats, root, _ = follow_path(result.features, result.root_position, path, model.channel_names,
                                  body_map.name(body_map.pelvis), frame_time_s, up_axis=int(body_map.up_axis),
-                                 smoothing=smoothing)
+                                 smoothing=smoothing, start_frame=int(start))
     return eqx.tree_at(lambda r: (r.features, r.root_position), result, (feats, root))
 
 
