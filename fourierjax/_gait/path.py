@@ -90,6 +90,10 @@ def _yaw_quat(psi, up_axis):
     return q.at[..., 1 + up_axis].set(jnp.sin(0.5 * psi))
 
 
+#: Points of the arc-length window that `follow_path` averages the path over.
+_WINDOW_SAMPLES = 17
+
+
 @filter_jit
 def _follow(features, root, path, smoothing, sway, frame_time_s, start, *, columns, order, up_axis):
     horiz = [k for k in range(3) if k != up_axis]
@@ -100,13 +104,28 @@ def _follow(features, root, path, smoothing, sway, frame_time_s, start, *, colum
     d = jnp.where(norm > 1e-9, travel / norm, jnp.asarray([0.0, 1.0], travel.dtype))
     n = jnp.stack([d[1], -d[0]])  # the ground-plane normal of d (a, b) -> (b, -a)
     s, lateral = ground @ d, ground @ n
-    # A chord shorter than the vertex spacing sees one segment's direction, and the heading
-    # turns in steps (1.4° every few frames on a 256-gon): at least the mean spacing.
+    # The root walks the path averaged over a window of +-smoothing of arc length (corners rounded),
+    # and the heading is that average's direction: the chord from s - smoothing to s + smoothing.
+    # Walked as drawn, a polyline's corner turned the root's travel at once while the body turned
+    # over the chord: 02_01 (Euler N = 4, smoothing 23 cm) along a 90-degree corner skated 0.635x
+    # its capture and stepped its knee 5.31 deg (the capture's 3.49); averaged, 0.176x and 2.92
+    # deg. The chord was also at least the mean vertex spacing (against a 256-gon's steps), so a
+    # 2-segment polyline's body turned over metres before its corner while its root walked
+    # straight; the default smoothing (a quarter of the leg) is three times a 3 m circle's
+    # spacing. A chord of zero length has no direction: at least 1e-3 of the shortest segment.
     pts = path.points - path.points[:1]
     seg = jnp.diff(jnp.concatenate([pts, pts[:1]]) if path.closed else pts, axis=0)
-    spacing = jnp.mean(safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24))
-    smoothing = jnp.maximum(smoothing, spacing)
-    p = _resolve(pts, path.closed, s)
+    smoothing = jnp.maximum(smoothing, 1e-3 * jnp.min(safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24)))
+    # Trapezoids on _WINDOW_SAMPLES points of the window (the path is piecewise linear).
+    u = jnp.linspace(-1.0, 1.0, _WINDOW_SAMPLES, dtype=s.dtype)
+    w = jnp.ones(_WINDOW_SAMPLES, s.dtype).at[0].set(0.5).at[-1].set(0.5)
+    def averaged(arc):
+        window = jax.vmap(lambda ui: _resolve(pts, path.closed, arc + ui * smoothing))(u)  # [W, N, 2]
+        return jnp.tensordot(w / jnp.sum(w), window, axes=1)
+
+    # From the start frame's place: the averaged path need not pass through the first point (a
+    # circle's average runs R (L/R)^2 / 6 inside it).
+    p = averaged(s) - averaged(jnp.zeros((1,), s.dtype))
     ahead = _resolve(pts, path.closed, s + smoothing) - _resolve(pts, path.closed, s - smoothing)
     t_len = safe_sqrt(jnp.sum(ahead * ahead, axis=-1), floor=1e-24)
     tangent = ahead / t_len[:, None]
@@ -138,17 +157,17 @@ def follow_path(
     frame_time_s: float,
     *,
     up_axis: int = 1,
-    smoothing: Float[ArrayLike, ""] = 0.0,
+    smoothing: Float[ArrayLike, ""] | None = None,
     sway: Float[ArrayLike, ""] = 0.0,
     start_frame: int = 0,
 ) -> tuple[Float[Array, "T C"], Float[Array, "T 3"], Float[Array, " T"]]:
     """Bend a straight synthesized gait onto a path: heading and root follow it at the gait's speed.
 
     The root's travel along its mean direction becomes arc length on the path (so the speed is
-    the gait's), a fraction `sway` of its sideways deviation is kept about the path's normal,
-    and the pelvis (with the
-    whole body) turns about the up axis with the path's tangent. Pure JAX: vmap it over
-    characters, each with its own path of the same vertex count.
+    the gait's); the root walks the path averaged over `+-smoothing` of arc length (its corners
+    rounded), a fraction `sway` of its sideways deviation is kept about the path's normal, and
+    the pelvis (with the whole body) turns about the up axis with the averaged path's direction.
+    Pure JAX: vmap it over characters, each with its own path of the same vertex count.
 
     Arguments:
         features: `[T, C]` frames of one character (`synthesize_gait(...).features`).
@@ -158,9 +177,12 @@ def follow_path(
         channel_names: the features' names; pelvis_name: the body map's pelvis joint name.
         frame_time_s: seconds per frame.
         up_axis: the up axis (Y, 1).
-        smoothing: half-length (file units) of the chord that gives the tangent, at least
-            the mean vertex spacing; longer rounds a polyline's corners (a circle's chords
-            are tangent to it anyway).
+        smoothing: half-width L (file units) of the arc-length window the path is averaged
+            over (at least 1e-3 of its shortest segment); default the mean segment length (a
+            polygon's vertices turn the heading smoothly; `synthesize_gait` and `synth --path`
+            pass a quarter of the leg). Longer rounds corners more: the root passes a
+            right-angled corner 0.35 L inside it, and walks a circle of radius R about
+            R (L/R)^2/6 inside it (3 mm for L = 23 cm, R = 3 m).
         sway: the fraction of the root's sideways deviation from its mean line that is kept
             (0: the root stays on the path; 1: the gait's own sway, on CMU 07_01 4.7 cm peak
             to peak per cycle plus 2.5 cm of slow drift, so up to 3.7 cm off the path).
@@ -190,6 +212,10 @@ def follow_path(
         raise UserError(f"follow_path: `start_frame` must be a frame index in [0, {features.shape[0]}), "
                         f"got {start_frame!r}")
     f = features.dtype
+    if smoothing is None:
+        pts = path.points
+        seg = jnp.diff(jnp.concatenate([pts, pts[:1]]) if path.closed else pts, axis=0)
+        smoothing = jnp.mean(safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24))
     return _follow(features, root, path, jnp.asarray(smoothing, f), jnp.asarray(sway, f),
                    jnp.asarray(frame_time_s, f), jnp.asarray(start_frame, jnp.int32), columns=tuple(cols),
                    order=order, up_axis=up_axis)

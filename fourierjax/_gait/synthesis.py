@@ -232,7 +232,7 @@ def synthesize_gait(
         path: a `GroundPath` (file units) to walk along (`follow_path`, no sideways sway): the
             straight gait is bent onto it first and the feet are locked after, so they stay
             planted through the turns. The result's features, root and feet are the bent ones.
-        path_smoothing: `follow_path`'s tangent half-chord (file units); default a quarter of
+        path_smoothing: `follow_path`'s `smoothing` (corners rounded, file units); default a quarter of
             the leg length (as `synth --path`).
         floor: the floor's height (file units, up axis) the hip rule stands the feet on; default
             the model's captured floor (`model_ground`). Pass the fitted model's `model_ground`

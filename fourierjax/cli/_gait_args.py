@@ -54,7 +54,8 @@ def add_path_argument(group) -> None:
                        help="walk along a path in the ground plane at the model's speed: circle:R "
                        "(R in metres, turning left; circle:-R turns right), or a .toml/.json file with "
                        "points = [[x, z], ...] in metres (closed = true to go round), or "
-                       "arc = {radius = R, angle_deg = A} (then straight on)")
+                       "arc = {radius = R, angle_deg = A} (then straight on); corners are rounded over a "
+                       "quarter of the leg length either side")
 
 
 def parse_path(text: str, metres_per_unit: float):
