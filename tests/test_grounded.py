@@ -243,6 +243,38 @@ def test_cmu_run_flight_matches_the_capture(cmu_transition):
         assert abs(m["flight"] - m["flight_captured"]) <= 0.10, (direction, m)
 
 
+def test_the_sources_knee_speeds_cap_the_transitions_knee():
+    """Issue #21 item 1 (the knee never pops) in a transition: the sources' knee speeds
+    (`gait.fit_knee_speed`, as `synth` passes its clip's) cap the lock's swing knee, blended by s.
+    CMU 02_03 -> 02_01 (N = 4, 120 fps, blend from 2 s over 1 s): the locked knee stepped 8.02 deg
+    in a frame against the captures' largest 5.28 (4.87 unlocked); capped 5.23."""
+    motions, fits = _fits(("02_01", "02_03"), 4)
+    bm, dt = fits[0].body_map, fits[0].frame_time_s
+    sk = motions[0].skeleton()
+    knees = [gait.fit_knee_speed(f, m) for f, m in zip(fits, motions)]
+
+    def largest_step(motion):
+        P = fmotion.motion_joint_positions(motion)
+        return float(np.degrees(np.abs(np.diff(gait.knee_angles(P, bm), axis=0)).max()))
+
+    captured = max(largest_step(m[f.frame_start:f.frame_stop]) for m, f in zip(motions, fits))
+    T = int(round(5.0 / dt))
+    steps = {}
+    for label, kw in (("free", {}), ("capped", {"knee_speed_rad_s": (knees[1], knees[0])})):
+        r = style.grounded_transition(fits[1].model, fits[0].model, sk, T, dt, 2.0, 1.0, body_map=bm, **kw)
+        mot = place_root(motion_from_features(motions[0], np.asarray(r.features), fits[1].model.channel_names, dt,
+                                              body_map=bm), np.asarray(r.root_position, np.float64), body_map=bm)
+        steps[label] = largest_step(mot)
+        assert float(np.asarray(r.lowest).min()) >= -1e-3, label
+    assert steps["free"] > captured, steps  # the pop the cap removes (else this test shows nothing)
+    assert steps["capped"] <= captured, (steps, captured)
+    for bad, match in (((1.0,), r"\(A's, B's\)"), ((knees[0], np.ones(3)), "scalar or \\[2\\]"),
+                       ((knees[0], -1.0), "finite and > 0"), ((np.nan, knees[1]), "finite and > 0")):
+        with pytest.raises(UserError, match=match):
+            style.grounded_transition(fits[1].model, fits[0].model, sk, 8, dt, 0.0, 0.1, body_map=bm,
+                                      knee_speed_rad_s=bad)
+
+
 def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
     """Without locking only the root channels change; the root travels as fast as the blend's
     own root velocity. Foot locking (the default) changes the legs' angles only, keeps the root

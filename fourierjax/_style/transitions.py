@@ -337,6 +337,7 @@ def grounded_transition(
     omega_mode: OmegaMode = "geometric",
     foot_lock: bool = True,
     contact_intervals: tuple[Float[ArrayLike, "2 2"], Float[ArrayLike, "2 2"]] | None = None,
+    knee_speed_rad_s: tuple[Float[ArrayLike, "*2"], Float[ArrayLike, "*2"]] | None = None,
 ) -> GroundedTransition:
     """A walk ↔ run transition that stands on the floor: `transition`, grounded.
 
@@ -365,6 +366,12 @@ def grounded_transition(
             with a model by `fourierjax fit`): where the feet are locked and where the models
             fly; default estimated from each model's cycle (concrete models: under jit, vmap or
             grad pass them).
+        knee_speed_rad_s: `(A's, B's)` the foot lock's cap on the knee's angular speed where
+            the foot is free (radians per second, each scalar or `[2]` left, right;
+            `gait.fit_knee_speed` of each source clip, stored with a model by `fourierjax
+            fit`), blended by s, as `synthesize_gait` takes one. Default None: no cap. Without
+            one the lock stepped the knee 8.02 deg in a frame of CMU 02_03 -> 02_01 (N = 4,
+            120 fps) against the captures' largest 5.28 (unlocked: 4.87).
 
     Returns:
         A `GroundedTransition`. Raises `UserError` as `transition` does.
@@ -399,8 +406,38 @@ def grounded_transition(
         # sources' largest 20.98, a pop by issue 21's rule (20.42 at 1x; 20.98 at 2x; session 30).
         smooth_frames = int(round(SMOOTH_S / float(frame_time_s)))
     contact_intervals = _contact_intervals(a, b, skeleton, body_map, contact_intervals)
+    knee = None
+    if foot_lock and knee_speed_rad_s is not None:
+        knee = _knee_caps(knee_speed_rad_s, x.dtype)
     return _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, contact_intervals,
-                     smooth_frames)
+                     smooth_frames, knee, None if knee is None else float(frame_time_s))
+
+
+def _knee_caps(knee_speed_rad_s, dtype):
+    """`[2, 2]` the knee speed caps `(A's, B's)` x (left, right), each given as a scalar or `[2]`;
+    checked with NumPy when concrete (no eager XLA programs on the command line's path)."""
+    if not isinstance(knee_speed_rad_s, (tuple, list)) or len(knee_speed_rad_s) != 2:
+        raise UserError("grounded_transition: `knee_speed_rad_s` must be (A's, B's), each a scalar or [2] "
+                        "(left, right) in radians per second")
+    caps = []
+    for which, k in zip("AB", knee_speed_rad_s):
+        traced = isinstance(k, jax.core.Tracer)
+        shape = jnp.shape(k)
+        if shape not in ((), (2,)):
+            raise UserError(f"grounded_transition: `knee_speed_rad_s` {which}'s must be a scalar or [2] (left, "
+                            f"right), got shape {shape}")
+        if not traced:
+            k = np.asarray(k, np.float64)
+            if not np.all(np.isfinite(k) & (k > 0)):
+                raise UserError(f"grounded_transition: `knee_speed_rad_s` {which}'s must be finite and > 0 "
+                                f"(radians per second), got {k}")
+            k = np.broadcast_to(k, (2,)).astype(dtype)
+        else:
+            k = jnp.broadcast_to(jnp.asarray(k, dtype), (2,))
+        caps.append(k)
+    if any(isinstance(k, jax.core.Tracer) for k in caps):
+        return jnp.stack([jnp.asarray(k) for k in caps])
+    return np.stack(caps)
 
 
 _on_branch = saved(filter_jit(on_branch_of))
@@ -412,9 +449,10 @@ _on_branch = saved(filter_jit(on_branch_of))
 @saved
 @filter_jit
 def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, contact_intervals,
-              smooth_frames):
-    """`grounded_transition` after the blend `x, s, theta`: ``b`` on ``a``'s branch, and
-    ``smooth_frames`` None for no foot lock."""
+              smooth_frames, knee=None, knee_frame_time_s=None):
+    """`grounded_transition` after the blend `x, s, theta`: ``b`` on ``a``'s branch,
+    ``smooth_frames`` None for no foot lock, ``knee`` `[2, 2]` the lock's knee speed caps (A's,
+    B's), blended by s, or None (with ``knee_frame_time_s``, static: the cap's window in frames)."""
     from fourierjax import gait
     from fourierjax._gait.footlock import CONTACT_HEIGHT_FRACTION
     from fourierjax._gait.hip import lowest_points
@@ -448,7 +486,10 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
     if smooth_frames is not None:
         feats, feet = gait.lock_feet(feats, skeleton, weights, body_map=body_map, representation=rep,
                                      root_position=root, clearance=clearance, ground=floor_a, return_feet=True,
-                                     smooth_frames=smooth_frames)
+                                     smooth_frames=smooth_frames,
+                                     knee_speed_rad_s=None if knee is None else (
+                                         (1.0 - s)[:, None] * knee[0][None, :] + s[:, None] * knee[1][None, :]),
+                                     frame_time_s=knee_frame_time_s)
     lowest = lowest_points(feet, clearance, up_axis=up) - floor[:, None]
     return GroundedTransition(feats, root, feet, lowest, s, theta, clearance, jnp.asarray(floor_a))
 

@@ -38,6 +38,9 @@ class Gait:
     #: The source file's up axis ("y", "z", "-z", ...): the model and `template` are Y-up, and
     #: BVH written from them is turned back to it (`cli._outputs.write_bvh_as_source`).
     up: str = "y"
+    #: `[2]` the source clip's largest knee speeds (rad/s, `gait.fit_knee_speed`; stored in the
+    #: model file by `fourierjax fit`): the foot lock's cap on the swing's knee. None when unknown.
+    knee_speed_rad_s: object | None = None
 
 
 def add_gait_arguments(parser: argparse.ArgumentParser) -> None:
@@ -122,7 +125,8 @@ def fit_bvhs(paths, harmonics: int, representation: str) -> list[Gait]:
         provenance = fit.summary()
         provenance.update(source=str(path), rest_frames_dropped=rest, up=up)
         gaits.append(Gait(fit.model, motion, motion.frame_time_s, str(path), provenance, fit.alignment,
-                          gait.fit_contact_intervals(fit, motion), body_map=fit.body_map, up=up))
+                          gait.fit_contact_intervals(fit, motion), body_map=fit.body_map, up=up,
+                          knee_speed_rad_s=gait.fit_knee_speed(fit, motion)))
     return gaits
 
 
@@ -147,6 +151,7 @@ def _load_model_file(path: pathlib.Path, argument: str) -> Gait:
     return Gait(
         mf.model, mf.template_motion(), mf.frame_time_s, str(path), provenance, mf.alignment or "none",
         getattr(mf, "contact_intervals", None), body_map=mf.body_map, up=source_up(provenance),
+        knee_speed_rad_s=getattr(mf, "knee_speed_rad_s", None),
     )
 
 

@@ -68,9 +68,12 @@ def grounded_motion_of(args, a, b, template, num_frames: int, dt: float, start: 
     if foot_lock:
         intervals = tuple(g.contact_intervals if getattr(g, "contact_intervals", None) is not None
                           else gait.contact_intervals(g.model, skeleton, body_map=bmap) for g in (a, b))
+    # The sources' knee speeds cap the lock's swing knee, as in `synth` (when both are known).
+    knees = tuple(getattr(g, "knee_speed_rad_s", None) for g in (a, b))
     r = style.grounded_transition(a.model, b.model, skeleton, num_frames, dt, start, duration,
                                   body_map=bmap, ease=args.ease, method=args.method,
-                                  foot_lock=foot_lock, contact_intervals=intervals)
+                                  foot_lock=foot_lock, contact_intervals=intervals,
+                                  knee_speed_rad_s=None if any(k is None for k in knees) else knees)
     return grounded_motion(template, r.features, r.root_position, a.model.channel_names, dt, body_map=bmap)
 
 
