@@ -223,17 +223,18 @@ def synthesize_gait(
             synthesized from the model, and every k-th is returned: the same motion
             locks alike at any frame rate. The lock also starts a whole contact before the first
             frame (a pre-roll of at least 1 s, dropped after it; with a `path`, walking up to its
-            first point), so the first contact is planted like any other. The root then comes from the denser and longer
-            frames too, re-anchored at the first frame (Bandai-1 run_happy at 30 fps: 2.7 units
-            from `foot_lock=False`'s over 5 s, 0.2% of the path; 02_01 at 120 fps: 0.0044).
+            first point), so the first contact is planted like any other. The root then comes
+            from the denser and longer frames too, re-anchored at the first frame (Bandai-1
+            run_happy at 30 fps: 2.7 units from `foot_lock=False`'s over 5 s, 0.2% of the path;
+            02_01 at 120 fps: 0.0044).
         contact_intervals: `[2, 2]` contact phases of the feet (`contact_intervals`: stored
             with the model by `fourierjax fit`); default estimated from the model's cycle
             (a concrete model; under vmap or grad pass them, and `body_map`).
         path: a `GroundPath` (file units) to walk along (`follow_path`, no sideways sway): the
             straight gait is bent onto it first and the feet are locked after, so they stay
             planted through the turns. The result's features, root and feet are the bent ones.
-        path_smoothing: `follow_path`'s `smoothing` (corners rounded, file units); default a quarter of
-            the leg length (as `synth --path`).
+        path_smoothing: `follow_path`'s `smoothing` (file units: how far corners are rounded);
+            default a quarter of the leg length (as `synth --path`).
         floor: the floor's height (file units, up axis) the hip rule stands the feet on; default
             the model's captured floor (`model_ground`). Pass the fitted model's `model_ground`
             (floor and clearance) for a model edited from it (`style.superpose`,
