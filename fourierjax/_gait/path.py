@@ -71,12 +71,18 @@ def polyline_path(points: Sequence[Sequence[float]], *, closed: bool = False) ->
     return GroundPath(jnp.asarray(p), closed=closed)
 
 
-def _resolve(points, closed, s):
-    """Position `[N, 2]` at arc lengths `s` `[N]` (linear beyond the ends of an open path)."""
+def _segments(points, closed):
+    """`(start points [S, 2], segments [S, 2], lengths [S])` of a path (a closed one's last
+    segment joins its last point to its first)."""
     if closed:
         points = jnp.concatenate([points, points[:1]], axis=0)
     seg = points[1:] - points[:-1]
-    length = safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24)
+    return points[:-1], seg, safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24)
+
+
+def _resolve(points, closed, s):
+    """Position `[N, 2]` at arc lengths `s` `[N]` (linear beyond the ends of an open path)."""
+    points, seg, length = _segments(points, closed)
     cum = jnp.concatenate([jnp.zeros((1,), length.dtype), jnp.cumsum(length)])
     if closed:
         s = jnp.mod(s, cum[-1])
@@ -114,8 +120,10 @@ def _follow(features, root, path, smoothing, sway, frame_time_s, start, *, colum
     # straight; the default smoothing (a quarter of the leg) is three times a 3 m circle's
     # spacing. A chord of zero length has no direction: at least 1e-3 of the shortest segment.
     pts = path.points - path.points[:1]
-    seg = jnp.diff(jnp.concatenate([pts, pts[:1]]) if path.closed else pts, axis=0)
-    smoothing = jnp.maximum(smoothing, 1e-3 * jnp.min(safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24)))
+    length = _segments(pts, path.closed)[2]
+    if smoothing is None:  # `follow_path`'s default
+        smoothing = jnp.mean(length)
+    smoothing = jnp.maximum(smoothing, 1e-3 * jnp.min(length))
     # Trapezoids on _WINDOW_SAMPLES points of the window (the path is piecewise linear).
     u = jnp.linspace(-1.0, 1.0, _WINDOW_SAMPLES, dtype=s.dtype)
     w = jnp.ones(_WINDOW_SAMPLES, s.dtype).at[0].set(0.5).at[-1].set(0.5)
@@ -212,10 +220,7 @@ def follow_path(
         raise UserError(f"follow_path: `start_frame` must be a frame index in [0, {features.shape[0]}), "
                         f"got {start_frame!r}")
     f = features.dtype
-    if smoothing is None:
-        pts = path.points
-        seg = jnp.diff(jnp.concatenate([pts, pts[:1]]) if path.closed else pts, axis=0)
-        smoothing = jnp.mean(safe_sqrt(jnp.sum(seg * seg, axis=-1), floor=1e-24))
-    return _follow(features, root, path, jnp.asarray(smoothing, f), jnp.asarray(sway, f),
+    smoothing = None if smoothing is None else jnp.asarray(smoothing, f)
+    return _follow(features, root, path, smoothing, jnp.asarray(sway, f),
                    jnp.asarray(frame_time_s, f), jnp.asarray(start_frame, jnp.int32), columns=tuple(cols),
                    order=order, up_axis=up_axis)
