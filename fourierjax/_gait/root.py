@@ -89,6 +89,7 @@ def root_trajectory(
     temperature: Float[ArrayLike, ""] | None = None,
     flight_step: Float[Array, "T-1 2"] | None = None,
     pelvis_height: Float[Array, " T"] | None = None,
+    stance: Float[Array, " T"] | None = None,
 ) -> Float[Array, "T 3"]:
     """Root positions over time from the feet on the ground (the carrying foot point stays put).
 
@@ -107,6 +108,12 @@ def root_trajectory(
       flight: root speeds were 0.72-0.90 of the captured on the bundled walks and runs (02_03
       0.72, 09_01 0.74, 07_01 0.85), 0.96-1.00 with the planted point (measured from the
       models and from the captures' own poses alike).
+    - With `stance` too (`[T]` in [0, 1]) the ground weight is at least `stance`: there the
+      carrying point moves the root even where it slips in the model's own world. For frames
+      whose root velocity does not match their stride: a transition's blend of two models
+      (`style.grounded_transition`), where the stance foot of 02_03 -> 02_01 slipped 9-16
+      units/s in the blend's own world, the slip test read its stance as flight and the root
+      kept the blend's own speed (31 units/s) while that foot slid 8.5 units over its stance.
     - Without it, the carrying point is the lowest, and where even that is above
       `contact_threshold` (flight) the root keeps its last velocity per radian of phase, so it
       comes to rest with the phase.
@@ -170,6 +177,10 @@ def root_trajectory(
         # a step of 1.3 read as flight and the root kept the model's own speed).
         base = jax.lax.stop_gradient(jnp.quantile(low_slip, 0.05))
         ground = ground * jax.nn.sigmoid((ref + base - low_slip) / (0.2 * ref))
+        if stance is not None:
+            # Where the caller knows a foot is in stance, its feet carry the root whatever
+            # their slip in the model's own world (`stance`, see the docstring).
+            ground = jnp.maximum(ground, 0.5 * (stance[1:] + stance[:-1]))
         # A foot may not carry the root backwards against the model's own travel: a run's
         # landing foot, lowest while still swinging forward, dragged the pelvis back (09_01
         # defaults: -45 units/s, 64 of 480 frames). Each stance move keeps at least

@@ -584,7 +584,8 @@ def model_hip_curves(
 
 @saved
 @filter_jit
-def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis):
+def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet, groins, pelvis, up_axis,
+            stance=None):
     idx = jnp.asarray([feet.left, feet.right])
     foot_local, joints = jax.vmap(
         lambda f: pose_points(skeleton, representation, idx, (*groins, pelvis), f, pelvis))(features)
@@ -595,7 +596,7 @@ def _ground(features, skeleton, clearance, frame_time_s, *, representation, feet
     flight_step = 0.5 * (features[1:, :2] + features[:-1, :2]) * frame_time_s
     phase = jnp.zeros(features.shape[:1], features.dtype)  # unused with a flight step
     root = root_trajectory(foot_local, height, phase, clearance, up_axis=up_axis, flight_step=flight_step,
-                           pelvis_height=height + joints[:, 2, up_axis])
+                           pelvis_height=height + joints[:, 2, up_axis], stance=stance)
     vel = jnp.gradient(root, axis=0) / frame_time_s
     out = features.at[:, 0].set(vel[:, horiz[0]]).at[:, 1].set(vel[:, horiz[1]]).at[:, 2].set(height)
     return out, root, foot_local + root[:, None, None, :], clearance
@@ -612,6 +613,7 @@ def ground_features(
     body_map: BodyMap | None = None,
     clearance: Float[ArrayLike, "2 P"] | None = None,
     up_axis: int | None = None,
+    stance: Float[ArrayLike, " T"] | None = None,
 ) -> tuple[Float[Array, "T C"], Float[Array, "T 3"], Float[Array, "T 2 P 3"], Float[Array, "2 P"]]:
     """Root motion from the stance feet for any gait features (a style interpolation, a transition).
 
@@ -626,6 +628,9 @@ def ground_features(
         frame_time_s: seconds per frame.
         feet, groins, body_map, clearance, up_axis: as `synthesize_gait`; without `feet` or
             `groins` a `body_map` is required (the map of a model's cycle: `model_body_map`).
+        stance: optional `[T]` weights in [0, 1] of frames known to stand on a foot (from
+            contact intervals): there the stance feet carry the root even where the features'
+            own root velocity disagrees with their stride (`root_trajectory`).
 
     Returns:
         `(features [T, C]` with `root.vx, root.vz, root.y` replaced, `root_position [T, 3]`,
@@ -641,5 +646,9 @@ def ground_features(
     check_positive(where, "frame_time_s", frame_time_s, "seconds per frame")
     if clearance is not None:
         clearance = jnp.asarray(clearance, features.dtype)
+    if stance is not None and jnp.shape(stance) != features.shape[:1]:
+        raise UserError(f"{where}: `stance` must be [T] = [{features.shape[0]}] weights in [0, 1], one a frame, "
+                        f"got shape {jnp.shape(stance)}")
     return _ground(features, skeleton, clearance, jnp.asarray(frame_time_s, features.dtype),
-                   representation=representation, feet=feet, groins=groins, pelvis=pelvis, up_axis=up_axis)
+                   representation=representation, feet=feet, groins=groins, pelvis=pelvis, up_axis=up_axis,
+                   stance=None if stance is None else jnp.asarray(stance, features.dtype))

@@ -258,6 +258,10 @@ def transition(
 _FLIGHT_GRID = 64
 #: In stance the blend's own height may lift the lowest foot point this many contact bands.
 _STANCE_LIFT_BANDS = 0.5
+#: Inside the blend the stance feet (by the contact intervals) carry the root with weight
+#: `min(1, _BLEND_CARRY s (1 - s))`: fully for 0.15 <= s <= 0.85, fading to the two models' own
+#: rule (`gait.ground_features`'s slip test) at the window's ends.
+_BLEND_CARRY = 8.0
 
 
 class GroundedTransition(eqx.Module):
@@ -343,10 +347,12 @@ def grounded_transition(
 
     The frames of `transition` (at `t = k Δt`) get their root from the stance feet
     (`gait.ground_features`: the planted foot point carries the body, in flight the blend's
-    own root velocity does) and their height from the floor: the lowest foot point stands on
-    a's captured floor (`_captured_floor`), lifted where both models' own cycles fly (no foot
-    in contact by their contact intervals) by their own lowest point's height over its
-    take-off-to-landing line, blended by s, so there is flight only where the run has it.
+    own root velocity does; inside the blend window, where that velocity and the stride come
+    from two models and disagree, the feet in stance by the contact intervals carry it) and
+    their height from the floor: the lowest foot point stands on a's captured floor
+    (`_captured_floor`), lifted where both models' own cycles fly (no foot in contact by their
+    contact intervals) by their own lowest point's height over its take-off-to-landing line,
+    blended by s, so there is flight only where the run has it.
 
     Arguments:
         a, b: compatible models (start and end gait), aligned to the same gait event.
@@ -458,8 +464,22 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
     from fourierjax._gait.hip import lowest_points
 
     rep, up = a.representation, int(body_map.up_axis)
-    feats, root, feet, clearance = gait.ground_features(x, skeleton, rep, frame_time_s, body_map=body_map,
-                                                        clearance=clearance)
+    # Inside the blend the stance feet carry the root. The blend's root velocity and its stride
+    # come from two models and disagree: on 02_03 -> 02_01 (N = 5, fitted files' intervals) the
+    # walk's first stance foot slipped 9-16 units/s in the blend's own world, so `ground_features`'
+    # slip test read it as flight, the root kept the blend's speed (31 units/s) and the foot slid
+    # 8.5 units over the stance. The lock held it as a shift from +3.8 to -4.7 units and let go
+    # of it at the blend's end: the knee stepped 12.33 deg in a frame against the captures' 5.28
+    # (8.20 with the intervals estimated from the models). Carried: 5.23 and 5.21. The root then
+    # slows to the walk's speed about 0.25 s sooner (run -> walk; walk -> run unchanged within 2%).
+    # Outside the blend each model's root velocity matches its stride, and the slip test keeps a
+    # run's landing foot (low, in contact, still swinging forward) from carrying it: carried by
+    # the contact intervals there too, run parts travelled 9% short of their own speed.
+    weights = _transition_contacts(s, theta, contact_intervals)
+    held = jnp.max(weights, axis=-1)
+    feats, root, feet, clearance = gait.ground_features(
+        x, skeleton, rep, frame_time_s, body_map=body_map, clearance=clearance,
+        stance=held * jnp.clip(_BLEND_CARRY * s * (1.0 - s), 0.0, 1.0))
     floor_a, lift_a = _captured_floor(a, skeleton, rep, frame_time_s, body_map, clearance, contact_intervals[0])
     floor_b, lift_b = _captured_floor(b, skeleton, rep, frame_time_s, body_map, clearance, contact_intervals[1])
     # The lowest point on a's floor (two captures need not share a floor level: 02_01 and 02_03
@@ -472,8 +492,6 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
     # 1.3 bands, through the left stance) put the locked run's stance foot out of reach and out
     # of contact: 34-36% flight against the captured 16%. None in stance (the hip rule alone),
     # the Bandai-1 run -> walk lock popped at a landing (21.98 against the sources' 20.98).
-    weights = _transition_contacts(s, theta, contact_intervals)
-    held = jnp.max(weights, axis=-1)
     lift = (1.0 - s) * _flight_lift(lift_a, theta) + s * _flight_lift(lift_b, theta)
     own = jnp.maximum(x[:, 2] - s * (floor_b - floor_a) - floor_a - feats[:, 2], 0.0)
     band = _STANCE_LIFT_BANDS * CONTACT_HEIGHT_FRACTION * body_map.height
