@@ -466,15 +466,16 @@ def _grounded(a, b, x, s, theta, skeleton, frame_time_s, body_map, clearance, co
     rep, up = a.representation, int(body_map.up_axis)
     # Inside the blend the stance feet carry the root. The blend's root velocity and its stride
     # come from two models and disagree: on 02_03 -> 02_01 (N = 5, fitted files' intervals) the
-    # walk's first stance foot slipped 9-16 units/s in the blend's own world, so `ground_features`'
-    # slip test read it as flight, the root kept the blend's speed (31 units/s) and the foot slid
-    # 8.5 units over the stance. The lock held it as a shift from +3.8 to -4.7 units and let go
-    # of it at the blend's end: the knee stepped 12.33 deg in a frame against the captures' 5.28
-    # (8.20 with the intervals estimated from the models). Carried: 5.23 and 5.21. The root then
-    # slows to the walk's speed about 0.25 s sooner (run -> walk; walk -> run unchanged within 2%).
-    # Outside the blend each model's root velocity matches its stride, and the slip test keeps a
-    # run's landing foot (low, in contact, still swinging forward) from carrying it: carried by
-    # the contact intervals there too, run parts travelled 9% short of their own speed.
+    # walk's first stance foot slipped in the blend's own world (it moved 9-16 units/s over the
+    # floor), so `ground_features`' slip test read it as flight, the root kept the blend's speed
+    # (31 units/s) and the foot slid 8.5 units over the stance. The lock held it as a shift from
+    # +3.8 to -4.7 units and let go of it at the blend's end: the knee stepped 12.33 deg in a frame
+    # against the captures' 5.28 (8.20 with the intervals estimated from the models). Carried:
+    # 5.23 and 5.21. The root then slows to the walk's speed about 0.5 s sooner (run -> walk,
+    # 1.5 s blend: 45 -> 20 units/s over 0.75 s, was 1.25 s); walk -> run travels within 2% of
+    # before. Outside the blend each model's root velocity matches its stride, and the slip test
+    # keeps a run's landing foot (low, in contact, still swinging forward) from carrying it:
+    # carried by the contact intervals there too, run parts travelled 9% short of their own speed.
     weights = _transition_contacts(s, theta, contact_intervals)
     held = jnp.max(weights, axis=-1)
     feats, root, feet, clearance = gait.ground_features(
