@@ -319,6 +319,8 @@ def test_grounded_transition_keeps_the_pose_and_travels_at_the_blend_speed():
     ivs = tuple(gait.contact_intervals(f.model, sk, body_map=bm) for f in fits)
     with pytest.raises(UserError, match=r"`stance` must be \[T\]"):
         gait.ground_features(x, sk, "euler", dt, body_map=bm, stance=np.ones(T - 1))
+    with pytest.raises(UserError, match=r"weights in \[0, 1\] \(finite\)"):
+        gait.ground_features(x, sk, "euler", dt, body_map=bm, stance=np.full(T, np.nan))
     with pytest.raises(UserError, match="concrete `frame_time_s`"):  # it sets the easing's frames
         jax.jit(lambda d: style.grounded_transition(fits[0].model, fits[1].model, sk, 8, d, 0.0, 0.1, body_map=bm,
                                                      contact_intervals=ivs).features)(dt)

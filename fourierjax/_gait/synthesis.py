@@ -8,9 +8,10 @@ from typing import TYPE_CHECKING
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from fourierjax._checks import integer
+from fourierjax._checks import concrete, integer
 from fourierjax._gait.common import (
     check_finite,
     check_jump,
@@ -646,9 +647,15 @@ def ground_features(
     check_positive(where, "frame_time_s", frame_time_s, "seconds per frame")
     if clearance is not None:
         clearance = jnp.asarray(clearance, features.dtype)
-    if stance is not None and jnp.shape(stance) != features.shape[:1]:
-        raise UserError(f"{where}: `stance` must be [T] = [{features.shape[0]}] weights in [0, 1], one a frame, "
-                        f"got shape {jnp.shape(stance)}")
+    if stance is not None:
+        if jnp.shape(stance) != features.shape[:1]:
+            raise UserError(f"{where}: `stance` must be [T] = [{features.shape[0]}] weights in [0, 1], one a "
+                            f"frame, got shape {jnp.shape(stance)}")
+        w = concrete(stance)
+        bad = None if w is None else ~((w >= 0) & (w <= 1))  # NaN is bad too
+        if bad is not None and bad.any():
+            raise UserError(f"{where}: `stance` must be weights in [0, 1] (finite), got {int(bad.sum())} "
+                            f"outside, e.g. {w[bad][0]!r} at frame {int(np.flatnonzero(bad)[0])}")
     return _ground(features, skeleton, clearance, jnp.asarray(frame_time_s, features.dtype),
                    representation=representation, feet=feet, groins=groins, pelvis=pelvis, up_axis=up_axis,
                    stance=None if stance is None else jnp.asarray(stance, features.dtype))
