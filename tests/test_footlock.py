@@ -396,6 +396,32 @@ def test_stance_free_hip_is_the_shared_leg_ik():
         np.testing.assert_allclose(float(jnp.linalg.norm(p2 - b)), float(rb), rtol=1e-4)
 
 
+def test_a_near_straight_leg_bends_its_knee_the_way_it_bent():
+    """`_legik.knee_pole`: the lock's knee bends towards the pose knee's offset from its own
+    hip-to-ankle line, not towards the thigh. Closed form: a pose leg 2 deg short of straight,
+    knee forward (+z), and a goal 3 units forward and 2 units up: the thigh as the pole put the
+    new knee behind the hip-to-goal line (a backward knee, and a swing of the knee about that line
+    as the goal moves: Bandai-1 run_happy's knee moved 23.5 units in a frame, see `knee_pole`)."""
+    from fourierjax._legik import knee_pole, sphere_circle_point
+
+    l1 = l2 = 10.0
+    half = np.radians(1.0)  # each bone 1 deg off the hip-to-ankle line: the knee at 178 deg
+    H = jnp.zeros(3)
+    K = jnp.asarray([0.0, -l1 * np.cos(half), l1 * np.sin(half)])
+    A = jnp.asarray([0.0, -2 * l1 * np.cos(half), 0.0])
+    G = A + jnp.asarray([0.0, 2.0, 3.0])
+    axis = (G - H) / jnp.linalg.norm(G - H)
+    # "Forward" of the new line: +z with its component along the line removed.
+    fwd = jnp.asarray([0.0, 0.0, 1.0]) - axis[2] * axis
+    new, _ = sphere_circle_point(H, G, l1, l2, knee_pole(H, K, A))
+    old, _ = sphere_circle_point(H, G, l1, l2, K - H)
+    np.testing.assert_allclose([float(jnp.linalg.norm(new - H)), float(jnp.linalg.norm(G - new))], [l1, l2], rtol=1e-5)
+    assert float(jnp.dot(new - H, fwd)) > 0.5  # the knee in front of the hip-to-goal line
+    assert float(jnp.dot(old - H, fwd)) < 0.0  # the thigh as the pole: behind it (what this replaced)
+    # A straight pose leg (no bend to follow) falls back on the thigh, finite.
+    assert np.all(np.isfinite(np.asarray(knee_pole(H, jnp.asarray([0.0, -l1, 0.0]), A))))
+
+
 def test_lock_crowd_holds_a_sliding_planted_foot():
     from fourierjax import data
     from fourierjax.body import infer_body_map

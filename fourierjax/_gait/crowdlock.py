@@ -18,7 +18,7 @@ from fourierjax._gait.footlock import (
     hold_step,
     hold_weights,
 )
-from fourierjax._legik import safe_norm, soft_reach, sphere_circle_point
+from fourierjax._legik import knee_pole, safe_norm, soft_reach, sphere_circle_point
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -89,7 +89,7 @@ def _leg(H, K, A, G):
     d = safe_norm(G - H)
     eased = soft_reach(d, l1 + l2, REACH_KNEE, REACH_LIMIT, safe_norm(A - H))
     G = H + (G - H) * (eased / jnp.maximum(d, 1e-9))
-    K2, _ = sphere_circle_point(H, G, l1, l2, K - H)
+    K2, _ = sphere_circle_point(H, G, l1, l2, knee_pole(H, K, A))
     return K2, G
 
 

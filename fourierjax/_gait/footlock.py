@@ -19,7 +19,7 @@ from fourierjax._gait.contactphase import (  # noqa: F401, E402
     intervals_from_contacts,
     intervals_from_model,
 )
-from fourierjax._legik import quat_between, safe_norm, soft_reach, sphere_circle_point
+from fourierjax._legik import knee_pole, quat_between, safe_norm, soft_reach, sphere_circle_point
 from fourierjax.errors import UserError
 
 if TYPE_CHECKING:
@@ -776,7 +776,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
             G, capped = _knee_speed_cap(H, G, l1, l2, KNEE_CAP_MARGIN * knee_step[:, f], free, knee_window)
         else:
             capped = jnp.zeros(features.shape[:1], bool)
-        K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, K - H)
+        K2, _ = jax.vmap(sphere_circle_point)(H, G, l1, l2, knee_pole(H, K, A))
         R1 = quat_between(K - H, K2 - H)
         R2 = quat_between(rotations.quat_apply(R1, A - K), G - K2)
         qm, qc = rotations.quat_multiply, rotations.quat_conjugate
