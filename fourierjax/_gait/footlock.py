@@ -69,9 +69,6 @@ ROLL_BANDS = (0.25, 0.5)
 #: Each contact's hold starts the easing's frames early (`_plant`'s `lead`), and the swing's
 #: easing towards it is warped by this power.
 LEAD_WARP = 1.6
-#: In the air a foot's shift moves from one plant's to the next one's at a pace inversely
-#: proportional to the foot's own horizontal speed plus this share of its mean speed (`_air_pace`).
-AIR_PACE_FLOOR = 0.3
 #: The knee-speed cap (`_knee_speed_cap`) is a Lipschitz envelope over this many seconds on each
 #: side of a frame, aiming at this share of the cap (float32 rounding of the written motion).
 KNEE_CAP_WINDOW_S, KNEE_CAP_MARGIN = 0.1, 0.99
@@ -289,18 +286,7 @@ def _next(mask, idx, T):
     return jax.lax.cummin(jnp.where(mask, idx, T), axis=0, reverse=True)
 
 
-def _air_pace(feet_pts, horizontal, floor_speed):
-    """`[T, 2]` weights of each frame in a swing's easing (`_plant`'s `pace`): 1 / (the foot's own
-    horizontal speed over its mean speed, plus `AIR_PACE_FLOOR`), so the swing's extra travel goes
-    where the foot moves slowly. ``floor_speed``: speeds below it per frame count as still (a
-    foot that never moves eases as without a pace)."""
-    hv = jnp.mean(feet_pts, -2) * horizontal[None, None]  # [T, 2, 3]
-    d = jnp.concatenate([hv[1:2] - hv[:1], 0.5 * (hv[2:] - hv[:-2]), hv[-1:] - hv[-2:-1]], 0)
-    v = safe_norm(d)  # [T, 2] per frame, central differences
-    return 1.0 / (v / jnp.maximum(jnp.mean(v, 0, keepdims=True), floor_speed) + AIR_PACE_FLOOR)
-
-
-def _plant(points, lam, low, lead=0, pace=None):
+def _plant(points, lam, low, lead=0):
     """Horizontal shift `[T, 3]` holding one foot's points where they land (offline: the
     landing of a contact is known before it happens, so a descending foot is drawn to it).
 
@@ -310,8 +296,7 @@ def _plant(points, lam, low, lead=0, pace=None):
     roll); the shift is the weighted mean of the held points' errors. With `lead` frames (static),
     each contact's hold starts that many frames earlier (but for one cut by the last frame), with
     the weights of its first frame, so that easing the shift over `lead` frames on each side
-    (`_smooth`) has the foot stopped by the contact's first frame. With `pace` (`[T]` > 0,
-    `_air_pace`), the swing's easing advances by each frame's pace, not evenly."""
+    (`_smooth`) has the foot stopped by the contact's first frame."""
     T, P = lam.shape
     idx = jnp.arange(T)
     down = jnp.any(low, -1)
@@ -351,15 +336,7 @@ def _plant(points, lam, low, lead=0, pace=None):
     next_shift = held[jnp.clip(next_start, 0, T - 1)]
     prev_shift = jnp.where((last_end >= 0)[:, None], prev_shift, next_shift)
     next_shift = jnp.where((next_start < T)[:, None], next_shift, prev_shift)
-    if pace is None:
-        x = jnp.clip((idx - last_end) / jnp.maximum(next_start - last_end, 1), 0.0, 1.0)
-    else:
-        c = jnp.cumsum(pace)
-        c0 = c[jnp.clip(last_end, 0, T - 1)]
-        c1 = c[jnp.clip(next_start, 0, T - 1)]
-        x = jnp.clip((c - c0) / jnp.maximum(c1 - c0, 1e-9), 0.0, 1.0)
-        x = jnp.where((last_end >= 0) & (next_start < T), x,
-                      jnp.clip((idx - last_end) / jnp.maximum(next_start - last_end, 1), 0.0, 1.0))
+    x = jnp.clip((idx - last_end) / jnp.maximum(next_start - last_end, 1), 0.0, 1.0)
     if lead > 0:
         # The lead-in takes its frames from the swing's end: the easing is warped towards the
         # end (`x ** LEAD_WARP`) so the early swing keeps its pace. Not warped, the knee's
@@ -696,16 +673,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
     landing = _before_still(jnp.any(low_land, -1), jnp.any(low, -1))[..., None]  # [T, 2, 1]
     lam_p = jnp.where(landing, hold_h * still_land, lam)
     low_p = jnp.where(landing, low_land, low)
-    # The swing covers the plants' offsets from the model's own feet (a low-harmonic foot slides
-    # in contact: run_normal's unlocked stance feet at 164 units/s). Eased evenly in time the
-    # extra travel peaked mid-swing, where the foot's own speed does: Bandai-1 run_normal's
-    # right toe (N = 5, 30 fps, locked at 4x) moved 21.14 units a frame (unlocked 18.77), over
-    # the capture's largest joint move, 20.98. Paced by the foot's own speed (`_air_pace`):
-    # 20.60 (floor 1: 20.74; 0.1: 20.54). Bandai-1 stays 25/30 (run_masculinity 0.459x ->
-    # 0.364x; the others within +0.005x), the bundled clips 7/7 (within +0.002x).
-    pace = _air_pace(feet_pts, 1.0 - upv, 1e-3 * band)
-    pace = [pace[:, 0], pace[:, 1]]
-    planted = [_plant(feet_pts[:, f], lam_p[:, f], low_p[:, f], lead, pace[f]) for f in range(2)]
+    planted = [_plant(feet_pts[:, f], lam_p[:, f], low_p[:, f], lead) for f in range(2)]
     shift = jnp.stack([p[0] for p in planted], 1)
     on_plant = jnp.stack([p[1] for p in planted], 1).astype(shift.dtype)  # [T, 2]
     shift = shift * (1.0 - upv)[None, None]
@@ -716,8 +684,7 @@ def _lock(features, skeleton, contact, root_position, clearance, ground, band, *
         # out (smoothstep) as it stretches the hip-to-ankle distance by up to `TOE_REACH_FADE`
         # of the leg's length over the unheld foot's.
         low_free = low_in & (still_free > 0.5)
-        free = jnp.stack([_plant(feet_pts[:, f], (hold_h * still_free)[:, f], low_free[:, f], 0, pace[f])[0]
-                          for f in range(2)], 1)
+        free = jnp.stack([_plant(feet_pts[:, f], (hold_h * still_free)[:, f], low_free[:, f])[0] for f in range(2)], 1)
         free = free * (1.0 - upv)[None, None]
         H, K, A = (jnp.stack([pts[:, leg[k][0]] for leg in legs], 1) for k in range(3))  # [T, 2, 3]
         reach = safe_norm(K - H) + safe_norm(A - K)
